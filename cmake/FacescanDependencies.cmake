@@ -1,0 +1,53 @@
+# Finds the six libraries of the design (all from Debian 12 packages). A missing one stops configure with the
+# package to install; ./deploy/install-deps.sh installs them all.
+include_guard(GLOBAL)
+
+function(facescan_require found what package)
+    if(NOT ${found})
+        message(FATAL_ERROR "facescan: ${what} not found. Install it with: sudo apt-get install ${package}"
+                            "  (or run ./deploy/install-deps.sh, which installs everything facescan needs)")
+    endif()
+endfunction()
+
+find_package(OpenCV QUIET COMPONENTS core imgproc imgcodecs objdetect calib3d)
+facescan_require(OpenCV_FOUND "OpenCV" "libopencv-dev")
+
+find_package(Eigen3 QUIET NO_MODULE)
+facescan_require(Eigen3_FOUND "Eigen3" "libeigen3-dev")
+
+find_package(CycloneDDS QUIET)
+facescan_require(CycloneDDS_FOUND "Cyclone DDS (C API and idlc)" "cyclonedds-dev cyclonedds-tools")
+
+find_package(draco QUIET)
+facescan_require(draco_FOUND "Draco" "libdraco-dev")
+
+# Debian's OpenMesh ships no version file, so no version may be asked for.
+find_package(OpenMesh QUIET)
+facescan_require(OpenMesh_FOUND "OpenMesh" "libopenmesh-dev")
+
+find_package(PkgConfig QUIET)
+facescan_require(PkgConfig_FOUND "pkg-config" "pkg-config")
+# OpenNI2 has no CMake config in Debian; pkg-config names it libopenni2.
+pkg_check_modules(OpenNI2 QUIET IMPORTED_TARGET libopenni2)
+facescan_require(OpenNI2_FOUND "OpenNI2" "libopenni2-dev")
+
+pkg_check_modules(Zstd QUIET IMPORTED_TARGET libzstd)
+facescan_require(Zstd_FOUND "zstd" "libzstd-dev")
+pkg_check_modules(TurboJpeg QUIET IMPORTED_TARGET libturbojpeg)
+facescan_require(TurboJpeg_FOUND "libjpeg-turbo (TurboJPEG API)" "libturbojpeg0-dev")
+
+find_package(Threads REQUIRED)
+
+if(FACESCAN_BUILD_TESTS)
+    find_package(GTest QUIET)
+    facescan_require(GTest_FOUND "GoogleTest" "libgtest-dev")
+endif()
+if(FACESCAN_BUILD_BENCH)
+    find_path(NANOFLANN_INCLUDE_DIR nanoflann.hpp)
+    facescan_require(NANOFLANN_INCLUDE_DIR "nanoflann" "libnanoflann-dev")
+endif()
+
+# Haar cascades come from opencv-data; the path is compiled in as the default and can be overridden at run time.
+find_file(FACESCAN_HAAR_FRONTAL haarcascade_frontalface_default.xml
+          PATHS /usr/share/opencv4/haarcascades /usr/share/opencv/haarcascades NO_DEFAULT_PATH)
+facescan_require(FACESCAN_HAAR_FRONTAL "OpenCV Haar cascades" "opencv-data")

@@ -1,0 +1,27 @@
+# Helpers shared by every facescan target: warnings (ours only, never global) and test registration.
+include_guard(GLOBAL)
+
+function(facescan_warnings target)
+    target_compile_options(${target} PRIVATE -Wall -Wextra -Wpedantic -Wshadow=local -Wnon-virtual-dtor)
+    if(FACESCAN_WERROR)
+        target_compile_options(${target} PRIVATE -Werror)
+    endif()
+endfunction()
+
+# facescan_add_test(NAME name SOURCES a.cpp ... LIBS lib ... [LABELS l ...] [TIMEOUT s])
+# One gtest executable, discovered test by test so ctest reports each case.
+function(facescan_add_test)
+    cmake_parse_arguments(T "" "NAME;TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
+    add_executable(${T_NAME} ${T_SOURCES})
+    target_link_libraries(${T_NAME} PRIVATE ${T_LIBS} GTest::gtest GTest::gtest_main)
+    target_compile_definitions(${T_NAME} PRIVATE
+        FACESCAN_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
+        FACESCAN_BINARY_DIR="${PROJECT_BINARY_DIR}")
+    facescan_warnings(${T_NAME})
+    if(NOT T_TIMEOUT)
+        set(T_TIMEOUT 300)
+    endif()
+    include(GoogleTest)
+    gtest_discover_tests(${T_NAME} DISCOVERY_TIMEOUT 60
+        PROPERTIES TIMEOUT ${T_TIMEOUT} LABELS "${T_LABELS}")
+endfunction()

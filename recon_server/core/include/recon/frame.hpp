@@ -1,0 +1,23 @@
+// What one frame is inside the core: depth in metres (0 = invalid), optional colour registered to depth.
+// Raw sensor units are converted at the boundary (agent/server), never here.
+#pragma once
+
+#include <cstdint>
+#include <opencv2/core.hpp>
+
+#include "recon/camera.hpp"
+
+namespace facescan::recon {
+
+struct RgbdFrame {
+    cv::Mat depth_m;     // CV_32FC1, metres, 0 where the sensor has no measurement
+    cv::Mat colour_bgr;  // CV_8UC3 registered to depth, or empty
+    int64_t timestamp_ns = 0;
+};
+
+// Raw sensor depth (CV_16UC1) to metres: raw * metres_per_unit (Kinect/OpenNI: 0.001; TUM PNGs: 1/5000).
+void depthRawToMetres(const cv::Mat& raw_u16, float metres_per_unit, cv::Mat& depth_m);
+// Metres back to raw units, rounding to nearest; 0 stays 0, out-of-range clamps to 0 (invalid).
+void depthMetresToRaw(const cv::Mat& depth_m, float metres_per_unit, cv::Mat& raw_u16);
+
+}  // namespace facescan::recon
