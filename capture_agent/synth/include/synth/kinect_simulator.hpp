@@ -1,0 +1,106 @@
+// The synthetic Kinect v1: THE renderer of the project (tests, capture agent `synthetic` source, benchmarks).
+// A head turns in front of a fixed camera, with a static torso below it and a wall behind it; the output is
+// 640x480 depth (metres) and colour registered to depth, with the Kinect v1 noise model of DESIGN.md s6
+// (Nguyen, Izadi, Lovell 2012), plus ground truth (pose, labels, noise-free depth, face box).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <opencv2/core.hpp>
+
+#include "recon/camera.hpp"
+#include "recon/frame.hpp"
+#include "recon/status.hpp"
+#include "synth/head_model.hpp"
+
+namespace facescan::synth {
+
+// Kinect v1 depth noise (Nguyen, Izadi, Lovell 2012; DESIGN.md s6).
+struct NoiseParams {
+    float axial_a_m = 0.0012f;         // metres; sigma_z = a + b (z - z0)^2 + angle term
+    float axial_b_per_m = 0.0019f;     // 1/metre
+    float axial_z0_m = 0.4f;           // metres
+    float angle_coeff_m = 0.0001f;     // metres * sqrt(m); angle term = c / sqrt(z) * theta^2 / (pi/2 - theta)^2
+    float lateral_sigma_px = 0.8f;     // pixels, std of the lateral (x, y) displacement of each sample
+    float disparity_step_px = 0.125f;  // pixels, disparity quantisation (1/8 px)
+    float baseline_m = 0.075f;         // metres, IR projector to IR camera (projector at +x of the camera)
+    float max_incidence_deg = 75.0f;   // degrees, surfaces more oblique than this return no depth
+    float min_range_m = 0.4f;          // metres, nearest measurable depth
+    float max_range_m = 4.0f;          // metres, farthest measurable depth
+    float dropout_rate = 0.005f;       // share of valid pixels randomly lost, [0, 1)
+    bool shadow = true;                // invalidate pixels the projector cannot see (edge shadow band)
+
+    Status validate() const;
+};
+
+struct SequenceParams {
+    int frames = 300;                    // frame count
+    float fps = 30.0f;                   // frames per second (timestamps)
+    float distance_m = 0.7f;             // metres, camera to head-frame origin at rest
+    float yaw_amplitude_deg = 35.0f;     // degrees, head turns left-right by +- this
+    float pitch_amplitude_deg = 12.0f;   // degrees, head nods by +- this
+    float yaw_period_frames = 300.0f;    // frames per full left-right-left cycle (sets angular speed)
+    float pitch_period_frames = 150.0f;  // frames per full nod cycle
+    float sway_amplitude_m = 0.01f;      // metres, slow lateral/vertical sway of the whole body (phases from seed)
+    uint64_t seed = 1;                   // noise and sway phases; frame i uses a generator seeded from (seed, i)
+    bool noise = true;                   // false: exact depth (no noise, quantisation, dropouts, shadows, angle loss)
+    bool torso = true;                   // render a torso below the head (segmentation must remove it)
+    bool wall = true;                    // render a wall behind the subject
+    float wall_distance_m = 1.6f;        // metres, camera to wall
+    NoiseParams noise_model;             // used when noise == true
+
+    Status validate() const;
+};
+
+// Per-pixel labels of FrameTruth::label.
+enum class PixelLabel : uint8_t { kNone = 0, kHead = 1, kBody = 2 };
+
+struct FrameTruth {
+    recon::Pose T_camera_head = recon::Pose::Identity();  // true head pose of this frame
+    cv::Mat label;         // CV_8UC1 PixelLabel per pixel (of the ideal render; wall and empty are 0)
+    cv::Mat depth_true_m;  // CV_32FC1 noise-free depth, metres, 0 where nothing is hit
+    cv::Rect face_box_px;  // box of the visible face (brows to chin, cheek to cheek); empty when not visible
+    float yaw_deg = 0;     // degrees, head yaw of this frame (0 = frontal)
+    float pitch_deg = 0;   // degrees
+};
+
+class KinectSimulator {
+ public:
+    KinectSimulator(HeadModel head, SequenceParams params,
+                    recon::Intrinsics intrinsics = recon::Intrinsics::kinectV1());
+    ~KinectSimulator();
+    KinectSimulator(KinectSimulator&&) noexcept;
+    KinectSimulator& operator=(KinectSimulator&&) noexcept;
+
+    int frameCount() const { return params_.frames; }
+    const recon::Intrinsics& intrinsics() const { return intrinsics_; }
+    const SequenceParams& params() const { return params_; }
+    const HeadModel& head() const { return head_; }
+
+    // T_camera_head of frame `index` (any integer; the motion is periodic and smooth).
+    recon::Pose poseAt(int index) const;
+    // The head mesh in the first camera frame (T_camera0_head applied): what a reconstruction should produce.
+    recon::Mesh headInFirstCamera() const;
+
+    // Renders frame `index` into `out` (depth metres CV_32F, colour CV_8UC3 registered, timestamp).
+    // Thread-safe: several threads may render different (or equal) indices at once. Deterministic.
+    void render(int index, recon::RgbdFrame& out, FrameTruth* truth = nullptr) const;
+
+ private:
+    struct Scene;
+    HeadModel head_;
+    SequenceParams params_;
+    recon::Intrinsics intrinsics_;
+    std::unique_ptr<Scene> scene_;  // renderable copies of head, torso, wall
+};
+
+// Writes frames [0, frameCount) as a TUM RGB-D folder (DESIGN.md s7):
+//   rgb/<t>.png, depth/<t>.png (16-bit, 5000 units per metre), rgb.txt, depth.txt,
+//   groundtruth.txt   `t tx ty tz qx qy qz qw`: camera i in the reference frame = the FIRST camera frame
+//                     (T_camera0_camera_i; the head is static in that frame),
+//   intrinsics.txt    `fx fy cx cy`,
+//   head_gt.ply       the head mesh in metres in the HEAD frame (the ruler's --gt),
+//   T_camera0_head.txt 4x4 row-major: maps head_gt.ply into the first camera frame (the ruler's --init).
+Status writeTumSequence(const KinectSimulator& simulator, const std::filesystem::path& dir);
+
+}  // namespace facescan::synth

@@ -1,0 +1,77 @@
+// The accuracy ruler: how close a reconstructed mesh M is to the ground-truth head G (DESIGN.md s6).
+//
+// Face region of G: the vertices within `face_radius_m` of G's nose tip whose normal faces forward
+// (normal . face_direction >= min_facing_cos). M is rigidly aligned to G (point-to-plane ICP from several
+// starting poses, or from a given initial guess), then every vertex of M whose nearest point on G lies in the
+// face region is a sample; distances are point-to-SURFACE (nearest triangle), never point-to-vertex.
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+#include <optional>
+
+#include "recon/camera.hpp"
+#include "recon/mesh.hpp"
+#include "recon/status.hpp"
+
+namespace facescan::eval {
+
+struct AccuracyParams {
+    float face_radius_m = 0.11f;       // metres, face region = G within this of the nose tip...
+    float min_facing_cos = 0.0f;       // ...whose normal . face_direction is at least this (0 = facing forward)
+    float complete_within_m = 0.002f;  // metres, a G face vertex is "covered" when M is this close
+    float outlier_m = 0.005f;          // metres, M samples farther than this from G are outliers
+    bool align = true;                 // run ICP; false = measure as given (after the initial guess)
+    int icp_iterations = 40;           // per starting pose
+    int max_icp_samples = 6000;        // M vertices used by ICP (uniform subsample)
+
+    Status validate() const;
+};
+
+struct AccuracyReport {
+    double mean_mm = 0;          // mean |d| over the face samples of M, millimetres
+    double rms_mm = 0;           // root mean square of d, millimetres
+    double median_mm = 0;        // median |d|, millimetres
+    double p90_mm = 0;           // 90th percentile |d|, millimetres
+    double completeness = 0;     // share of G's face vertices within complete_within_m of M's surface, [0, 1]
+    double outliers = 0;         // share of M's face samples farther than outlier_m from G, [0, 1]
+    int mesh_vertices_used = 0;  // M samples in the face region
+    int gt_face_vertices = 0;    // G vertices in the face region
+    recon::Pose T_gt_mesh = recon::Pose::Identity();  // the alignment found: maps M into G's frame
+};
+
+// The nose tip of a head-frame mesh (y up, face along +z): the most forward vertex above the neck.
+Eigen::Vector3f findNoseTip(const recon::Mesh& gt_head_frame);
+
+// Measures M against G. `gt_nose_tip` is in G's frame and `face_direction` the way G's face looks (head frame:
+// +z). `T_gt_mesh_guess`, when given, is tried first (e.g. inverse of T_camera0_head for a mesh in the first
+// camera frame). InvalidArgument for empty meshes or bad params; NotFound when M never meets G's face.
+StatusOr<AccuracyReport> measureAccuracy(const recon::Mesh& mesh, const recon::Mesh& gt,
+                                         const Eigen::Vector3f& gt_nose_tip, const AccuracyParams& params = {},
+                                         const std::optional<recon::Pose>& T_gt_mesh_guess = std::nullopt,
+                                         const Eigen::Vector3f& face_direction = Eigen::Vector3f::UnitZ());
+
+// Point-to-surface distance queries against a mesh (nanoflann k-d tree over vertices, then exact
+// point-triangle distance over the one-rings of the k nearest vertices).
+class SurfaceDistance {
+ public:
+    explicit SurfaceDistance(const recon::Mesh& mesh);
+    ~SurfaceDistance();
+    SurfaceDistance(const SurfaceDistance&) = delete;
+    SurfaceDistance& operator=(const SurfaceDistance&) = delete;
+
+    struct Hit {
+        float distance_m = 0;
+        Eigen::Vector3f closest = Eigen::Vector3f::Zero();  // nearest point on the surface
+        Eigen::Vector3f normal = Eigen::Vector3f::UnitZ();  // normal of the triangle hit
+        int face = -1;                                      // triangle index
+        int nearest_vertex = -1;
+    };
+    Hit query(const Eigen::Vector3f& p) const;
+
+ private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace facescan::eval
