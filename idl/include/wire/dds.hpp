@@ -1,0 +1,253 @@
+// A thin RAII layer over the Cyclone DDS C API (Debian ships no cyclonedds-cxx). It owns entity handles and
+// turns return codes into Status; everything else (discovery, reliability, history, durability, liveliness,
+// fragmentation) is DDS's own work, configured through QoS (wire/qos.hpp) and the XML profiles in deploy/profiles.
+#pragma once
+
+#include <dds/dds.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <utility>
+
+#include "recon/status.hpp"
+
+namespace facescan::wire {
+
+// A Cyclone return code (negative) as a Status that names the failed operation.
+Status ddsStatus(dds_return_t code, const std::string& what);
+
+// Which DDS domain and which network profile. Profiles: "loopback" (this machine only; tests and demo), "lan"
+// (discovery on the local network), or a path to a Cyclone XML file.
+struct DomainConfig {
+    uint32_t domain_id = 0;       // DDS domain; separate domains never see each other
+    std::string profile = "lan";  // loopback | lan | FILE.xml
+    Status validate() const;
+};
+
+// Resolves a profile name to the XML text Cyclone is given (searching deploy/profiles of the source tree, then
+// <exe>/../share/facescan/profiles, then FACESCAN_PROFILE_DIR).
+StatusOr<std::string> loadProfileXml(const std::string& profile);
+
+// Reads net.core.rmem_max and compares it with the SocketReceiveBufferSize min of the profile. When the kernel
+// limit is lower, Cyclone cannot create the participant; the Status says exactly which sysctl to run.
+Status checkSocketBuffers(const std::string& profile_xml);
+
+// An owned DDS entity handle; deleting it deletes its children (DDS semantics).
+class Entity {
+ public:
+    Entity() = default;
+    explicit Entity(dds_entity_t handle) : handle_(handle) {}
+    ~Entity() { reset(); }
+    Entity(Entity&& other) noexcept : handle_(std::exchange(other.handle_, 0)) {}
+    Entity& operator=(Entity&& other) noexcept {
+        if (this != &other) {
+            reset();
+            handle_ = std::exchange(other.handle_, 0);
+        }
+        return *this;
+    }
+    Entity(const Entity&) = delete;
+    Entity& operator=(const Entity&) = delete;
+
+    dds_entity_t handle() const { return handle_; }
+    bool valid() const { return handle_ > 0; }
+    void reset();
+
+ private:
+    dds_entity_t handle_ = 0;
+};
+
+class Qos {
+ public:
+    Qos() : qos_(dds_create_qos()) {}
+    ~Qos() { dds_delete_qos(qos_); }
+    Qos(const Qos& other) : qos_(dds_create_qos()) { dds_copy_qos(qos_, other.qos_); }
+    Qos& operator=(const Qos& other) {
+        if (this != &other) dds_copy_qos(qos_, other.qos_);
+        return *this;
+    }
+    dds_qos_t* get() const { return qos_; }
+
+ private:
+    dds_qos_t* qos_;
+};
+
+// One domain participant. Several Participants of one process may share a domain; the domain (with its XML
+// configuration) lives as long as any of them.
+class Participant {
+ public:
+    static StatusOr<Participant> create(const DomainConfig& config);
+    dds_entity_t handle() const { return entity_.handle(); }
+    uint32_t domainId() const { return domain_id_; }
+
+ private:
+    std::shared_ptr<Entity> domain_;
+    Entity entity_;
+    uint32_t domain_id_ = 0;
+};
+
+// What a generated C type needs to become a topic: its descriptor, its topic name and its QoS profile.
+// Specialised for every facescan topic in wire/topics.hpp.
+template <typename T>
+struct TopicTraits;
+
+template <typename T>
+class Topic {
+ public:
+    static StatusOr<Topic> create(const Participant& participant) {
+        Topic topic;
+        const Qos qos = TopicTraits<T>::qos();
+        const dds_entity_t h = dds_create_topic(participant.handle(), TopicTraits<T>::descriptor(),
+                                                TopicTraits<T>::name(), qos.get(), nullptr);
+        if (h < 0) return ddsStatus(h, std::string("create topic ") + TopicTraits<T>::name());
+        topic.entity_ = Entity(h);
+        topic.participant_ = participant.handle();
+        return topic;
+    }
+    dds_entity_t handle() const { return entity_.handle(); }
+    dds_entity_t participant() const { return participant_; }
+
+ private:
+    Entity entity_;
+    dds_entity_t participant_ = 0;
+};
+
+template <typename T>
+class Writer {
+ public:
+    // `qos` overrides the topic's default writer QoS (e.g. keep-all for recordings that must not lose frames).
+    static StatusOr<Writer> create(const Topic<T>& topic, const Qos* qos = nullptr) {
+        Writer writer;
+        const Qos defaults = TopicTraits<T>::qos();
+        const dds_entity_t h =
+            dds_create_writer(topic.participant(), topic.handle(), qos ? qos->get() : defaults.get(), nullptr);
+        if (h < 0) return ddsStatus(h, std::string("create writer for ") + TopicTraits<T>::name());
+        writer.entity_ = Entity(h);
+        return writer;
+    }
+    // Blocks at most the QoS max_blocking_time when a reliable keep-all history is full (back-pressure).
+    Status write(const T& sample) {
+        const dds_return_t rc = dds_write(entity_.handle(), &sample);
+        return rc < 0 ? ddsStatus(rc, std::string("write ") + TopicTraits<T>::name()) : Status::ok();
+    }
+    // Tells readers this instance (session) is gone for good.
+    Status dispose(const T& key_sample) {
+        const dds_return_t rc = dds_writedispose(entity_.handle(), &key_sample);
+        return rc < 0 ? ddsStatus(rc, "writedispose") : Status::ok();
+    }
+    // Number of matched readers (discovery).
+    int matchedReaders() const {
+        dds_publication_matched_status_t st{};
+        return dds_get_publication_matched_status(entity_.handle(), &st) < 0 ? 0 : static_cast<int>(st.current_count);
+    }
+    // Waits until at least `count` readers are matched; false on timeout.
+    bool waitForReaders(int count, std::chrono::milliseconds timeout) const;
+    // Waits until every sample written so far is acknowledged by all reliable readers.
+    Status waitForAcks(std::chrono::milliseconds timeout) {
+        const dds_return_t rc = dds_wait_for_acks(entity_.handle(), DDS_MSECS(timeout.count()));
+        return rc < 0 ? ddsStatus(rc, "wait for acknowledgements") : Status::ok();
+    }
+    dds_entity_t handle() const { return entity_.handle(); }
+
+ private:
+    Entity entity_;
+};
+
+template <typename T>
+class Reader {
+ public:
+    static StatusOr<Reader> create(const Topic<T>& topic, const Qos* qos = nullptr) {
+        Reader reader;
+        const Qos defaults = TopicTraits<T>::qos();
+        const dds_entity_t h =
+            dds_create_reader(topic.participant(), topic.handle(), qos ? qos->get() : defaults.get(), nullptr);
+        if (h < 0) return ddsStatus(h, std::string("create reader for ") + TopicTraits<T>::name());
+        reader.entity_ = Entity(h);
+        const dds_entity_t ws = dds_create_waitset(topic.participant());
+        if (ws < 0) return ddsStatus(ws, "create waitset");
+        reader.waitset_ = Entity(ws);
+        const dds_entity_t cond = dds_create_readcondition(h, DDS_ANY_STATE);
+        if (cond < 0) return ddsStatus(cond, "create read condition");
+        const dds_return_t rc = dds_waitset_attach(ws, cond, h);
+        if (rc < 0) return ddsStatus(rc, "attach read condition");
+        return reader;
+    }
+
+    // Takes up to `max_samples` samples (loaned, zero-copy) and calls fn(const T&, const dds_sample_info_t&)
+    // for each; invalid samples (instance state changes, e.g. a writer that died) are passed too, with
+    // info.valid_data false. Returns the number of samples seen, or an error.
+    template <typename Fn>
+    StatusOr<int> take(Fn&& fn, int max_samples = 16) {
+        constexpr int kBatch = 16;
+        void* samples[kBatch];
+        dds_sample_info_t infos[kBatch];
+        int seen = 0;
+        while (seen < max_samples) {
+            samples[0] = nullptr;
+            const int want = std::min(kBatch, max_samples - seen);
+            const dds_return_t n =
+                dds_take(entity_.handle(), samples, infos, static_cast<size_t>(want), static_cast<uint32_t>(want));
+            if (n < 0) return ddsStatus(n, std::string("take ") + TopicTraits<T>::name());
+            for (int i = 0; i < n; ++i) fn(*static_cast<const T*>(samples[i]), infos[i]);
+            if (n > 0) dds_return_loan(entity_.handle(), samples, n);
+            seen += n;
+            if (n < want) break;
+        }
+        return seen;
+    }
+
+    // Like take, but leaves the samples in the reader (e.g. to look at durable state without consuming it).
+    template <typename Fn>
+    StatusOr<int> read(Fn&& fn, int max_samples = 16) {
+        constexpr int kBatch = 16;
+        void* samples[kBatch];
+        dds_sample_info_t infos[kBatch];
+        samples[0] = nullptr;
+        const int want = std::min(kBatch, max_samples);
+        const dds_return_t n =
+            dds_read(entity_.handle(), samples, infos, static_cast<size_t>(want), static_cast<uint32_t>(want));
+        if (n < 0) return ddsStatus(n, std::string("read ") + TopicTraits<T>::name());
+        for (int i = 0; i < n; ++i) fn(*static_cast<const T*>(samples[i]), infos[i]);
+        if (n > 0) dds_return_loan(entity_.handle(), samples, n);
+        return static_cast<int>(n);
+    }
+
+    // Blocks until data (or an instance state change) is available, or the timeout passes; false on timeout.
+    bool waitForData(std::chrono::milliseconds timeout) {
+        const dds_return_t rc = dds_waitset_wait(waitset_.handle(), nullptr, 0, DDS_MSECS(timeout.count()));
+        return rc > 0;
+    }
+    int matchedWriters() const {
+        dds_subscription_matched_status_t st{};
+        return dds_get_subscription_matched_status(entity_.handle(), &st) < 0 ? 0 : static_cast<int>(st.current_count);
+    }
+    bool waitForWriters(int count, std::chrono::milliseconds timeout) const;
+    dds_entity_t handle() const { return entity_.handle(); }
+
+ private:
+    Entity entity_;
+    Entity waitset_;
+};
+
+// Polls `done` every few milliseconds until it returns true or the timeout passes (discovery waits).
+bool pollUntil(const std::function<bool()>& done, std::chrono::milliseconds timeout);
+
+template <typename T>
+bool Writer<T>::waitForReaders(int count, std::chrono::milliseconds timeout) const {
+    return pollUntil([&] { return matchedReaders() >= count; }, timeout);
+}
+template <typename T>
+bool Reader<T>::waitForWriters(int count, std::chrono::milliseconds timeout) const {
+    return pollUntil([&] { return matchedWriters() >= count; }, timeout);
+}
+
+// Borrowing views for writing string fields (no copy; DDS never frees them).
+inline char* stringView(const std::string& s) { return const_cast<char*>(s.c_str()); }
+// A received string field (may be null in a malformed sample).
+inline std::string fromDds(const char* s) { return s ? std::string(s) : std::string(); }
+
+}  // namespace facescan::wire

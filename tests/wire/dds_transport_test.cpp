@@ -1,0 +1,187 @@
+// Real Cyclone DDS on the loopback profile, no mocks: a second process publishes frames, this one receives them.
+// Each test uses its own domain id (derived from the pid) so parallel ctest runs never see each other.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstring>
+#include <vector>
+
+#include "wire/topics.hpp"
+
+namespace facescan::wire {
+namespace {
+
+using namespace std::chrono_literals;
+
+uint32_t privateDomain(uint32_t salt) { return 100 + (static_cast<uint32_t>(getpid()) * 7 + salt) % 120; }
+
+// Deterministic payload for frame `seq`, so the receiver can check every byte.
+std::vector<uint8_t> payloadFor(uint32_t seq, size_t size) {
+    std::vector<uint8_t> bytes(size);
+    uint32_t x = seq * 2654435761u + 12345u;
+    for (auto& b : bytes) {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        b = static_cast<uint8_t>(x);
+    }
+    return bytes;
+}
+
+constexpr size_t kFrameBytes = 300 * 1024;  // a realistic compressed RGB-D frame
+const std::string kSession = "test-session";
+
+// Child process: publishes `count` frames as a recording (every frame must arrive), then exits.
+[[noreturn]] void publishFrames(uint32_t domain, uint32_t count, bool exit_abruptly) {
+    auto participant = Participant::create({domain, "loopback"});
+    if (!participant) _exit(10);
+    auto topic = Topic<facescan_wire_RgbdFrame>::create(*participant);
+    if (!topic) _exit(11);
+    const Qos qos = frameWriterQos(/*every_frame=*/true);
+    auto writer = Writer<facescan_wire_RgbdFrame>::create(*topic, &qos);
+    if (!writer) _exit(12);
+    if (!writer->waitForReaders(1, 20s)) _exit(13);
+    for (uint32_t seq = 0; seq < count; ++seq) {
+        const std::vector<uint8_t> depth = payloadFor(seq, kFrameBytes);
+        facescan_wire_RgbdFrame sample{};
+        sample.session_id = stringView(kSession);
+        sample.seq = seq;
+        sample.capture_time_ns = seq;
+        sample.depth_codec = facescan_wire_DEPTH_RVL;
+        sample.depth = octetView(depth.data(), depth.size());
+        sample.colour_codec = facescan_wire_COLOUR_NONE;
+        if (!writer->write(sample).isOk()) _exit(14);
+    }
+    if (exit_abruptly) raise(SIGKILL);  // a killed agent: no clean shutdown
+    if (!writer->waitForAcks(20s).isOk()) _exit(15);
+    _exit(0);
+}
+
+TEST(DdsTransport, RecordingFramesArriveIntactAndInOrderAcrossProcesses) {
+    const uint32_t domain = privateDomain(1);
+    constexpr uint32_t kCount = 60;
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) publishFrames(domain, kCount, false);
+
+    auto participant = Participant::create({domain, "loopback"});
+    ASSERT_TRUE(participant.isOk()) << participant.status().toString();
+    auto topic = Topic<facescan_wire_RgbdFrame>::create(*participant);
+    ASSERT_TRUE(topic.isOk()) << topic.status().toString();
+    const Qos qos = frameReaderQos();
+    auto reader = Reader<facescan_wire_RgbdFrame>::create(*topic, &qos);
+    ASSERT_TRUE(reader.isOk()) << reader.status().toString();
+
+    std::vector<uint32_t> received;
+    size_t corrupt = 0;
+    const auto deadline = std::chrono::steady_clock::now() + 30s;
+    while (received.size() < kCount && std::chrono::steady_clock::now() < deadline) {
+        reader->waitForData(200ms);
+        auto n = reader->take([&](const facescan_wire_RgbdFrame& s, const dds_sample_info_t& info) {
+            if (!info.valid_data) return;
+            received.push_back(s.seq);
+            const std::vector<uint8_t> expected = payloadFor(s.seq, kFrameBytes);
+            if (s.depth._length != expected.size() || std::memcmp(s.depth._buffer, expected.data(), expected.size()) ||
+                fromDds(s.session_id) != kSession) {
+                ++corrupt;
+            }
+        });
+        ASSERT_TRUE(n.isOk()) << n.status().toString();
+    }
+    int wstatus = 0;
+    waitpid(child, &wstatus, 0);
+    EXPECT_TRUE(WIFEXITED(wstatus) && WEXITSTATUS(wstatus) == 0) << "publisher exit status " << wstatus;
+    ASSERT_EQ(received.size(), kCount);
+    EXPECT_EQ(corrupt, 0u);
+    for (uint32_t i = 0; i < kCount; ++i) EXPECT_EQ(received[i], i) << "out of order at " << i;
+}
+
+TEST(DdsTransport, KilledPublisherIsSeenAsGone) {
+    const uint32_t domain = privateDomain(2);
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) publishFrames(domain, 3, /*exit_abruptly=*/true);
+
+    auto participant = Participant::create({domain, "loopback"});
+    ASSERT_TRUE(participant.isOk()) << participant.status().toString();
+    auto topic = Topic<facescan_wire_RgbdFrame>::create(*participant);
+    ASSERT_TRUE(topic.isOk());
+    const Qos qos = frameReaderQos();
+    auto reader = Reader<facescan_wire_RgbdFrame>::create(*topic, &qos);
+    ASSERT_TRUE(reader.isOk());
+
+    int frames = 0;
+    bool gone = false;
+    const auto deadline = std::chrono::steady_clock::now() + 20s;  // lease is 3 s in the loopback profile
+    while (!gone && std::chrono::steady_clock::now() < deadline) {
+        reader->waitForData(200ms);
+        auto n = reader->take([&](const facescan_wire_RgbdFrame&, const dds_sample_info_t& info) {
+            if (info.valid_data) ++frames;
+            if (info.instance_state != DDS_IST_ALIVE) gone = true;
+        });
+        ASSERT_TRUE(n.isOk());
+    }
+    waitpid(child, nullptr, 0);
+    EXPECT_GT(frames, 0);
+    EXPECT_TRUE(gone) << "the killed writer's session never became not-alive";
+}
+
+TEST(DdsTransport, LateJoinerGetsDurableCameraInfo) {
+    const uint32_t domain = privateDomain(3);
+    auto participant = Participant::create({domain, "loopback"});
+    ASSERT_TRUE(participant.isOk()) << participant.status().toString();
+    auto topic = Topic<facescan_wire_CameraInfo>::create(*participant);
+    ASSERT_TRUE(topic.isOk());
+    auto writer = Writer<facescan_wire_CameraInfo>::create(*topic);
+    ASSERT_TRUE(writer.isOk());
+    facescan_wire_CameraInfo info{};
+    info.session_id = stringView(kSession);
+    info.width = 640;
+    info.height = 480;
+    info.fx = 575.8f;
+    const std::string empty;
+    info.source = stringView(empty);
+    info.agent_host = stringView(empty);
+    ASSERT_TRUE(writer->write(info).isOk());
+
+    // The reader is created after the sample was written: transient-local durability must still deliver it.
+    auto reader = Reader<facescan_wire_CameraInfo>::create(*topic);
+    ASSERT_TRUE(reader.isOk());
+    int got = 0;
+    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    while (got == 0 && std::chrono::steady_clock::now() < deadline) {
+        reader->waitForData(200ms);
+        (void)reader->take([&](const facescan_wire_CameraInfo& s, const dds_sample_info_t& i) {
+            if (i.valid_data && s.width == 640 && fromDds(s.session_id) == kSession) ++got;
+        });
+    }
+    EXPECT_EQ(got, 1);
+}
+
+TEST(DdsProfiles, LoadsNamedProfilesAndRejectsUnknownOnes) {
+    EXPECT_TRUE(loadProfileXml("loopback").isOk());
+    EXPECT_TRUE(loadProfileXml("lan").isOk());
+    auto bad = loadProfileXml("wifi");
+    ASSERT_FALSE(bad.isOk());
+    EXPECT_NE(bad.status().message().find("loopback, lan"), std::string::npos);
+    EXPECT_EQ(loadProfileXml("/nonexistent/profile.xml").status().code(), StatusCode::kNotFound);
+    EXPECT_FALSE(DomainConfig({300, "loopback"}).validate().isOk());
+}
+
+TEST(DdsProfiles, SocketBufferCheckNamesTheSysctlToRaise) {
+    // A profile asking for more than any kernel allows by default: the check must say what to change.
+    const std::string xml = R"(<Internal><SocketReceiveBufferSize min="64GiB" max="64GiB"/></Internal>)";
+    const Status s = checkSocketBuffers(xml);
+    ASSERT_FALSE(s.isOk());
+    EXPECT_NE(s.message().find("sysctl -w net.core.rmem_max="), std::string::npos) << s.message();
+    EXPECT_TRUE(checkSocketBuffers(R"(<SocketReceiveBufferSize min="default"/>)").isOk());
+    auto loopback = loadProfileXml("loopback");
+    ASSERT_TRUE(loopback.isOk());
+    EXPECT_TRUE(checkSocketBuffers(*loopback).isOk()) << "this machine cannot run the loopback profile";
+}
+
+}  // namespace
+}  // namespace facescan::wire
