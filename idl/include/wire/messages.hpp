@@ -1,0 +1,77 @@
+// Message <-> core conversion: the only place that knows how RgbdFrame/CameraInfo samples map to recon types.
+// Everything read from the network is validated here and comes back as a Status, never a crash.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "recon/frame.hpp"
+#include "wire/colour_codec.hpp"
+#include "wire/depth_codec.hpp"
+#include "wire/topics.hpp"
+
+namespace facescan::wire {
+
+// CameraInfo as a C++ value (the agent fills it; the server validates what it receives).
+struct CameraInfoData {
+    std::string session_id;
+    recon::Intrinsics intrinsics;
+    float depth_units_m = 0.001f;  // metres per raw unit
+    bool colour_registered = true;
+    float rate_hz = 30.0f;
+    bool every_frame = false;      // recording: process every frame
+    uint32_t expected_frames = 0;  // 0 = unknown
+    std::string source;
+    std::string agent_host;
+
+    Status validate() const;  // sizes within the codec caps, positive focal lengths, sane units
+};
+
+// Session ids travel as DDS keys and end up in file names on the server: 1-64 of [A-Za-z0-9._-], not ".."/".".
+Status validateSessionId(const std::string& session_id);
+
+// Holds the strings the message points at: keep it alive until the sample is written.
+facescan_wire_CameraInfo toMessage(const CameraInfoData& info);
+StatusOr<CameraInfoData> fromMessage(const facescan_wire_CameraInfo& msg);
+
+// One compressed frame, buffers reused frame to frame.
+struct EncodedFrame {
+    uint32_t seq = 0;
+    int64_t capture_time_ns = 0;
+    DepthCodecId depth_codec = DepthCodecId::kRvlZstd;
+    std::vector<uint8_t> depth;
+    ColourCodecId colour_codec = ColourCodecId::kNone;
+    std::vector<uint8_t> colour;
+
+    size_t bytes() const { return depth.size() + colour.size(); }
+};
+
+// Agent side: raw 16-bit depth (+ optional colour) to codec payloads. No allocation per frame after warm-up.
+class FrameEncoder {
+ public:
+    FrameEncoder(DepthCodecParams depth = {}, ColourJpegParams colour = {});
+    Status encode(const cv::Mat& depth_raw_u16, const cv::Mat& colour_bgr, EncodedFrame& out);
+
+ private:
+    DepthEncoder depth_;
+    ColourJpegEncoder colour_;
+};
+
+// A sample that points into `frame`'s buffers and `session_id` (no copy): write it before they change.
+facescan_wire_RgbdFrame toMessage(const std::string& session_id, const EncodedFrame& frame);
+
+// Server side: a received sample to a frame in metres, checked against the session's CameraInfo.
+class FrameDecoder {
+ public:
+    // Decodes depth (and colour when present and `want_colour`) into `out` (buffers reused).
+    Status decode(const facescan_wire_RgbdFrame& msg, const CameraInfoData& camera, bool want_colour,
+                  recon::RgbdFrame& out);
+
+ private:
+    DepthDecoder depth_;
+    ColourJpegDecoder colour_;
+    cv::Mat depth_raw_;
+};
+
+}  // namespace facescan::wire

@@ -1,0 +1,133 @@
+#include "wire/messages.hpp"
+
+#include <cmath>
+
+namespace facescan::wire {
+
+Status validateSessionId(const std::string& session_id) {
+    if (session_id.empty() || session_id.size() > 64) {
+        return invalidArgument("session id must be 1-64 characters, got " + std::to_string(session_id.size()));
+    }
+    if (session_id == "." || session_id == "..") return invalidArgument("session id may not be '.' or '..'");
+    for (const char c : session_id) {
+        const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '-' ||
+                        c == '_' || c == '.';
+        if (!ok) return invalidArgument("session id '" + session_id + "' may only use letters, digits, '.', '-', '_'");
+    }
+    return Status::ok();
+}
+
+Status CameraInfoData::validate() const {
+    RETURN_IF_ERROR(validateSessionId(session_id));
+    const recon::Intrinsics& k = intrinsics;
+    if (k.width_px < 16 || k.height_px < 16 || k.width_px > kMaxDepthWidthPx || k.height_px > kMaxDepthHeightPx) {
+        return outOfRange("camera size " + std::to_string(k.width_px) + "x" + std::to_string(k.height_px) +
+                          " outside 16..4096");
+    }
+    if (!(k.fx_px > 1 && k.fy_px > 1 && std::isfinite(k.fx_px) && std::isfinite(k.fy_px)) || !std::isfinite(k.cx_px) ||
+        !std::isfinite(k.cy_px)) {
+        return invalidArgument("camera intrinsics are not usable (focal lengths must be finite and > 1 px)");
+    }
+    if (!(depth_units_m > 1e-6f && depth_units_m <= 0.01f)) {
+        return invalidArgument("depth units must be in (1e-6, 0.01] metres per raw unit, got " +
+                               std::to_string(depth_units_m));
+    }
+    if (!(rate_hz > 0 && rate_hz <= 1000)) return invalidArgument("frame rate must be in (0, 1000] Hz");
+    return Status::ok();
+}
+
+facescan_wire_CameraInfo toMessage(const CameraInfoData& info) {
+    facescan_wire_CameraInfo msg{};
+    msg.session_id = stringView(info.session_id);
+    msg.width = static_cast<uint32_t>(info.intrinsics.width_px);
+    msg.height = static_cast<uint32_t>(info.intrinsics.height_px);
+    msg.fx = info.intrinsics.fx_px;
+    msg.fy = info.intrinsics.fy_px;
+    msg.cx = info.intrinsics.cx_px;
+    msg.cy = info.intrinsics.cy_px;
+    msg.depth_units_m = info.depth_units_m;
+    msg.colour_registered = info.colour_registered;
+    msg.source_rate_hz = info.rate_hz;
+    msg.every_frame = info.every_frame;
+    msg.expected_frames = info.expected_frames;
+    msg.source = stringView(info.source);
+    msg.agent_host = stringView(info.agent_host);
+    return msg;
+}
+
+StatusOr<CameraInfoData> fromMessage(const facescan_wire_CameraInfo& msg) {
+    CameraInfoData info;
+    info.session_id = fromDds(msg.session_id);
+    if (msg.width > static_cast<uint32_t>(kMaxDepthWidthPx) || msg.height > static_cast<uint32_t>(kMaxDepthHeightPx)) {
+        return outOfRange("CameraInfo size " + std::to_string(msg.width) + "x" + std::to_string(msg.height) +
+                          " exceeds 4096x4096");
+    }
+    info.intrinsics.width_px = static_cast<int>(msg.width);
+    info.intrinsics.height_px = static_cast<int>(msg.height);
+    info.intrinsics.fx_px = msg.fx;
+    info.intrinsics.fy_px = msg.fy;
+    info.intrinsics.cx_px = msg.cx;
+    info.intrinsics.cy_px = msg.cy;
+    info.depth_units_m = msg.depth_units_m;
+    info.colour_registered = msg.colour_registered;
+    info.rate_hz = msg.source_rate_hz;
+    info.every_frame = msg.every_frame;
+    info.expected_frames = msg.expected_frames;
+    info.source = fromDds(msg.source);
+    info.agent_host = fromDds(msg.agent_host);
+    RETURN_IF_ERROR(info.validate());
+    return info;
+}
+
+FrameEncoder::FrameEncoder(DepthCodecParams depth, ColourJpegParams colour) : depth_(depth), colour_(colour) {}
+
+Status FrameEncoder::encode(const cv::Mat& depth_raw_u16, const cv::Mat& colour_bgr, EncodedFrame& out) {
+    out.depth_codec = depth_.params().codec;
+    RETURN_IF_ERROR(depth_.encode(depth_raw_u16, out.depth));
+    if (colour_bgr.empty()) {
+        out.colour_codec = ColourCodecId::kNone;
+        out.colour.clear();
+        return Status::ok();
+    }
+    out.colour_codec = ColourCodecId::kJpeg;
+    return colour_.encode(colour_bgr, out.colour);
+}
+
+facescan_wire_RgbdFrame toMessage(const std::string& session_id, const EncodedFrame& frame) {
+    facescan_wire_RgbdFrame msg{};
+    msg.session_id = stringView(session_id);
+    msg.seq = frame.seq;
+    msg.capture_time_ns = frame.capture_time_ns;
+    msg.depth_codec = static_cast<facescan_wire_DepthCodec>(frame.depth_codec);
+    msg.depth = octetView(frame.depth.data(), frame.depth.size());
+    msg.colour_codec = static_cast<facescan_wire_ColourCodec>(frame.colour_codec);
+    msg.colour = octetView(frame.colour.data(), frame.colour.size());
+    msg.end_of_stream = false;
+    return msg;
+}
+
+Status FrameDecoder::decode(const facescan_wire_RgbdFrame& msg, const CameraInfoData& camera, bool want_colour,
+                            recon::RgbdFrame& out) {
+    if (msg.depth._length > 0 && msg.depth._buffer == nullptr) return dataLoss("depth payload has no bytes");
+    ASSIGN_OR_RETURN(const DepthCodecId codec, depthCodecFromTag(static_cast<uint32_t>(msg.depth_codec)));
+    const int w = camera.intrinsics.width_px;
+    const int h = camera.intrinsics.height_px;
+    RETURN_IF_ERROR(depth_.decode(codec, msg.depth._buffer, msg.depth._length, w, h, depth_raw_));
+    recon::depthRawToMetres(depth_raw_, camera.depth_units_m, out.depth_m);
+    out.timestamp_ns = msg.capture_time_ns;
+    const bool has_colour = msg.colour_codec == facescan_wire_COLOUR_JPEG && msg.colour._length > 0;
+    if (!want_colour || !has_colour) {
+        out.colour_bgr.release();
+        return Status::ok();
+    }
+    if (msg.colour._buffer == nullptr) return dataLoss("colour payload has no bytes");
+    // Colour that is not registered to depth cannot be used per depth pixel; it is dropped here and the
+    // depth-only paths take over (the Biwi-style extrinsic mapping lives in the detector's offline tools).
+    if (!camera.colour_registered) {
+        out.colour_bgr.release();
+        return Status::ok();
+    }
+    return colour_.decode(msg.colour._buffer, msg.colour._length, w, h, out.colour_bgr);
+}
+
+}  // namespace facescan::wire
