@@ -98,6 +98,7 @@ facescan_wire_RgbdFrame toMessage(const std::string& session_id, const EncodedFr
     msg.session_id = stringView(session_id);
     msg.seq = frame.seq;
     msg.capture_time_ns = frame.capture_time_ns;
+    msg.source_time_ns = frame.source_time_ns;
     msg.depth_codec = static_cast<facescan_wire_DepthCodec>(frame.depth_codec);
     msg.depth = octetView(frame.depth.data(), frame.depth.size());
     msg.colour_codec = static_cast<facescan_wire_ColourCodec>(frame.colour_codec);
@@ -114,7 +115,8 @@ Status FrameDecoder::decode(const facescan_wire_RgbdFrame& msg, const CameraInfo
     const int h = camera.intrinsics.height_px;
     RETURN_IF_ERROR(depth_.decode(codec, msg.depth._buffer, msg.depth._length, w, h, depth_raw_));
     recon::depthRawToMetres(depth_raw_, camera.depth_units_m, out.depth_m);
-    out.timestamp_ns = msg.capture_time_ns;
+    // Trajectories are stamped with the source's time so they line up with a recording's ground truth.
+    out.timestamp_ns = msg.source_time_ns;
     const bool has_colour = msg.colour_codec == facescan_wire_COLOUR_JPEG && msg.colour._length > 0;
     if (!want_colour || !has_colour) {
         out.colour_bgr.release();
