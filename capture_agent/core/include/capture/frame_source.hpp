@@ -14,25 +14,25 @@
 namespace facescan::capture {
 
 struct SourceInfo {
-    recon::Intrinsics intrinsics;  // of the depth camera
-    float depth_units_m = 0.001f;  // metres per raw depth unit (OpenNI: mm; TUM: 1/5000 m)
+    recon::Intrinsics intrinsics;   // of the depth camera
+    float depth_units_m = 0.001f;   // metres per raw depth unit (OpenNI: mm; TUM: 1/5000 m)
     bool colour_registered = true;  // colour pixels line up with depth pixels
     bool has_colour = true;
-    float rate_hz = 30.0f;          // the source's own frame rate
-    bool is_recording = false;      // a file or generator: can be read as fast as the consumer takes it
-    int expected_frames = 0;        // 0 when unknown or live
-    std::string description;        // e.g. "synthetic:leeperrysmith", "oni:/data/scan.oni"
+    float rate_hz = 30.0f;      // the source's own frame rate
+    bool is_recording = false;  // a file or generator: can be read as fast as the consumer takes it
+    int expected_frames = 0;    // 0 when unknown or live
+    std::string description;    // e.g. "synthetic:leeperrysmith", "oni:/data/scan.oni"
 };
 
 struct CapturedFrame {
-    cv::Mat depth_raw;   // CV_16UC1, depth_units_m per unit, 0 = no measurement
-    cv::Mat colour_bgr;  // CV_8UC3, or empty when the source has no colour
+    cv::Mat depth_raw;         // CV_16UC1, depth_units_m per unit, 0 = no measurement
+    cv::Mat colour_bgr;        // CV_8UC3, or empty when the source has no colour
     int64_t timestamp_ns = 0;  // the source's timestamp (device clock, file time, or synthetic time)
     uint32_t index = 0;        // 0, 1, 2, ... in source order
 };
 
 class FrameSource {
-   public:
+ public:
     virtual ~FrameSource() = default;
     virtual const SourceInfo& info() const = 0;
     // Next frame into `out` (buffers reused when sizes match). Returns true for a frame, false at a clean end
@@ -42,8 +42,8 @@ class FrameSource {
 };
 
 struct SourceOptions {
-    bool colour = true;          // false: do not read colour at all (--no-colour)
-    int max_frames = 0;          // 0 = all; otherwise stop after this many
+    bool colour = true;                 // false: do not read colour at all (--no-colour)
+    int max_frames = 0;                 // 0 = all; otherwise stop after this many
     float tum_depth_units_m = 0.0002f;  // TUM PNG units (5000 per metre); 0.001 for Kinect/OpenNI millimetres
 };
 
@@ -51,12 +51,14 @@ struct SourceOptions {
 //   openni2[:URI]   the first OpenNI2 device, or the one with this URI
 //   oni:FILE        an OpenNI2 recording, every frame in order
 //   tum:DIR         a TUM RGB-D folder (rgb.txt, depth.txt, optional intrinsics.txt)
-//   synthetic[:k=v,...]  the virtual Kinect (keys: frames, distance, yaw, pitch, seed, noise, subject=builtin|scan|PATH)
+//   synthetic[:k=v,...]  the virtual Kinect (keys: frames, distance, yaw, pitch, seed, noise,
+//   subject=builtin|scan|PATH)
 StatusOr<std::unique_ptr<FrameSource>> openSource(const std::string& spec, const SourceOptions& options);
 
 // Per-kind openers (used by openSource; exposed for tests).
 StatusOr<std::unique_ptr<FrameSource>> openTumSource(const std::string& dir, const SourceOptions& options);
-StatusOr<std::unique_ptr<FrameSource>> openSyntheticSource(const std::string& options_text, const SourceOptions& options);
+StatusOr<std::unique_ptr<FrameSource>> openSyntheticSource(const std::string& options_text,
+                                                           const SourceOptions& options);
 // uri empty = first device. Live camera: depth 640x480@30 in mm, registration and sync on where supported.
 StatusOr<std::unique_ptr<FrameSource>> openOpenNi2Device(const std::string& uri, const SourceOptions& options);
 // Playback of an .oni recording at manual speed: every frame in order, then a clean end.

@@ -1,0 +1,78 @@
+// The capture agent: reads a FrameSource, compresses, publishes CameraInfo once and then RgbdFrames over DDS.
+// The camera thread never waits on the network: it hands frames to the publisher through a small queue; a live
+// camera drops the oldest queued frame when the network falls behind (counted), a recording sent with
+// --rate max waits instead, so no frame of it is ever lost.
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "capture/frame_source.hpp"
+#include "wire/dds.hpp"
+#include "wire/depth_codec.hpp"
+
+namespace facescan::capture {
+
+enum class RateMode {
+    kReal,   // the source's own rate (live cameras: as delivered; recordings: paced by their timestamps/rate)
+    kMax,    // as fast as the server takes them, every frame processed (DDS back-pressure, no loss)
+    kFixed,  // a fixed rate in Hz
+};
+
+struct AgentOptions {
+    std::string source = "openni2";  // openni2[:URI] | oni:FILE | tum:DIR | synthetic[:k=v,...]
+    SourceOptions source_options;
+    wire::DomainConfig dds;
+    std::string session_id;  // empty: a fresh unique id
+    RateMode rate = RateMode::kReal;
+    float rate_hz = 0;      // Hz, with RateMode::kFixed
+    int jpeg_quality = 90;  // 1..100
+    wire::DepthCodecParams depth;
+    float wait_for_server_s = 0;  // seconds to wait for a server before giving up; 0 = wait forever
+    int queue_frames = 4;         // frames between the camera thread and the publisher
+
+    Status validate() const;
+};
+
+struct AgentStats {
+    uint32_t captured = 0;   // frames read from the source
+    uint32_t published = 0;  // frames written to DDS
+    uint32_t dropped = 0;    // live frames dropped because the network fell behind
+    double elapsed_s = 0;
+    double fps = 0;          // published frames per second over the last interval
+    double bytes_per_s = 0;  // compressed bytes per second over the last interval
+    double ratio = 0;        // raw bytes / compressed bytes so far
+    int servers = 0;         // matched frame readers (servers listening)
+};
+
+// A fresh session id: host-YYYYmmdd-HHMMSS-xxxx (unique per scan, valid as a DDS key and a file name).
+std::string newSessionId();
+
+class Agent {
+ public:
+    static StatusOr<std::unique_ptr<Agent>> create(AgentOptions options);
+    ~Agent();
+
+    const std::string& sessionId() const { return session_id_; }
+    const SourceInfo& sourceInfo() const { return source_->info(); }
+    bool everyFrame() const { return options_.rate == RateMode::kMax; }
+
+    // Publishes until the source ends, `stop` becomes true (Ctrl-C) or the source fails; in every case the
+    // server is told the stream ended. `on_event` gets a one-line message for notable events (waiting for a
+    // server, server found or lost) and `on_stats` about once a second.
+    Status run(const std::atomic<bool>& stop, const std::function<void(const std::string&)>& on_event,
+               const std::function<void(const AgentStats&)>& on_stats);
+
+ private:
+    struct Impl;
+    explicit Agent(AgentOptions options);
+
+    AgentOptions options_;
+    std::string session_id_;
+    std::unique_ptr<FrameSource> source_;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace facescan::capture

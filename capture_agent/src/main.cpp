@@ -1,0 +1,152 @@
+// facescan-agent: runs beside the camera; reads frames, compresses them and streams them to facescan-server.
+#include <sys/resource.h>
+
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "capture/agent.hpp"
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+void onSignal(int) { g_stop = true; }
+
+constexpr const char* kUsage = R"(usage: facescan-agent [options]
+
+Reads RGB-D frames from a camera or a recording, compresses depth losslessly and colour as JPEG, and streams
+them to facescan-server over DDS. Prints a status line every second; Ctrl-C ends the stream cleanly.
+
+options:
+  --source SRC          where frames come from (default: openni2)
+                          openni2[:URI]          the first OpenNI2 camera, or the one with this URI
+                          oni:FILE               an OpenNI2 recording, every frame in order
+                          tum:DIR                a TUM RGB-D folder
+                          synthetic[:k=v,...]    the virtual Kinect filming a head scan; keys: frames,
+                                                 distance (m), yaw, pitch (deg), period (frames), seed,
+                                                 noise (0/1), subject (auto|builtin|scan|PATH)
+  --session ID          session id (default: a fresh unique id, printed at start)
+  --frames N            stop after N frames (default: all)
+  --rate real|max|HZ    real: the source's own rate (default); max: as fast as the server takes them, with no
+                        frame lost (recordings); HZ: a fixed rate
+  --jpeg-quality Q      colour JPEG quality 1-100 (default 90)
+  --no-colour           send depth only
+  --depth-codec NAME    rvl-zstd (default), rvl, zstd, delta-zstd, raw16, png
+  --tum-depth-scale S   raw depth units per metre of tum: sources (default 5000; Kinect millimetres: 1000)
+  --wait-for-server S   give up when no server appears within S seconds (default: wait forever)
+  --profile P           DDS network profile: loopback, lan (default) or FILE.xml
+  --domain N            DDS domain id 0-232 (default 0); agent, server and client must agree
+  --help                this text
+
+exit codes: 0 done, 1 error (source, network), 2 bad usage)";
+
+int usageError(const std::string& message) {
+    std::fprintf(stderr, "facescan-agent: %s\n(see facescan-agent --help)\n", message.c_str());
+    return 2;
+}
+
+bool parseInt(const std::string& text, long lo, long hi, long& out) {
+    char* end = nullptr;
+    out = std::strtol(text.c_str(), &end, 10);
+    return end && *end == '\0' && !text.empty() && out >= lo && out <= hi;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    using namespace facescan;
+    capture::AgentOptions options;
+    for (int i = 1; i < argc; ++i) {
+        const std::string arg = argv[i];
+        auto value = [&]() -> const char* { return i + 1 < argc ? argv[++i] : nullptr; };
+        long n = 0;
+        if (arg == "--help" || arg == "-h") {
+            std::puts(kUsage);
+            return 0;
+        } else if (arg == "--no-colour" || arg == "--no-color") {
+            options.source_options.colour = false;
+            continue;
+        }
+        const char* v = value();
+        if (!v) return usageError(arg + " needs a value");
+        const std::string text = v;
+        if (arg == "--source") {
+            options.source = text;
+        } else if (arg == "--session") {
+            options.session_id = text;
+        } else if (arg == "--frames") {
+            if (!parseInt(text, 1, 100'000'000, n)) return usageError("--frames takes a positive count");
+            options.source_options.max_frames = static_cast<int>(n);
+        } else if (arg == "--rate") {
+            if (text == "real") {
+                options.rate = capture::RateMode::kReal;
+            } else if (text == "max") {
+                options.rate = capture::RateMode::kMax;
+            } else {
+                options.rate = capture::RateMode::kFixed;
+                options.rate_hz = std::strtof(text.c_str(), nullptr);
+            }
+        } else if (arg == "--jpeg-quality") {
+            if (!parseInt(text, 1, 100, n)) return usageError("--jpeg-quality takes 1-100");
+            options.jpeg_quality = static_cast<int>(n);
+        } else if (arg == "--depth-codec") {
+            const auto codec = wire::depthCodecFromName(text);
+            if (!codec) return usageError("unknown depth codec '" + text + "'");
+            options.depth.codec = *codec;
+        } else if (arg == "--tum-depth-scale") {
+            const float per_m = std::strtof(text.c_str(), nullptr);
+            if (!(per_m > 0)) return usageError("--tum-depth-scale takes raw units per metre, e.g. 5000");
+            options.source_options.tum_depth_units_m = 1.0f / per_m;
+        } else if (arg == "--wait-for-server") {
+            options.wait_for_server_s = std::strtof(text.c_str(), nullptr);
+        } else if (arg == "--profile") {
+            options.dds.profile = text;
+        } else if (arg == "--domain") {
+            if (!parseInt(text, 0, 232, n)) return usageError("--domain takes 0-232");
+            options.dds.domain_id = static_cast<uint32_t>(n);
+        } else {
+            return usageError("unknown option " + arg);
+        }
+    }
+    if (const Status s = options.validate(); !s.isOk()) return usageError(s.message());
+
+    auto agent = capture::Agent::create(options);
+    if (!agent.isOk()) {
+        std::fprintf(stderr, "facescan-agent: %s\n", agent.status().toString().c_str());
+        return 1;
+    }
+    const capture::SourceInfo& info = (*agent)->sourceInfo();
+    std::printf("facescan-agent: session %s\n", (*agent)->sessionId().c_str());
+    std::printf("facescan-agent: source %s, %dx%d, %.1f Hz%s%s\n", info.description.c_str(), info.intrinsics.width_px,
+                info.intrinsics.height_px, info.rate_hz, info.has_colour ? ", colour" : ", depth only",
+                info.expected_frames > 0 ? (", " + std::to_string(info.expected_frames) + " frames").c_str() : "");
+    std::fflush(stdout);
+
+    std::signal(SIGINT, onSignal);
+    std::signal(SIGTERM, onSignal);
+    const Status status = (*agent)->run(
+        g_stop,
+        [](const std::string& event) {
+            std::printf("facescan-agent: %s\n", event.c_str());
+            std::fflush(stdout);
+        },
+        [](const capture::AgentStats& st) {
+            std::printf("frames %u | %.1f fps | %.2f Mbit/s | ratio %.1f:1 | dropped %u | servers %d\n", st.published,
+                        st.fps, st.bytes_per_s * 8e-6, st.ratio, st.dropped, st.servers);
+            std::fflush(stdout);
+        });
+
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    const double cpu_s =
+        usage.ru_utime.tv_sec + usage.ru_utime.tv_usec * 1e-6 + usage.ru_stime.tv_sec + usage.ru_stime.tv_usec * 1e-6;
+    std::printf("facescan-agent: %s; cpu %.1f s\n",
+                g_stop ? "stopped (Ctrl-C), server told the stream ended" : "stream ended", cpu_s);
+    if (!status.isOk()) {
+        std::fprintf(stderr, "facescan-agent: %s\n", status.toString().c_str());
+        return 1;
+    }
+    return 0;
+}
