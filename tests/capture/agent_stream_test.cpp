@@ -1,0 +1,195 @@
+// Agent -> DDS -> a test reader: the real facescan-agent binary streams each source; every depth frame must
+// arrive bit-exact and in order, then an end-of-stream sample. Loopback profile, private domain per test.
+#include <gtest/gtest.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <optional>
+#include <thread>
+#include <vector>
+
+#include "capture/frame_source.hpp"
+#include "synth/kinect_simulator.hpp"
+#include "wire/messages.hpp"
+
+extern char** environ;
+
+namespace facescan::capture {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+uint32_t privateDomain(uint32_t salt) { return 100 + (static_cast<uint32_t>(getpid()) * 7 + salt) % 120; }
+
+pid_t spawnAgent(const std::vector<std::string>& args) {
+    std::vector<char*> argv;
+    const std::string bin = FACESCAN_AGENT_BIN;
+    argv.push_back(const_cast<char*>(bin.c_str()));
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    pid_t pid = -1;
+    if (posix_spawn(&pid, bin.c_str(), nullptr, nullptr, argv.data(), environ) != 0) return -1;
+    return pid;
+}
+
+// Reads every frame of a source directly: what the agent must deliver.
+std::vector<cv::Mat> expectedDepth(const std::string& spec) {
+    auto source = openSource(spec, SourceOptions{});
+    EXPECT_TRUE(source.isOk()) << source.status().toString();
+    std::vector<cv::Mat> frames;
+    if (!source.isOk()) return frames;
+    CapturedFrame frame;
+    while (true) {
+        auto got = (*source)->next(frame);
+        EXPECT_TRUE(got.isOk()) << got.status().toString();
+        if (!got.isOk() || !*got) break;
+        frames.push_back(frame.depth_raw.clone());
+    }
+    return frames;
+}
+
+// Streams `spec` through the agent and checks every received depth frame against `expected`.
+void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expected, uint32_t salt) {
+    ASSERT_FALSE(expected.empty());
+    const uint32_t domain = privateDomain(salt);
+    const std::string session = "agent-test-" + std::to_string(salt);
+    const pid_t agent = spawnAgent({"--source", spec, "--profile", "loopback", "--domain", std::to_string(domain),
+                                    "--session", session, "--rate", "max", "--wait-for-server", "30"});
+    ASSERT_GT(agent, 0);
+
+    auto participant = wire::Participant::create({domain, "loopback"});
+    ASSERT_TRUE(participant.isOk()) << participant.status().toString();
+    auto info_topic = wire::Topic<facescan_wire_CameraInfo>::create(*participant);
+    auto frame_topic = wire::Topic<facescan_wire_RgbdFrame>::create(*participant);
+    ASSERT_TRUE(info_topic.isOk() && frame_topic.isOk());
+    auto info_reader = wire::Reader<facescan_wire_CameraInfo>::create(*info_topic);
+    const wire::Qos qos = wire::frameReaderQos();
+    auto frame_reader = wire::Reader<facescan_wire_RgbdFrame>::create(*frame_topic, &qos);
+    ASSERT_TRUE(info_reader.isOk() && frame_reader.isOk());
+
+    std::optional<wire::CameraInfoData> camera;
+    wire::DepthDecoder decoder;
+    std::vector<uint32_t> seqs;
+    int mismatches = 0;
+    bool ended = false;
+    std::vector<const facescan_wire_RgbdFrame*> unused;
+    const auto deadline = std::chrono::steady_clock::now() + 60s;
+    while (!ended && std::chrono::steady_clock::now() < deadline) {
+        if (!camera) {
+            (void)info_reader->take([&](const facescan_wire_CameraInfo& m, const dds_sample_info_t& i) {
+                if (!i.valid_data) return;
+                auto parsed = wire::fromMessage(m);
+                ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+                camera = *parsed;
+            });
+            if (!camera) {
+                std::this_thread::sleep_for(20ms);
+                continue;
+            }
+        }
+        frame_reader->waitForData(200ms);
+        auto n = frame_reader->take([&](const facescan_wire_RgbdFrame& m, const dds_sample_info_t& i) {
+            if (!i.valid_data) return;
+            if (m.end_of_stream) {
+                ended = true;
+                return;
+            }
+            seqs.push_back(m.seq);
+            cv::Mat depth;
+            auto codec = wire::depthCodecFromTag(static_cast<uint32_t>(m.depth_codec));
+            ASSERT_TRUE(codec.isOk());
+            const Status s = decoder.decode(*codec, m.depth._buffer, m.depth._length, camera->intrinsics.width_px,
+                                            camera->intrinsics.height_px, depth);
+            ASSERT_TRUE(s.isOk()) << s.toString();
+            if (m.seq >= expected.size() || cv::norm(depth, expected[m.seq], cv::NORM_INF) != 0) ++mismatches;
+        });
+        ASSERT_TRUE(n.isOk());
+    }
+    int status = 0;
+    waitpid(agent, &status, 0);
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "agent exit status " << status;
+    EXPECT_TRUE(ended) << "no end-of-stream sample";
+    ASSERT_EQ(seqs.size(), expected.size());
+    for (size_t i = 0; i < seqs.size(); ++i) EXPECT_EQ(seqs[i], i) << "out of order at " << i;
+    EXPECT_EQ(mismatches, 0) << "depth frames not bit-exact";
+    ASSERT_TRUE(camera.has_value());
+    EXPECT_EQ(camera->session_id, session);
+    EXPECT_TRUE(camera->every_frame);
+}
+
+TEST(AgentStream, SyntheticSourceArrivesBitExactAndInOrder) {
+    const std::string spec = "synthetic:frames=24,seed=3,subject=builtin";
+    const auto expected = expectedDepth(spec);
+    ASSERT_EQ(expected.size(), 24u);
+    streamAndCompare(spec, expected, 1);
+}
+
+TEST(AgentStream, TumFolderArrivesBitExactAndInOrder) {
+    const fs::path dir = fs::temp_directory_path() / ("facescan-tum-" + std::to_string(getpid()));
+    synth::SequenceParams seq;
+    seq.frames = 16;
+    seq.seed = 5;
+    const synth::KinectSimulator sim(synth::builtinHead(), seq);
+    ASSERT_TRUE(synth::writeTumSequence(sim, dir).isOk());
+    const std::string spec = "tum:" + dir.string();
+    const auto expected = expectedDepth(spec);
+    ASSERT_EQ(expected.size(), 16u);
+    // The source reads exactly the PNGs of the folder.
+    const cv::Mat first =
+        cv::imread((dir / "depth").string() + "/" + fs::directory_iterator(dir / "depth")->path().filename().string(),
+                   cv::IMREAD_ANYDEPTH);
+    EXPECT_EQ(first.type(), CV_16UC1);
+    streamAndCompare(spec, expected, 2);
+    fs::remove_all(dir);
+}
+
+TEST(Sources, BadSpecsAndMissingInputsGiveClearErrors) {
+    auto unknown = openSource("webcam", SourceOptions{});
+    ASSERT_FALSE(unknown.isOk());
+    EXPECT_NE(unknown.status().message().find("openni2[:URI], oni:FILE, tum:DIR"), std::string::npos);
+    EXPECT_EQ(openSource("tum:/nonexistent/folder", SourceOptions{}).status().code(), StatusCode::kNotFound);
+    EXPECT_FALSE(openSource("synthetic:frames=abc", SourceOptions{}).isOk());
+    EXPECT_FALSE(openSource("synthetic:colour=1", SourceOptions{}).isOk());
+    EXPECT_FALSE(openSource("oni:", SourceOptions{}).isOk());
+}
+
+TEST(Sources, TumSourceRejectsMalformedListsAndImages) {
+    const fs::path dir = fs::temp_directory_path() / ("facescan-badtum-" + std::to_string(getpid()));
+    fs::create_directories(dir);
+    { std::ofstream(dir / "depth.txt") << "# comment\n0.0 depth/missing.png\n"; }
+    EXPECT_EQ(openSource("tum:" + dir.string(), SourceOptions{}).status().code(), StatusCode::kDataLoss);
+    { std::ofstream(dir / "depth.txt") << "not-a-number\n"; }
+    EXPECT_FALSE(openSource("tum:" + dir.string(), SourceOptions{}).isOk());
+    fs::remove_all(dir);
+}
+
+TEST(Sources, SyntheticSourceHonoursFrameLimitAndColourSwitch) {
+    SourceOptions options;
+    options.colour = false;
+    options.max_frames = 5;
+    auto source = openSource("synthetic:frames=50,subject=builtin", options);
+    ASSERT_TRUE(source.isOk()) << source.status().toString();
+    EXPECT_EQ((*source)->info().expected_frames, 5);
+    EXPECT_FALSE((*source)->info().has_colour);
+    CapturedFrame frame;
+    int count = 0;
+    while (true) {
+        auto got = (*source)->next(frame);
+        ASSERT_TRUE(got.isOk());
+        if (!*got) break;
+        EXPECT_TRUE(frame.colour_bgr.empty());
+        EXPECT_EQ(frame.depth_raw.type(), CV_16UC1);
+        EXPECT_EQ(frame.index, static_cast<uint32_t>(count));
+        ++count;
+    }
+    EXPECT_EQ(count, 5);
+}
+
+}  // namespace
+}  // namespace facescan::capture
