@@ -1,0 +1,81 @@
+// Registration: projective point-to-plane ICP, coarse to fine (thesis section 4.1.3). Data association is the
+// thesis' Algorithm 2 with distance and normal gates; each iteration solves the linearised point-to-plane system
+// (eq. 4.14-4.20) by Cholesky and stops when the error of eq. 4.21 converges. Failures are values, never throws.
+#pragma once
+
+#include <array>
+#include <vector>
+
+#include "recon/camera.hpp"
+#include "recon/depth_filter.hpp"
+#include "recon/status.hpp"
+
+namespace facescan::recon {
+
+enum class TrackingStatus {
+    kFirstFrame,       // the frame defines the reference orientation (world = this camera); nothing to align
+    kTracked,          // aligned; the frame was integrated
+    kNotEnoughPoints,  // too few valid pixels or correspondences to constrain 6 degrees of freedom
+    kDiverged,         // the solve was singular, not finite, or the residual stayed too large
+    kLargeMotion,      // converged, but further from the prediction than the motion limits allow
+    kNoHead,           // the head mask (or the depth inside it) was empty
+    kInvalidInput,     // wrong sizes or types; the frame was not looked at
+};
+const char* trackingStatusName(TrackingStatus s);
+
+struct TrackingResult {
+    TrackingStatus status = TrackingStatus::kInvalidInput;
+    Pose T_world_camera = Pose::Identity();  // the estimate (the prediction when the frame was rejected)
+    float rmse_m = 0.0f;                     // metres; point-to-plane RMS of the inliers at the finest level
+    int inliers = 0;                         // count; correspondences at the finest level's last iteration
+    int iterations = 0;                      // count; iterations run over all levels
+    bool ok() const { return status == TrackingStatus::kTracked || status == TrackingStatus::kFirstFrame; }
+};
+
+struct IcpParams {
+    int levels = 3;  // count; pyramid levels used (<= FilterParams::levels)
+    // Iterations per level, index 0 = finest (Meyer: 20/15/10 fine to coarse); the convergence test usually
+    // stops far earlier.
+    std::array<int, kMaxPyramidLevels> iterations = {20, 15, 10, 10};
+    // Distance gate of Algorithm 2 per level (metres), finest first (Meyer: 50..200 mm).
+    std::array<float, kMaxPyramidLevels> dist_gate_m = {0.05f, 0.1f, 0.2f, 0.2f};
+    // Normal-angle gate of Algorithm 2 per level (degrees), finest first (Meyer: 30..45 deg).
+    std::array<float, kMaxPyramidLevels> normal_gate_deg = {30.0f, 37.5f, 45.0f, 45.0f};
+    // Residual scale of the robust (Huber) weight (metres; 0 = plain least squares as in the thesis). Pairs that
+    // pass the gates but sit far off the tangent plane (hair, silhouette) then pull less.
+    float huber_m = 0.003f;
+    float convergence_rel = 1e-4f;          // ratio; stop a level when the error (eq. 4.21) changes less than this
+    float convergence_step_m = 1e-5f;       // metres; or when the update moves points less than this
+    int min_inliers = 200;                  // count; fewer correspondences at the finest level = kNotEnoughPoints
+    float min_inlier_share = 0.2f;          // ratio; of the source's valid pixels at the finest level
+    float max_rmse_m = 0.01f;               // metres; a larger final residual = kDiverged
+    float max_translation_m = 0.08f;        // metres; a larger change from the prediction = kLargeMotion
+    float max_rotation_deg = 25.0f;         // degrees; likewise for rotation
+    int max_failures_before_reacquire = 5;  // count; consecutive rejected frames before the pipeline re-acquires
+    Status validate() const;
+};
+
+// Thesis eq. 4.11: the translation that moves the centroid of `source` (camera frame, transformed by
+// T_world_camera) onto the centroid of `target` (world frame). Returns false when either has no valid point.
+bool centroidAlignment(const SurfaceLevel& source, const SurfaceLevel& target_world, Pose& T_world_camera);
+
+// Projective ICP of a frame (camera-frame pyramid) against the model (world-frame vertex/normal pyramid rendered
+// from T_world_model). Holds the per-thread reduction buffers, so align() does not allocate.
+class Icp {
+ public:
+    explicit Icp(const IcpParams& p);
+
+    // T_world_camera: in, the initial guess; out, the estimate when status is kTracked (left unchanged otherwise,
+    // and returned in the result either way). `prediction` is what the motion limits are measured against.
+    TrackingResult align(const SurfacePyramid& source, const SurfacePyramid& model_world, const Pose& T_world_model,
+                         const Pose& prediction, Pose& T_world_camera);
+
+    const IcpParams& params() const { return params_; }
+
+ private:
+    struct Reduction;  // the 21 + 6 sums of A^T A and A^T b (eq. 4.20), error and count
+    IcpParams params_;
+    std::vector<std::array<double, 32>> partial_;  // one row per stripe of the parallel reduction
+};
+
+}  // namespace facescan::recon

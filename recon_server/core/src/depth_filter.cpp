@@ -1,0 +1,264 @@
+#include "recon/depth_filter.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/core/utility.hpp>
+
+namespace facescan::recon {
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+bool finitePositive(float z) { return std::isfinite(z) && z > 0.0f; }
+
+// Half-resolution ROI covering every coarse pixel with at least one child in `roi`.
+cv::Rect halfRoi(const cv::Rect& roi, const cv::Size& coarse_size) {
+    const int x0 = roi.x / 2, y0 = roi.y / 2;
+    const int x1 = std::min((roi.x + roi.width + 1) / 2, coarse_size.width);
+    const int y1 = std::min((roi.y + roi.height + 1) / 2, coarse_size.height);
+    return {x0, y0, std::max(0, x1 - x0), std::max(0, y1 - y0)};
+}
+
+}  // namespace
+
+Status FilterParams::validate() const {
+    if (!(sigma_space_px > 0.0f) || !(sigma_depth_m > 0.0f)) return invalidArgument("filter sigmas must be > 0");
+    if (radius_px < 0 || radius_px > 4) return invalidArgument("filter radius_px must be in [0, 4]");
+    if (levels < 1 || levels > kMaxPyramidLevels) return invalidArgument("filter levels must be in [1, 4]");
+    if (!(pyramid_max_step_m > 0.0f)) return invalidArgument("pyramid_max_step_m must be > 0");
+    if (!(min_depth_m >= 0.0f) || !(max_depth_m > min_depth_m)) return invalidArgument("bad depth range");
+    return Status::ok();
+}
+
+void SurfacePyramid::allocate(const Intrinsics& k, int level_count) {
+    count = std::clamp(level_count, 1, kMaxPyramidLevels);
+    for (int l = 0; l < count; ++l) {
+        SurfaceLevel& lv = levels[l];
+        lv.k = k.scaled(l);
+        lv.depth_m.create(lv.k.height_px, lv.k.width_px, CV_32FC1);
+        lv.vertex.create(lv.k.height_px, lv.k.width_px, CV_32FC3);
+        lv.normal.create(lv.k.height_px, lv.k.width_px, CV_32FC3);
+        lv.depth_m.setTo(0.0f);
+        lv.vertex.setTo(cv::Scalar::all(kNaN));
+        lv.normal.setTo(cv::Scalar::all(kNaN));
+        lv.roi = cv::Rect();
+    }
+}
+
+DepthFilter::DepthFilter(const Intrinsics& k, const FilterParams& p) : k_(k), params_(p) {
+    masked_.create(k.height_px, k.width_px, CV_32FC1);
+    masked_.setTo(0.0f);
+    // Eq. 4.5 depends only on the squared pixel distance; eq. 4.6 on |dz|, tabulated up to 3 sigma (beyond it the
+    // weight is below 1.1 %, and cutting it there keeps foreground and background apart).
+    for (size_t r2 = 0; r2 < space_lut_.size(); ++r2) {
+        space_lut_[r2] = std::exp(-static_cast<float>(r2) / (2.0f * p.sigma_space_px * p.sigma_space_px));
+    }
+    range_step_m_ = 3.0f * p.sigma_depth_m / static_cast<float>(range_lut_.size() - 1);
+    for (size_t i = 0; i < range_lut_.size(); ++i) {
+        const float dz = static_cast<float>(i) * range_step_m_;
+        range_lut_[i] = std::exp(-dz * dz / (2.0f * p.sigma_depth_m * p.sigma_depth_m));
+    }
+}
+
+int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyramid& out) {
+    const FilterParams& p = params_;
+    const int w = k_.width_px, h = k_.height_px;
+    // Mask, range-check and find the head's box in one pass.
+    int x_min = w, x_max = -1, y_min = h, y_max = -1;
+    for (int v = 0; v < h; ++v) {
+        const float* src = depth_m.ptr<float>(v);
+        const uint8_t* m = mask.empty() ? nullptr : mask.ptr<uint8_t>(v);
+        float* dst = masked_.ptr<float>(v);
+        for (int u = 0; u < w; ++u) {
+            const float z = src[u];
+            const bool keep =
+                (m == nullptr || m[u] != 0) && finitePositive(z) && z >= p.min_depth_m && z <= p.max_depth_m;
+            dst[u] = keep ? z : 0.0f;
+            if (keep) {
+                x_min = std::min(x_min, u);
+                x_max = std::max(x_max, u);
+                y_min = std::min(y_min, v);
+                y_max = std::max(y_max, v);
+            }
+        }
+    }
+    for (int l = 0; l < out.count; ++l) out.levels[l].roi = cv::Rect();
+    if (x_max < 0) return 0;
+    const cv::Rect roi(x_min, y_min, x_max - x_min + 1, y_max - y_min + 1);
+
+    // Bilateral filter, eq. 4.4: invalid pixels stay invalid and never contribute.
+    SurfaceLevel& l0 = out.levels[0];
+    l0.roi = roi;
+    const int radius = p.radius_px;
+    const float inv_step = 1.0f / range_step_m_;
+    const int lut_last = static_cast<int>(range_lut_.size()) - 1;
+    cv::parallel_for_(cv::Range(roi.y, roi.y + roi.height), [&](const cv::Range& rows) {
+        for (int v = rows.start; v < rows.end; ++v) {
+            float* dst = l0.depth_m.ptr<float>(v);
+            const float* centre_row = masked_.ptr<float>(v);
+            for (int u = roi.x; u < roi.x + roi.width; ++u) {
+                const float zc = centre_row[u];
+                if (zc <= 0.0f) {
+                    dst[u] = 0.0f;
+                    continue;
+                }
+                float sum_w = 0.0f, sum_wz = 0.0f;
+                for (int dv = -radius; dv <= radius; ++dv) {
+                    const int vv = v + dv;
+                    if (vv < roi.y || vv >= roi.y + roi.height) continue;
+                    const float* row = masked_.ptr<float>(vv);
+                    for (int du = -radius; du <= radius; ++du) {
+                        const int uu = u + du;
+                        if (uu < roi.x || uu >= roi.x + roi.width) continue;
+                        const float z = row[uu];
+                        if (z <= 0.0f) continue;
+                        const int idx = static_cast<int>(std::fabs(z - zc) * inv_step + 0.5f);
+                        if (idx > lut_last) continue;
+                        const float wgt = space_lut_[du * du + dv * dv] * range_lut_[idx];
+                        sum_w += wgt;
+                        sum_wz += wgt * z;
+                    }
+                }
+                dst[u] = sum_wz / sum_w;  // sum_w >= 1 (the centre pixel)
+            }
+        }
+    });
+
+    // Coarser levels: mean of the valid 2x2 children close in depth to the first valid one.
+    for (int l = 1; l < out.count; ++l) {
+        const SurfaceLevel& fine = out.levels[l - 1];
+        SurfaceLevel& coarse = out.levels[l];
+        coarse.roi = halfRoi(fine.roi, coarse.depth_m.size());
+        for (int v = coarse.roi.y; v < coarse.roi.y + coarse.roi.height; ++v) {
+            float* dst = coarse.depth_m.ptr<float>(v);
+            for (int u = coarse.roi.x; u < coarse.roi.x + coarse.roi.width; ++u) {
+                float ref = 0.0f, sum = 0.0f;
+                int n = 0;
+                for (int dy = 0; dy < 2; ++dy) {
+                    const int fv = 2 * v + dy;
+                    if (fv < fine.roi.y || fv >= fine.roi.y + fine.roi.height) continue;
+                    const float* src = fine.depth_m.ptr<float>(fv);
+                    for (int dx = 0; dx < 2; ++dx) {
+                        const int fu = 2 * u + dx;
+                        if (fu < fine.roi.x || fu >= fine.roi.x + fine.roi.width) continue;
+                        const float z = src[fu];
+                        if (z <= 0.0f) continue;
+                        if (n == 0) ref = z;
+                        if (std::fabs(z - ref) > p.pyramid_max_step_m) continue;
+                        sum += z;
+                        ++n;
+                    }
+                }
+                dst[u] = n > 0 ? sum / static_cast<float>(n) : 0.0f;
+            }
+        }
+    }
+
+    int valid = 0;
+    for (int l = 0; l < out.count; ++l) {
+        SurfaceLevel& lv = out.levels[l];
+        computeVertexMap(lv.k, lv.depth_m, lv.roi, lv.vertex);
+        computeNormalMap(lv.vertex, lv.roi, p.pyramid_max_step_m, lv.normal);
+    }
+    for (int v = roi.y; v < roi.y + roi.height; ++v) {
+        const float* z = l0.depth_m.ptr<float>(v);
+        for (int u = roi.x; u < roi.x + roi.width; ++u) valid += z[u] > 0.0f ? 1 : 0;
+    }
+    return valid;
+}
+
+void computeVertexMap(const Intrinsics& k, const cv::Mat& depth_m, const cv::Rect& roi, cv::Mat& vertex) {
+    cv::parallel_for_(cv::Range(roi.y, roi.y + roi.height), [&](const cv::Range& rows) {
+        for (int v = rows.start; v < rows.end; ++v) {
+            const float* z = depth_m.ptr<float>(v);
+            auto* dst = vertex.ptr<cv::Vec3f>(v);
+            for (int u = roi.x; u < roi.x + roi.width; ++u) {
+                if (z[u] > 0.0f) {
+                    const Eigen::Vector3f p = k.backProject(static_cast<float>(u), static_cast<float>(v), z[u]);
+                    dst[u] = cv::Vec3f(p.x(), p.y(), p.z());
+                } else {
+                    dst[u] = cv::Vec3f(kNaN, kNaN, kNaN);
+                }
+            }
+        }
+    });
+}
+
+void computeNormalMap(const cv::Mat& vertex, const cv::Rect& roi, float max_step_m, cv::Mat& normal) {
+    const float max_step2 = max_step_m * max_step_m;
+    cv::parallel_for_(cv::Range(roi.y, roi.y + roi.height), [&](const cv::Range& rows) {
+        for (int v = rows.start; v < rows.end; ++v) {
+            const auto* row = vertex.ptr<cv::Vec3f>(v);
+            const bool has_next_row = v + 1 < roi.y + roi.height;
+            const auto* next = has_next_row ? vertex.ptr<cv::Vec3f>(v + 1) : nullptr;
+            auto* dst = normal.ptr<cv::Vec3f>(v);
+            for (int u = roi.x; u < roi.x + roi.width; ++u) {
+                dst[u] = cv::Vec3f(kNaN, kNaN, kNaN);
+                if (!has_next_row || u + 1 >= roi.x + roi.width) continue;
+                const cv::Vec3f& p = row[u];
+                const cv::Vec3f& pu = row[u + 1];
+                const cv::Vec3f& pv = next[u];
+                if (std::isnan(p[0]) || std::isnan(pu[0]) || std::isnan(pv[0])) continue;
+                const cv::Vec3f du = pu - p, dv = pv - p;
+                if (du.dot(du) > max_step2 || dv.dot(dv) > max_step2) continue;
+                cv::Vec3f n = du.cross(dv);  // eq. 4.10
+                const float len = std::sqrt(n.dot(n));
+                if (!(len > 0.0f)) continue;
+                n *= (n.dot(p) > 0.0f ? -1.0f : 1.0f) / len;  // face the camera
+                dst[u] = n;
+            }
+        }
+    });
+}
+
+namespace {
+
+void downsampleMap(const cv::Mat& src, const cv::Rect& src_roi, cv::Mat& dst, cv::Rect& dst_roi, bool normalise) {
+    dst_roi = halfRoi(src_roi, dst.size());
+    for (int v = dst_roi.y; v < dst_roi.y + dst_roi.height; ++v) {
+        auto* out = dst.ptr<cv::Vec3f>(v);
+        for (int u = dst_roi.x; u < dst_roi.x + dst_roi.width; ++u) {
+            cv::Vec3f sum(0, 0, 0);
+            bool all = true;
+            for (int dy = 0; dy < 2 && all; ++dy) {
+                const int sv = 2 * v + dy;
+                if (sv >= src.rows) {
+                    all = false;
+                    break;
+                }
+                const auto* in = src.ptr<cv::Vec3f>(sv);
+                for (int dx = 0; dx < 2; ++dx) {
+                    const int su = 2 * u + dx;
+                    if (su >= src.cols || !src_roi.contains({su, sv}) || std::isnan(in[su][0])) {
+                        all = false;
+                        break;
+                    }
+                    sum += in[su];
+                }
+            }
+            // All four children, or none: mixing a silhouette's two sides would invent points in mid-air.
+            if (!all) {
+                out[u] = cv::Vec3f(kNaN, kNaN, kNaN);
+                continue;
+            }
+            if (normalise) {
+                const float len = std::sqrt(sum.dot(sum));
+                out[u] = len > 0.0f ? sum / len : cv::Vec3f(kNaN, kNaN, kNaN);
+            } else {
+                out[u] = sum * 0.25f;
+            }
+        }
+    }
+}
+
+}  // namespace
+
+void downsampleVertexMap(const cv::Mat& src, const cv::Rect& src_roi, cv::Mat& dst, cv::Rect& dst_roi) {
+    downsampleMap(src, src_roi, dst, dst_roi, false);
+}
+void downsampleNormalMap(const cv::Mat& src, const cv::Rect& src_roi, cv::Mat& dst, cv::Rect& dst_roi) {
+    downsampleMap(src, src_roi, dst, dst_roi, true);
+}
+
+}  // namespace facescan::recon

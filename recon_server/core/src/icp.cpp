@@ -1,0 +1,239 @@
+#include "recon/icp.hpp"
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+#include <opencv2/core/utility.hpp>
+
+namespace facescan::recon {
+namespace {
+
+constexpr int kStripes = 16;  // fixed stripe count: the reduction sums in the same order on any core count
+constexpr double kDegToRad = M_PI / 180.0;
+
+// Rigid transform of the ICP unknowns x = [alpha beta gamma tx ty tz] (eq. 4.16). The rotation is built exactly
+// from the angles (eq. 4.2) rather than from the small-angle matrix of eq. 4.14, which is only used to linearise:
+// the estimate stays a proper rotation after many updates.
+Pose incrementFromX(const Eigen::Matrix<double, 6, 1>& x) {
+    const Eigen::Matrix3d r =
+        (Eigen::AngleAxisd(x[2], Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(x[1], Eigen::Vector3d::UnitY()) *
+         Eigen::AngleAxisd(x[0], Eigen::Vector3d::UnitX()))
+            .toRotationMatrix();
+    Pose t = Pose::Identity();
+    t.linear() = r.cast<float>();
+    t.translation() = x.tail<3>().cast<float>();
+    return t;
+}
+
+float rotationDeg(const Pose& t) {
+    const float c = std::clamp((t.linear().trace() - 1.0f) * 0.5f, -1.0f, 1.0f);
+    return std::acos(c) * static_cast<float>(180.0 / M_PI);
+}
+
+}  // namespace
+
+const char* trackingStatusName(TrackingStatus s) {
+    switch (s) {
+        case TrackingStatus::kFirstFrame: return "first_frame";
+        case TrackingStatus::kTracked: return "tracked";
+        case TrackingStatus::kNotEnoughPoints: return "not_enough_points";
+        case TrackingStatus::kDiverged: return "diverged";
+        case TrackingStatus::kLargeMotion: return "large_motion";
+        case TrackingStatus::kNoHead: return "no_head";
+        case TrackingStatus::kInvalidInput: return "invalid_input";
+    }
+    return "unknown";
+}
+
+Status IcpParams::validate() const {
+    if (levels < 1 || levels > kMaxPyramidLevels) return invalidArgument("icp levels must be in [1, 4]");
+    for (int l = 0; l < levels; ++l) {
+        if (iterations[l] < 0 || iterations[l] > 100) return invalidArgument("icp iterations must be in [0, 100]");
+        if (!(dist_gate_m[l] > 0.0f)) return invalidArgument("icp dist_gate_m must be > 0");
+        if (!(normal_gate_deg[l] > 0.0f && normal_gate_deg[l] <= 90.0f))
+            return invalidArgument("icp normal_gate_deg must be in (0, 90]");
+    }
+    if (iterations[0] < 1) return invalidArgument("icp needs at least one iteration at the finest level");
+    if (!(huber_m >= 0.0f)) return invalidArgument("icp huber_m must be >= 0");
+    if (!(convergence_rel >= 0.0f) || !(convergence_step_m >= 0.0f))
+        return invalidArgument("icp convergence thresholds must be >= 0");
+    if (min_inliers < 6) return invalidArgument("icp min_inliers must be >= 6 (six unknowns)");
+    if (!(min_inlier_share >= 0.0f && min_inlier_share <= 1.0f))
+        return invalidArgument("icp min_inlier_share must be in [0, 1]");
+    if (!(max_rmse_m > 0.0f) || !(max_translation_m > 0.0f) || !(max_rotation_deg > 0.0f))
+        return invalidArgument("icp failure limits must be > 0");
+    if (max_failures_before_reacquire < 1) return invalidArgument("max_failures_before_reacquire must be >= 1");
+    return Status::ok();
+}
+
+bool centroidAlignment(const SurfaceLevel& source, const SurfaceLevel& target_world, Pose& T_world_camera) {
+    auto centroid = [](const SurfaceLevel& lv, Eigen::Vector3d& c) {
+        c.setZero();
+        long n = 0;
+        for (int v = lv.roi.y; v < lv.roi.y + lv.roi.height; ++v) {
+            const auto* row = lv.vertex.ptr<cv::Vec3f>(v);
+            for (int u = lv.roi.x; u < lv.roi.x + lv.roi.width; ++u) {
+                if (std::isnan(row[u][0])) continue;
+                c += Eigen::Vector3d(row[u][0], row[u][1], row[u][2]);
+                ++n;
+            }
+        }
+        if (n == 0) return false;
+        c /= static_cast<double>(n);
+        return true;
+    };
+    Eigen::Vector3d mu_s, mu_d;
+    if (!centroid(source, mu_s) || !centroid(target_world, mu_d)) return false;
+    // Eq. 4.11 with the source first moved by the current estimate: T = [I, mu_D - T mu_S] T.
+    const Eigen::Vector3f moved = T_world_camera * mu_s.cast<float>();
+    Pose shift = Pose::Identity();
+    shift.translation() = mu_d.cast<float>() - moved;
+    T_world_camera = shift * T_world_camera;
+    return true;
+}
+
+Icp::Icp(const IcpParams& p) : params_(p), partial_(kStripes) {}
+
+TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& model_world, const Pose& T_world_model,
+                          const Pose& prediction, Pose& T_world_camera) {
+    TrackingResult result;
+    result.T_world_camera = T_world_camera;
+    const int levels = std::min({params_.levels, source.count, model_world.count});
+    Pose estimate = T_world_camera;
+    const Pose T_model_world = T_world_model.inverse();
+
+    int last_inliers = 0;
+    double last_error = 0.0;
+    bool solve_failed = false;
+    for (int level = levels - 1; level >= 0; --level) {
+        const SurfaceLevel& src = source.levels[level];
+        const SurfaceLevel& dst = model_world.levels[level];
+        const float dist_gate2 = params_.dist_gate_m[level] * params_.dist_gate_m[level];
+        const float cos_gate = static_cast<float>(std::cos(params_.normal_gate_deg[level] * kDegToRad));
+        const float huber = params_.huber_m;
+        double prev_error = -1.0;
+        for (int it = 0; it < params_.iterations[level]; ++it) {
+            // Everything an iteration needs in the model camera: source point -> world (estimate) -> model camera.
+            const Pose T_model_camera = T_model_world * estimate;
+            const Eigen::Matrix3f r_wc = estimate.linear();
+            const Eigen::Vector3f t_wc = estimate.translation();
+            const int rows = src.roi.height;
+            cv::parallel_for_(cv::Range(0, kStripes), [&](const cv::Range& stripes) {
+                for (int s = stripes.start; s < stripes.end; ++s) {
+                    std::array<double, 32>& acc = partial_[s];
+                    acc.fill(0.0);
+                    const int v0 = src.roi.y + rows * s / kStripes, v1 = src.roi.y + rows * (s + 1) / kStripes;
+                    for (int v = v0; v < v1; ++v) {
+                        const auto* vs = src.vertex.ptr<cv::Vec3f>(v);
+                        const auto* ns = src.normal.ptr<cv::Vec3f>(v);
+                        for (int u = src.roi.x; u < src.roi.x + src.roi.width; ++u) {
+                            if (std::isnan(vs[u][0]) || std::isnan(ns[u][0])) continue;
+                            // Algorithm 2: transform the source vertex and normal by T, project into the model.
+                            const Eigen::Vector3f p_cam(vs[u][0], vs[u][1], vs[u][2]);
+                            const Eigen::Vector3f p_model = T_model_camera * p_cam;
+                            if (p_model.z() <= 0.0f) continue;
+                            const Eigen::Vector2f px = dst.k.project(p_model);
+                            const int ku = static_cast<int>(std::lround(px.x()));
+                            const int kv = static_cast<int>(std::lround(px.y()));
+                            if (!dst.roi.contains({ku, kv})) continue;
+                            const cv::Vec3f& dv = dst.vertex.at<cv::Vec3f>(kv, ku);
+                            const cv::Vec3f& dn = dst.normal.at<cv::Vec3f>(kv, ku);
+                            if (std::isnan(dv[0]) || std::isnan(dn[0])) continue;
+                            const Eigen::Vector3f s_w = r_wc * p_cam + t_wc;
+                            const Eigen::Vector3f d_w(dv[0], dv[1], dv[2]);
+                            const Eigen::Vector3f n_d(dn[0], dn[1], dn[2]);
+                            if ((s_w - d_w).squaredNorm() > dist_gate2) continue;
+                            const Eigen::Vector3f n_s = r_wc * Eigen::Vector3f(ns[u][0], ns[u][1], ns[u][2]);
+                            if (n_s.dot(n_d) < cos_gate) continue;
+                            // Eq. 4.17-4.18: A_i = [s x n, n], b_i = n.(d - s).
+                            const float b = n_d.dot(d_w - s_w);
+                            const Eigen::Vector3f sxn = s_w.cross(n_d);
+                            const double a[6] = {sxn.x(), sxn.y(), sxn.z(), n_d.x(), n_d.y(), n_d.z()};
+                            const float abs_b = std::fabs(b);
+                            const double w = (huber > 0.0f && abs_b > huber) ? huber / abs_b : 1.0;
+                            int k = 0;
+                            for (int i = 0; i < 6; ++i) {
+                                const double wai = w * a[i];
+                                for (int j = i; j < 6; ++j) acc[k++] += wai * a[j];  // A^T A, upper (eq. 4.20)
+                                acc[21 + i] += wai * b;                              // A^T b
+                            }
+                            acc[27] += static_cast<double>(b) * b;  // eq. 4.21 error
+                            acc[28] += 1.0;
+                        }
+                    }
+                }
+            });
+            std::array<double, 32> sum{};
+            for (const auto& part : partial_)
+                for (int i = 0; i < 29; ++i) sum[i] += part[i];
+            const int count = static_cast<int>(sum[28]);
+            ++result.iterations;
+            if (count < 6) {
+                if (level == 0) last_inliers = count;
+                break;  // nothing to solve at this level; a finer one may still have pairs
+            }
+            Eigen::Matrix<double, 6, 6> ata;
+            Eigen::Matrix<double, 6, 1> atb;
+            int k = 0;
+            for (int i = 0; i < 6; ++i) {
+                for (int j = i; j < 6; ++j) ata(i, j) = ata(j, i) = sum[k++];
+                atb[i] = sum[21 + i];
+            }
+            // Eq. 4.20 by Cholesky, as the thesis does.
+            const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(ata);
+            const Eigen::Matrix<double, 6, 1> x = llt.solve(atb);
+            if (llt.info() != Eigen::Success || !x.allFinite()) {
+                solve_failed = true;
+                break;
+            }
+            estimate = incrementFromX(x) * estimate;  // eq. 4.13
+            const double error = sum[27] / count;
+            if (level == 0) {
+                last_inliers = count;
+                last_error = error;
+            }
+            // Eq. 4.21 convergence: the error stopped changing, or the update moves points by almost nothing
+            // (rotation angles times a head's radius, plus the translation).
+            const double step_m = x.head<3>().norm() * 0.1 + x.tail<3>().norm();
+            const bool converged =
+                (prev_error >= 0.0 && std::fabs(prev_error - error) <= params_.convergence_rel * prev_error) ||
+                step_m < params_.convergence_step_m;
+            prev_error = error;
+            if (converged) break;
+        }
+        if (solve_failed) break;
+    }
+
+    int source_valid = 0;
+    const SurfaceLevel& s0 = source.levels[0];
+    for (int v = s0.roi.y; v < s0.roi.y + s0.roi.height; ++v) {
+        const auto* row = s0.normal.ptr<cv::Vec3f>(v);
+        for (int u = s0.roi.x; u < s0.roi.x + s0.roi.width; ++u) source_valid += std::isnan(row[u][0]) ? 0 : 1;
+    }
+    result.inliers = last_inliers;
+    result.rmse_m = static_cast<float>(std::sqrt(last_error));
+    if (solve_failed || !estimate.matrix().allFinite()) {
+        result.status = TrackingStatus::kDiverged;
+        return result;
+    }
+    if (last_inliers < params_.min_inliers ||
+        static_cast<float>(last_inliers) < params_.min_inlier_share * static_cast<float>(source_valid)) {
+        result.status = TrackingStatus::kNotEnoughPoints;
+        return result;
+    }
+    if (result.rmse_m > params_.max_rmse_m) {
+        result.status = TrackingStatus::kDiverged;
+        return result;
+    }
+    const Pose delta = prediction.inverse() * estimate;
+    if (delta.translation().norm() > params_.max_translation_m || rotationDeg(delta) > params_.max_rotation_deg) {
+        result.status = TrackingStatus::kLargeMotion;
+        return result;
+    }
+    result.status = TrackingStatus::kTracked;
+    result.T_world_camera = estimate;
+    T_world_camera = estimate;
+    return result;
+}
+
+}  // namespace facescan::recon

@@ -1,0 +1,252 @@
+// OpenMesh's VectorT default constructor leaves its elements uninitialised by design, and GCC 12 flags every
+// property push_back instantiated here; OpenMesh's headers are not marked SYSTEM by the build, so silence the two
+// diagnostics in this file only.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+
+#include "recon/marching_cubes.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numeric>
+#include <unordered_map>
+#include <vector>
+
+namespace facescan::recon {
+namespace {
+
+// The 12 cube edges: edge a*4 + j joins corner kEdgeCorner[e][0] to [1] along axis a. Corner c = x + 2y + 4z.
+struct EdgeTable {
+    std::array<std::array<int, 2>, 12> corners{};
+    std::array<int, 12> axis{};
+    // Per configuration (bit c set = corner c inside, D < 0): triangles as edge triples, -1 terminated.
+    std::array<std::array<int8_t, 37>, 256> tris{};
+};
+
+Eigen::Vector3f cornerPos(int c) { return Eigen::Vector3f(c & 1, (c >> 1) & 1, (c >> 2) & 1); }
+
+// Builds the triangle table instead of copying Lorensen's: on every cube face the crossing points are joined
+// into segments (an ambiguous face always cuts its inside corners off separately, so the two cubes sharing the
+// face agree and the surface has no cracks), oriented so that the inside is on a fixed side; the segments chain
+// into closed loops, and each loop is fanned into triangles whose normals point to the outside (D > 0).
+EdgeTable buildTable() {
+    EdgeTable t;
+    for (int a = 0; a < 3; ++a) {
+        int j = 0;
+        for (int c = 0; c < 8; ++c) {
+            if (c & (1 << a)) continue;
+            t.corners[a * 4 + j] = {c, c | (1 << a)};
+            t.axis[a * 4 + j] = a;
+            ++j;
+        }
+    }
+    auto edgeOf = [&](int c0, int c1) {
+        for (int e = 0; e < 12; ++e) {
+            if ((t.corners[e][0] == c0 && t.corners[e][1] == c1) || (t.corners[e][0] == c1 && t.corners[e][1] == c0))
+                return e;
+        }
+        return -1;
+    };
+    auto mid = [&](int e) { return 0.5f * (cornerPos(t.corners[e][0]) + cornerPos(t.corners[e][1])); };
+    for (int config = 0; config < 256; ++config) {
+        std::array<int, 12> next;
+        next.fill(-1);
+        auto inside = [&](int c) { return (config >> c) & 1; };
+        // Adds segment e1-e2 oriented so that ((B - A) x (C - A)) . N < 0 for the inside corner C.
+        auto addSegment = [&](int e1, int e2, int c_in, const Eigen::Vector3f& n_out) {
+            const Eigen::Vector3f a = mid(e1), b = mid(e2), c = cornerPos(c_in);
+            if ((b - a).cross(c - a).dot(n_out) < 0.0f) {
+                next[e1] = e2;
+            } else {
+                next[e2] = e1;
+            }
+        };
+        for (int a = 0; a < 3; ++a) {
+            const int b_axis = (a + 1) % 3, c_axis = (a + 2) % 3;
+            for (int side = 0; side < 2; ++side) {
+                Eigen::Vector3f n_out = Eigen::Vector3f::Zero();
+                n_out[a] = side ? 1.0f : -1.0f;
+                std::array<int, 4> q;  // the face's corners in cyclic order
+                const int base = side << a;
+                q[0] = base;
+                q[1] = base | (1 << b_axis);
+                q[2] = base | (1 << b_axis) | (1 << c_axis);
+                q[3] = base | (1 << c_axis);
+                int n_in = 0;
+                for (int i = 0; i < 4; ++i) n_in += inside(q[i]);
+                if (n_in == 0 || n_in == 4) continue;
+                const bool ambiguous = n_in == 2 && inside(q[0]) == inside(q[2]);
+                if (ambiguous) {
+                    for (int i = 0; i < 4; ++i) {
+                        if (!inside(q[i])) continue;
+                        addSegment(edgeOf(q[(i + 3) % 4], q[i]), edgeOf(q[i], q[(i + 1) % 4]), q[i], n_out);
+                    }
+                    continue;
+                }
+                int crossing[2], k = 0, c_in = -1;
+                for (int i = 0; i < 4; ++i) {
+                    if (inside(q[i])) c_in = q[i];
+                    if (inside(q[i]) != inside(q[(i + 1) % 4])) crossing[k++] = edgeOf(q[i], q[(i + 1) % 4]);
+                }
+                addSegment(crossing[0], crossing[1], c_in, n_out);
+            }
+        }
+        std::array<bool, 12> used{};
+        int out = 0;
+        for (int start = 0; start < 12; ++start) {
+            if (next[start] < 0 || used[start]) continue;
+            std::array<int, 12> loop;
+            int len = 0;
+            for (int e = start; !used[e]; e = next[e]) {
+                used[e] = true;
+                loop[len++] = e;
+            }
+            for (int i = 1; i + 1 < len; ++i) {
+                t.tris[config][out++] = static_cast<int8_t>(loop[0]);
+                t.tris[config][out++] = static_cast<int8_t>(loop[i]);
+                t.tris[config][out++] = static_cast<int8_t>(loop[i + 1]);
+            }
+        }
+        t.tris[config][out] = -1;
+    }
+    return t;
+}
+
+const EdgeTable& table() {
+    static const EdgeTable t = buildTable();
+    return t;
+}
+
+int findRoot(std::vector<int>& parent, int i) {
+    while (parent[i] != i) {
+        parent[i] = parent[parent[i]];
+        i = parent[i];
+    }
+    return i;
+}
+
+}  // namespace
+
+Status MeshParams::validate() const {
+    if (stride_vox < 1 || stride_vox > 8) return invalidArgument("mesh stride_vox must be in [1, 8]");
+    if (!(min_weight >= 0.0f)) return invalidArgument("mesh min_weight must be >= 0");
+    if (!(min_fragment_share >= 0.0f && min_fragment_share <= 1.0f))
+        return invalidArgument("mesh min_fragment_share must be in [0, 1]");
+    return Status::ok();
+}
+
+Mesh extractMesh(const VoxelBlockGrid& grid, const MeshParams& p) {
+    Mesh mesh;
+    if (grid.allocated_blocks == 0 || !p.validate().isOk()) return mesh;
+    const EdgeTable& tab = table();
+    const int stride = p.stride_vox;
+    const int64_t n = grid.resolution_vox;
+    std::vector<Eigen::Vector3f> positions_vox;
+    std::vector<std::array<int, 3>> triangles;
+    std::unordered_map<int64_t, int> edge_vertex;  // (lower corner's linear index) * 3 + axis -> vertex
+    edge_vertex.reserve(static_cast<size_t>(grid.allocated_blocks) * 256);
+
+    for (int b = 0; b < grid.allocated_blocks; ++b) {
+        const Eigen::Vector3i base = grid.block_coords[b] * kBlockSide;
+        for (int iz = 0; iz < kBlockSide; ++iz) {
+            for (int iy = 0; iy < kBlockSide; ++iy) {
+                for (int ix = 0; ix < kBlockSide; ++ix) {
+                    const int x = base.x() + ix, y = base.y() + iy, z = base.z() + iz;
+                    if (x % stride || y % stride || z % stride) continue;
+                    float val[8];
+                    int config = 0;
+                    bool ok = true;
+                    for (int c = 0; c < 8 && ok; ++c) {
+                        const Voxel* vx =
+                            grid.voxel(x + (c & 1) * stride, y + ((c >> 1) & 1) * stride, z + (c >> 2) * stride);
+                        ok = vx != nullptr && vx->weight > p.min_weight;
+                        if (!ok) break;
+                        val[c] = vx->tsdf;
+                        if (val[c] < 0.0f) config |= 1 << c;
+                    }
+                    if (!ok || config == 0 || config == 255) continue;
+                    int vid[12];
+                    for (const int8_t* e = tab.tris[config].data(); *e >= 0; ++e) {
+                        const int edge = *e;
+                        const int c0 = tab.corners[edge][0], c1 = tab.corners[edge][1];
+                        const int x0 = x + (c0 & 1) * stride, y0 = y + ((c0 >> 1) & 1) * stride,
+                                  z0 = z + (c0 >> 2) * stride;
+                        const int64_t key = ((static_cast<int64_t>(z0) * n + y0) * n + x0) * 3 + tab.axis[edge];
+                        auto [it, inserted] = edge_vertex.try_emplace(key, static_cast<int>(positions_vox.size()));
+                        if (inserted) {
+                            // The zero crossing along the edge, linear in D (the marching cubes refinement).
+                            const float tt = std::clamp(val[c0] / (val[c0] - val[c1]), 0.0f, 1.0f);
+                            Eigen::Vector3f p0(static_cast<float>(x0), static_cast<float>(y0), static_cast<float>(z0));
+                            Eigen::Vector3f dir = Eigen::Vector3f::Zero();
+                            dir[tab.axis[edge]] = static_cast<float>(stride);
+                            positions_vox.push_back(p0 + tt * dir);
+                        }
+                        vid[edge] = it->second;
+                    }
+                    for (const int8_t* e = tab.tris[config].data(); *e >= 0; e += 3) {
+                        const std::array<int, 3> tri = {vid[e[0]], vid[e[1]], vid[e[2]]};
+                        if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) continue;
+                        triangles.push_back(tri);
+                    }
+                }
+            }
+        }
+    }
+    if (triangles.empty()) return mesh;
+
+    // Connected pieces by union-find over shared vertices; drop the ones far smaller than the largest.
+    std::vector<int> parent(positions_vox.size());
+    std::iota(parent.begin(), parent.end(), 0);
+    for (const auto& t : triangles) {
+        const int r0 = findRoot(parent, t[0]);
+        parent[findRoot(parent, t[1])] = r0;
+        parent[findRoot(parent, t[2])] = r0;
+    }
+    std::vector<int> tri_count(positions_vox.size(), 0);
+    for (const auto& t : triangles) ++tri_count[findRoot(parent, t[0])];
+    const int largest = *std::max_element(tri_count.begin(), tri_count.end());
+    const float keep_min = p.min_fragment_share * static_cast<float>(largest);
+
+    std::vector<Mesh::VertexHandle> handle(positions_vox.size());
+    mesh.reserve(positions_vox.size(), triangles.size() * 3 / 2, triangles.size());
+    for (const auto& t : triangles) {
+        if (static_cast<float>(tri_count[findRoot(parent, t[0])]) < keep_min) continue;
+        Mesh::VertexHandle vh[3];
+        for (int i = 0; i < 3; ++i) {
+            if (!handle[t[i]].is_valid()) {
+                const Eigen::Vector3f& pv = positions_vox[t[i]];
+                const Eigen::Vector3f pw = grid.toWorld(pv);
+                const Mesh::VertexHandle h = mesh.add_vertex(Mesh::Point(pw.x(), pw.y(), pw.z()));
+                Eigen::Vector3f g;
+                if (grid.gradient(pv, g) && g.norm() > 0.0f) {
+                    g.normalize();
+                } else {
+                    g.setZero();  // filled from the faces below
+                }
+                mesh.set_normal(h, Mesh::Normal(g.x(), g.y(), g.z()));
+                Eigen::Vector3f bgr(200.0f, 200.0f, 200.0f);
+                if (p.colours) grid.interpolateColour(pv, bgr);
+                mesh.set_color(h, Mesh::Color(static_cast<uint8_t>(std::clamp(bgr[2], 0.0f, 255.0f)),
+                                              static_cast<uint8_t>(std::clamp(bgr[1], 0.0f, 255.0f)),
+                                              static_cast<uint8_t>(std::clamp(bgr[0], 0.0f, 255.0f))));
+                handle[t[i]] = h;
+            }
+            vh[i] = handle[t[i]];
+        }
+        mesh.add_face(vh[0], vh[1], vh[2]);
+    }
+    mesh.update_face_normals();
+    // Vertices whose gradient was unavailable (at the edge of the observed region) take the face-average normal.
+    for (auto vh : mesh.vertices()) {
+        if (mesh.normal(vh).sqrnorm() < 0.5f) {
+            Mesh::Normal sum(0, 0, 0);
+            for (auto fh : mesh.vf_range(vh)) sum += mesh.normal(fh);
+            const float len = sum.norm();
+            if (len > 0.0f) mesh.set_normal(vh, sum / len);
+        }
+    }
+    return mesh;
+}
+
+}  // namespace facescan::recon

@@ -1,0 +1,171 @@
+#include "recon/raycaster.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/core/utility.hpp>
+
+namespace facescan::recon {
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+// Slab test of the ray o + s d (s >= 0) against the cube of voxel centres [0, N-1]^3 (voxel coordinates).
+bool clipToCube(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float n_max, float& s0, float& s1) {
+    s0 = 0.0f;
+    s1 = std::numeric_limits<float>::max();
+    for (int a = 0; a < 3; ++a) {
+        if (std::fabs(d[a]) < 1e-12f) {
+            if (o[a] < 0.0f || o[a] > n_max) return false;
+            continue;
+        }
+        float t0 = (0.0f - o[a]) / d[a], t1 = (n_max - o[a]) / d[a];
+        if (t0 > t1) std::swap(t0, t1);
+        s0 = std::max(s0, t0);
+        s1 = std::min(s1, t1);
+    }
+    return s0 < s1;
+}
+
+bool blockAllocated(const VoxelBlockGrid& g, const Eigen::Vector3f& p_vox) {
+    const int x = static_cast<int>(p_vox.x() + 0.5f), y = static_cast<int>(p_vox.y() + 0.5f),
+              z = static_cast<int>(p_vox.z() + 0.5f);
+    if (x < 0 || y < 0 || z < 0 || x >= g.resolution_vox || y >= g.resolution_vox || z >= g.resolution_vox)
+        return false;
+    return g.block_index[(static_cast<size_t>(z >> 3) * g.blocks_per_side + (y >> 3)) * g.blocks_per_side + (x >> 3)] >=
+           0;
+}
+
+// Marches one ray (eq. 4.27) in voxel coordinates between s_begin and s_end (units: voxels along the unit ray
+// direction dir_vox); returns the interpolated zero crossing (eq. 4.28) or a negative value when there is none.
+float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox, float s_begin,
+               float s_end, float step_vox) {
+    float s = s_begin;
+    float prev_d = 0.0f, prev_s = 0.0f;
+    bool have_prev = false;
+    const float block_skip = static_cast<float>(kBlockSide) * 0.5f;
+    while (s <= s_end) {
+        const Eigen::Vector3f p = o_vox + dir_vox * s;
+        if (!blockAllocated(g, p)) {
+            have_prev = false;
+            s += block_skip;  // empty space: half a block at a time so thin allocated shells are not jumped
+            continue;
+        }
+        float d;
+        if (!g.interpolate(p, d)) {
+            have_prev = false;
+            s += step_vox;
+            continue;
+        }
+        if (have_prev && prev_d > 0.0f && d <= 0.0f) {
+            return prev_s + (s - prev_s) * prev_d / (prev_d - d);  // eq. 4.28
+        }
+        if (have_prev && prev_d < 0.0f && d > 0.0f) return -1.0f;  // leaving a back face: not a visible surface
+        // Close to the surface the step shrinks to the distance itself (D is in units of mu), never below a voxel/2.
+        const float next = std::max(0.5f, std::min(step_vox, std::fabs(d) * g.trunc_dist_m / g.voxel_size_m));
+        prev_d = d;
+        prev_s = s;
+        have_prev = true;
+        s += d > 0.0f ? std::max(next, 0.5f) : step_vox;
+    }
+    return -1.0f;
+}
+
+}  // namespace
+
+Status RaycastParams::validate() const {
+    if (!(step_trunc_fraction > 0.0f && step_trunc_fraction <= 1.0f))
+        return invalidArgument("raycast step_trunc_fraction must be in (0, 1] (a step over mu misses surfaces)");
+    if (!(start_before_hint_m >= 0.0f) || !(search_after_hint_m >= 0.0f))
+        return invalidArgument("raycast hint margins must be >= 0");
+    return Status::ok();
+}
+
+void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose& T_world_camera,
+                     const cv::Rect& roi_in, const cv::Mat& depth_hint_m, SurfaceLevel& out) const {
+    const cv::Rect roi = roi_in & cv::Rect(0, 0, k.width_px, k.height_px);
+    out.k = k;
+    out.roi = roi;
+    if (roi.empty() || grid.allocated_blocks == 0) {
+        out.roi = cv::Rect();
+        return;
+    }
+    const float vs = grid.voxel_size_m;
+    const float n_max = static_cast<float>(grid.resolution_vox - 1);
+    const float step_vox = params_.step_trunc_fraction * grid.trunc_dist_m / vs;
+    const Eigen::Matrix3f r = T_world_camera.linear();
+    const Eigen::Vector3f o_vox = grid.toVoxel(T_world_camera.translation());
+    const bool have_hint = !depth_hint_m.empty();
+    cv::parallel_for_(cv::Range(roi.y, roi.y + roi.height), [&](const cv::Range& rows) {
+        for (int v = rows.start; v < rows.end; ++v) {
+            auto* vert = out.vertex.ptr<cv::Vec3f>(v);
+            auto* norm = out.normal.ptr<cv::Vec3f>(v);
+            const float* hint = have_hint ? depth_hint_m.ptr<float>(v) : nullptr;
+            for (int u = roi.x; u < roi.x + roi.width; ++u) {
+                vert[u] = norm[u] = cv::Vec3f(kNaN, kNaN, kNaN);
+                const Eigen::Vector3f ray_cam = k.ray(static_cast<float>(u), static_cast<float>(v));
+                const float ray_len = ray_cam.norm();                   // metres along the ray per metre of depth
+                const Eigen::Vector3f dir_vox = r * ray_cam / ray_len;  // unit direction; voxel units per vs
+                float s0, s1;                                           // voxel units along dir_vox
+                if (!clipToCube(o_vox, dir_vox, n_max, s0, s1)) continue;
+                const float z_hint = hint ? hint[u] : 0.0f;
+                if (z_hint > 0.0f) {
+                    s0 = std::max(s0, (z_hint - params_.start_before_hint_m) * ray_len / vs);
+                    s1 = std::min(s1, (z_hint + params_.search_after_hint_m) * ray_len / vs);
+                } else if (!params_.march_without_hint) {
+                    continue;
+                }
+                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
+                if (s_hit < 0.0f) continue;
+                const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
+                Eigen::Vector3f grad;
+                if (!grid.gradient(p_vox, grad)) continue;
+                const float len = grad.norm();
+                if (!(len > 0.0f)) continue;
+                const Eigen::Vector3f p_world = grid.toWorld(p_vox);  // eq. 4.29
+                const Eigen::Vector3f n_world = grad / len;           // eq. 4.30
+                vert[u] = cv::Vec3f(p_world.x(), p_world.y(), p_world.z());
+                norm[u] = cv::Vec3f(n_world.x(), n_world.y(), n_world.z());
+            }
+        }
+    });
+}
+
+void Raycaster::renderShaded(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose& T_world_camera,
+                             cv::Mat& shaded_bgr) const {
+    shaded_bgr.create(k.height_px, k.width_px, CV_8UC3);
+    shaded_bgr.setTo(cv::Scalar::all(0));
+    if (grid.allocated_blocks == 0) return;
+    const float vs = grid.voxel_size_m;
+    const float n_max = static_cast<float>(grid.resolution_vox - 1);
+    const float step_vox = params_.step_trunc_fraction * grid.trunc_dist_m / vs;
+    const Eigen::Matrix3f r = T_world_camera.linear();
+    const Eigen::Vector3f o_vox = grid.toVoxel(T_world_camera.translation());
+    cv::parallel_for_(cv::Range(0, k.height_px), [&](const cv::Range& rows) {
+        for (int v = rows.start; v < rows.end; ++v) {
+            auto* out = shaded_bgr.ptr<cv::Vec3b>(v);
+            for (int u = 0; u < k.width_px; ++u) {
+                const Eigen::Vector3f ray_cam = k.ray(static_cast<float>(u), static_cast<float>(v));
+                const Eigen::Vector3f dir_vox = r * ray_cam.normalized();
+                float s0, s1;
+                if (!clipToCube(o_vox, dir_vox, n_max, s0, s1)) continue;
+                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
+                if (s_hit < 0.0f) continue;
+                const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
+                Eigen::Vector3f grad;
+                if (!grid.gradient(p_vox, grad) || !(grad.norm() > 0.0f)) continue;
+                // Lambert with the light at the camera: brightness = cos(normal, ray back to the camera).
+                const float lambert = std::max(0.0f, -grad.normalized().dot(dir_vox));
+                const float shade = 0.15f + 0.85f * lambert;
+                Eigen::Vector3f bgr(200.0f, 200.0f, 200.0f);
+                Eigen::Vector3f c;
+                if (grid.interpolateColour(p_vox, c) && c.maxCoeff() > 0.0f) bgr = c;
+                out[u] =
+                    cv::Vec3b(cv::saturate_cast<uint8_t>(bgr[0] * shade), cv::saturate_cast<uint8_t>(bgr[1] * shade),
+                              cv::saturate_cast<uint8_t>(bgr[2] * shade));
+            }
+        }
+    });
+}
+
+}  // namespace facescan::recon

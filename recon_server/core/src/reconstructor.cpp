@@ -1,0 +1,225 @@
+#include "recon/reconstructor.hpp"
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstdio>
+
+#include "recon/timing.hpp"
+
+namespace facescan::recon {
+namespace {
+
+constexpr size_t kTrajectoryReserve = 18000;  // 10 minutes at 30 frames/s before the vector ever grows
+
+}  // namespace
+
+ReconParams ReconParams::faceDefaults() { return ReconParams{}; }
+
+ReconParams ReconParams::fast() {
+    ReconParams p;
+    // Fewer iterations and a looser convergence test: frame-to-model tracking at 30 Hz starts close to the answer.
+    p.icp.iterations = {6, 5, 4, 4};
+    p.icp.convergence_rel = 1e-3f;
+    p.icp.convergence_step_m = 5e-5f;
+    p.raycast.step_trunc_fraction = 1.0f;
+    p.raycast.start_before_hint_m = 0.012f;
+    p.raycast.search_after_hint_m = 0.02f;
+    return p;
+}
+
+Status ReconParams::validate() const {
+    RETURN_IF_ERROR(filter.validate());
+    RETURN_IF_ERROR(icp.validate());
+    RETURN_IF_ERROR(tsdf.validate());
+    RETURN_IF_ERROR(raycast.validate());
+    RETURN_IF_ERROR(mesh.validate());
+    if (icp.levels > filter.levels) return invalidArgument("icp.levels must not exceed filter.levels");
+    if (min_head_pixels < 1) return invalidArgument("min_head_pixels must be >= 1");
+    if (roi_margin_px < 0) return invalidArgument("roi_margin_px must be >= 0");
+    return Status::ok();
+}
+
+Reconstructor::Reconstructor(const Intrinsics& k, const ReconParams& p)
+    : k_(k),
+      params_(p),
+      init_status_(k.valid() ? p.validate() : invalidArgument("camera intrinsics are not valid")),
+      filter_(k.valid() ? k : Intrinsics{}, p.filter),
+      icp_(p.icp),
+      volume_(init_status_.isOk() ? p.tsdf : TsdfParams{}),
+      raycaster_(p.raycast) {
+    const Intrinsics kk = k.valid() ? k : Intrinsics{};
+    frame_.allocate(kk, p.filter.levels);
+    model_.allocate(kk, p.filter.levels);
+    trajectory_.reserve(kTrajectoryReserve);
+}
+
+bool Reconstructor::checkInput(const RgbdFrame& frame, const cv::Mat& head_mask, FrameResult& result) const {
+    const cv::Size size(k_.width_px, k_.height_px);
+    const char* why = nullptr;
+    if (!init_status_.isOk()) {
+        why = "reconstructor parameters are invalid (see initStatus())";
+    } else if (frame.depth_m.empty() || frame.depth_m.type() != CV_32FC1) {
+        why = "depth must be CV_32FC1 metres";
+    } else if (frame.depth_m.size() != size) {
+        why = "depth size differs from the camera intrinsics";
+    } else if (!frame.colour_bgr.empty() && (frame.colour_bgr.type() != CV_8UC3 || frame.colour_bgr.size() != size)) {
+        why = "colour must be empty or CV_8UC3 of the depth's size";
+    } else if (!head_mask.empty() && (head_mask.type() != CV_8UC1 || head_mask.size() != size)) {
+        why = "head mask must be empty or CV_8UC1 of the depth's size";
+    }
+    if (why == nullptr) return true;
+    result.tracking.status = TrackingStatus::kInvalidInput;
+    result.tracking.T_world_camera = T_world_camera_;
+    result.reason = why;
+    return false;
+}
+
+FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& head_mask) {
+    FrameResult result;
+    if (!checkInput(frame, head_mask, result)) {
+        result.consecutive_failures = consecutive_failures_;
+        return result;
+    }
+    Stopwatch watch;
+    auto reject = [&](TrackingStatus status, const char* why) {
+        result.tracking.status = status;
+        result.tracking.T_world_camera = T_world_camera_;
+        result.reason = why;
+        ++consecutive_failures_;
+        velocity_ = Pose::Identity();  // the motion since the last good frame is unknown
+        result.consecutive_failures = consecutive_failures_;
+        result.reacquiring = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
+        return result;
+    };
+
+    // Noise reduction and point cloud (thesis 4.1.1-4.1.2).
+    const int valid = filter_.filter(frame.depth_m, head_mask, frame_);
+    result.ms.filter = watch.lapMs();
+    if (valid < params_.min_head_pixels) return reject(TrackingStatus::kNoHead, "too few valid head pixels");
+
+    if (!have_model_) {
+        // The first frame defines the reference orientation (thesis 4.1): world = this camera.
+        if (!volume_.placed() && !volume_.place(frame_.levels[0]))
+            return reject(TrackingStatus::kNoHead, "no valid head point to place the volume");
+        T_world_camera_ = Pose::Identity();
+        result.tracking.status = TrackingStatus::kFirstFrame;
+        result.tracking.inliers = valid;
+    } else {
+        // Registration against the ray-cast model (thesis 4.1.3, frame-to-model).
+        const bool reacquiring = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
+        Pose guess = T_world_camera_ * velocity_;  // constant-velocity prediction
+        if (reacquiring || frames_integrated_ == 1) {
+            // Eq. 4.11 for the first frame pair and for re-acquisition after a loss: align the centroids.
+            guess = T_world_camera_;
+            centroidAlignment(frame_.levels[0], model_.levels[0], guess);
+        }
+        Pose estimate = guess;
+        result.tracking = icp_.align(frame_, model_, T_world_model_, guess, estimate);
+        result.ms.icp = watch.lapMs();
+        if (!result.tracking.ok()) {
+            const char* why = "registration failed";
+            switch (result.tracking.status) {
+                case TrackingStatus::kNotEnoughPoints: why = "too few correspondences with the model"; break;
+                case TrackingStatus::kDiverged: why = "registration diverged (residual too large)"; break;
+                case TrackingStatus::kLargeMotion: why = "motion larger than the limits"; break;
+                default: break;
+            }
+            const TrackingStatus status = result.tracking.status;
+            result = reject(status, why);
+            result.ms.icp = watch.elapsedMs();
+            return result;
+        }
+        velocity_ = T_world_camera_.inverse() * estimate;
+        T_world_camera_ = estimate;
+    }
+
+    // Volumetric integration (thesis 4.2.1) and ray casting for the next registration (4.2.2).
+    {
+        std::lock_guard<std::mutex> lock(volume_mutex_);
+        volume_.integrate(frame_.levels[0], frame.colour_bgr, T_world_camera_);
+    }
+    result.ms.integrate = watch.lapMs();
+    result.integrated = true;
+    ++frames_integrated_;
+    have_model_ = true;
+    consecutive_failures_ = 0;
+    trajectory_.emplace_back(frame.timestamp_ns, T_world_camera_);
+    const cv::Rect& roi0 = frame_.levels[0].roi;
+    const int m = params_.roi_margin_px;
+    raycastModel(cv::Rect(roi0.x - m, roi0.y - m, roi0.width + 2 * m, roi0.height + 2 * m));
+    result.ms.raycast = watch.lapMs();
+    result.tracking.T_world_camera = T_world_camera_;
+    result.consecutive_failures = 0;
+    return result;
+}
+
+void Reconstructor::raycastModel(const cv::Rect& roi) {
+    raycaster_.cast(volume_.grid(), k_, T_world_camera_, roi, frame_.levels[0].depth_m, model_.levels[0]);
+    // The hint is only valid inside the frame's ROI; outside it the rays march the cube (see RaycastParams).
+    for (int l = 1; l < model_.count; ++l) {
+        downsampleVertexMap(model_.levels[l - 1].vertex, model_.levels[l - 1].roi, model_.levels[l].vertex,
+                            model_.levels[l].roi);
+        cv::Rect unused;
+        downsampleNormalMap(model_.levels[l - 1].normal, model_.levels[l - 1].roi, model_.levels[l].normal, unused);
+    }
+    T_world_model_ = T_world_camera_;
+}
+
+void Reconstructor::reset() {
+    std::lock_guard<std::mutex> lock(volume_mutex_);
+    volume_.reset();
+    T_world_camera_ = T_world_model_ = velocity_ = Pose::Identity();
+    have_model_ = false;
+    frames_integrated_ = 0;
+    consecutive_failures_ = 0;
+    trajectory_.clear();
+    for (int l = 0; l < model_.count; ++l) model_.levels[l].roi = cv::Rect();
+}
+
+void Reconstructor::copyVolume(TsdfSnapshot& snapshot) const {
+    std::lock_guard<std::mutex> lock(volume_mutex_);
+    volume_.grid().copyTo(snapshot);
+}
+
+Mesh Reconstructor::extractMesh(const MeshParams& p) const {
+    TsdfSnapshot snapshot;
+    copyVolume(snapshot);
+    return ::facescan::recon::extractMesh(snapshot, p);
+}
+
+void Reconstructor::renderPreview(const Pose& T_world_camera, cv::Mat& shaded_bgr) const {
+    std::lock_guard<std::mutex> lock(volume_mutex_);
+    raycaster_.renderShaded(volume_.grid(), k_, T_world_camera, shaded_bgr);
+}
+
+bool Reconstructor::predictedHeadBox(cv::Rect& box) const {
+    if (!have_model_ || consecutive_failures_ >= params_.icp.max_failures_before_reacquire) return false;
+    const SurfaceLevel& lv = model_.levels[0];
+    int x0 = lv.k.width_px, y0 = lv.k.height_px, x1 = -1, y1 = -1;
+    for (int v = lv.roi.y; v < lv.roi.y + lv.roi.height; ++v) {
+        const auto* row = lv.vertex.ptr<cv::Vec3f>(v);
+        for (int u = lv.roi.x; u < lv.roi.x + lv.roi.width; ++u) {
+            if (std::isnan(row[u][0])) continue;
+            x0 = std::min(x0, u);
+            x1 = std::max(x1, u);
+            y0 = std::min(y0, v);
+            y1 = std::max(y1, v);
+        }
+    }
+    if (x1 < 0) return false;
+    box = cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1);
+    return true;
+}
+
+std::string toTumLine(int64_t timestamp_ns, const Pose& T_world_camera) {
+    const Eigen::Quaternionf q(T_world_camera.linear());
+    const Eigen::Vector3f t = T_world_camera.translation();
+    const long long sec = static_cast<long long>(timestamp_ns / 1000000000);
+    const long long nsec = static_cast<long long>(timestamp_ns % 1000000000);
+    char buf[192];
+    std::snprintf(buf, sizeof(buf), "%lld.%09lld %.7f %.7f %.7f %.7f %.7f %.7f %.7f", sec, nsec < 0 ? -nsec : nsec,
+                  t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w());
+    return buf;
+}
+
+}  // namespace facescan::recon
