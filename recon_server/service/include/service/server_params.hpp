@@ -1,0 +1,54 @@
+// What facescan-server runs with: the recon core's Params structs (from a preset, a config file and flags) and
+// the service's own settings (sessions, snapshots, data dir, DDS domain). Validated once at start.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "recon/face_pipeline.hpp"
+#include "recon/reconstructor.hpp"
+#include "recon/status.hpp"
+#include "wire/dds.hpp"
+
+namespace facescan::service {
+
+struct ServerParams {
+    std::string preset = "face";  // face | fast: ReconParams::faceDefaults() or ReconParams::fast()
+    recon::ReconParams recon = recon::ReconParams::faceDefaults();
+    recon::FacePipelineParams face;  // detection and segmentation in front of the recon core
+    // Snapshots are meshed with cubes of this many voxels while scanning (2 = an eighth of the cubes); the final
+    // mesh (GET_MESH, disk) is always full resolution (recon.mesh).
+    int snapshot_stride_vox = 2;           // voxels
+    float snapshot_hz = 1.0f;              // Hz; MeshSnapshot rate per session (0 = no snapshots while scanning)
+    float snapshot_max_error_m = 0.2e-3f;  // metres; Draco position quantisation of snapshots (final: 0.05 mm)
+    float status_hz = 2.0f;                // Hz; ScanStatus rate per session
+    int max_sessions = 4;                  // count; open (not finished) sessions at once; more are refused
+    float idle_timeout_s = 60.0f;          // seconds; a session without frames for this long is finished
+    int queue_frames = 8;                  // frames; bounded per-session queue of a recording (every_frame) session
+    std::filesystem::path data_dir = "facescan-data";  // finished sessions go to data_dir/SESSION/
+    wire::DomainConfig domain{0, "lan"};
+    std::string server_id;  // in every reply and status; default "<hostname>-<pid>"
+
+    Status validate() const;
+};
+
+// `key = value` as in a config file: recon core fields under their struct's name (tsdf.voxel_size_m,
+// tsdf.resolution_vox, icp.iterations0, filter.sigma_depth_m, ...) and the service's own keys (snapshot_hz,
+// max_sessions, ...). Unknown keys and unparsable values are errors that name the key.
+Status applySetting(ServerParams& params, const std::string& key, const std::string& value);
+// A file of `key = value` lines; '#' starts a comment. Errors name the file and line.
+Status loadConfigFile(const std::filesystem::path& path, ServerParams& params);
+// Every key applySetting understands (for --help and tests).
+std::vector<std::string> settingKeys();
+
+// Parses the command line: `--preset` first (it resets the recon params), then `--config FILE`, then the other
+// flags (they override the file). `help` is set for --help/-h (params are then left at defaults).
+struct ParsedArgs {
+    ServerParams params;
+    bool help = false;
+};
+StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args);
+std::string serverUsage();
+
+}  // namespace facescan::service

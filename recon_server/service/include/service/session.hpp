@@ -1,0 +1,178 @@
+// One scan session on the server: its CameraInfo, a frame slot (live: the newest frame only) or a bounded queue
+// (recording: every frame), and a worker thread that runs decode -> detection/segmentation -> recon core.
+// Knows nothing of DDS topics: the server routes samples in and publishes what the session reports.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "recon/face_pipeline.hpp"
+#include "recon/reconstructor.hpp"
+#include "service/server_params.hpp"
+#include "wire/messages.hpp"
+
+namespace facescan::service {
+
+enum class SessionState { kWaiting, kScanning, kLost, kFinished, kRefused };
+const char* sessionStateName(SessionState state);
+
+// A received RgbdFrame with its bytes copied out of the DDS loan (the loan goes back at once).
+struct PendingFrame {
+    uint32_t seq = 0;
+    int64_t capture_time_ns = 0;  // agent CLOCK_REALTIME
+    int64_t source_time_ns = 0;   // the source's timestamp (trajectory)
+    uint32_t depth_codec = 0;
+    uint32_t colour_codec = 0;
+    bool end_of_stream = false;
+    std::vector<uint8_t> depth;  // capacity reused frame to frame
+    std::vector<uint8_t> colour;
+
+    void assign(const facescan_wire_RgbdFrame& msg);
+    // A message view over this frame's buffers (valid while this object is unchanged).
+    facescan_wire_RgbdFrame view() const;
+};
+
+// A consistent copy of what the status and the summary report.
+struct SessionStats {
+    std::string session_id;
+    SessionState state = SessionState::kWaiting;
+    std::string detail;
+    bool camera_known = false;
+    bool every_frame = false;
+    uint32_t frames_received = 0;
+    uint32_t frames_integrated = 0;
+    uint32_t frames_rejected = 0;
+    uint32_t frames_skipped = 0;
+    uint32_t frames_dropped = 0;
+    float fps = 0;                // frames processed per second, last ~2 s (status) or whole session (summary)
+    recon::StageTimesMs ms;       // recent average per stage (status); ms.mesh = snapshot mesh + encode
+    recon::StageTimesMs ms_mean;  // session mean per stage
+    float latency_p50_ms = 0;     // capture (agent clock) to pose known, last 512 tracked frames
+    float latency_p95_ms = 0;
+    float snapshot_copy_ms = 0;    // last snapshot: volume copy (the only part under the frame-path lock)
+    float snapshot_mesh_ms = 0;    // last snapshot: coarse marching cubes
+    float snapshot_encode_ms = 0;  // last snapshot: Draco encode
+    uint32_t snapshot_seq = 0;
+    double duration_s = 0;  // first to last processed frame
+    std::string source;
+};
+
+struct MeshResult {
+    std::shared_ptr<const std::vector<uint8_t>> draco;  // Draco with normals and colours
+    uint32_t vertex_count = 0;
+    uint32_t triangle_count = 0;
+};
+
+struct SnapshotResult {
+    uint32_t seq = 0;
+    uint32_t frames_integrated = 0;
+    MeshResult mesh;
+};
+
+// Called once the session is finished (written to disk or not): ok, or why the files could not be written.
+using FinishCallback = std::function<void(const Status&, const MeshResult&)>;
+
+class Session {
+ public:
+    // `space_freed` is called (from the worker) whenever a full frame queue gets room again.
+    Session(std::string session_id, const ServerParams& params, std::function<void()> space_freed);
+    ~Session();  // finishes (without writing) and joins the worker if still running
+    Session(const Session&) = delete;
+    Session& operator=(const Session&) = delete;
+
+    const std::string& id() const { return id_; }
+
+    // --- intake thread ---
+    // The first valid CameraInfo builds the pipeline and starts the worker; later ones must match it.
+    Status setCamera(const wire::CameraInfoData& camera);
+    // How many more frames the session takes now: a recording (or a session whose CameraInfo has not arrived yet)
+    // has a bounded queue; live sessions and finished ones take everything (live keeps the newest).
+    int roomForFrames() const;
+    void pushFrame(const facescan_wire_RgbdFrame& msg);
+    void noteMalformed();   // a sample that could not even be routed properly (counted as dropped)
+    void noteWriterGone();  // the agent's writer is gone (killed or exited without end of stream)
+    int64_t lastActivityNs() const { return last_activity_ns_.load(); }
+
+    // --- any thread ---
+    void requestReset(std::function<void(const Status&)> done);
+    // Finish now: queued frames are skipped, then the final mesh is extracted and written to dir.
+    void requestFinish(const std::string& why, FinishCallback done);
+    bool finished() const;
+    bool open() const { return !finished(); }
+    SessionStats stats() const;
+    // Full-resolution mesh: the final one once finished, else extracted from the current model now.
+    StatusOr<MeshResult> mesh();
+    std::string trajectoryTum() const;
+    StatusOr<std::vector<uint8_t>> previewPng();
+    // Snapshot thread: a coarse mesh of the current model when something was integrated since the last one.
+    std::optional<SnapshotResult> makeSnapshot();
+    // Once, after finishing: the final full-resolution mesh as the last snapshot (late subscribers get it).
+    std::optional<SnapshotResult> takeFinalSnapshot();
+
+ private:
+    struct Control {
+        enum Kind { kReset, kFinish } kind;
+        std::string why;
+        std::function<void(const Status&)> reset_done;
+        FinishCallback finish_done;
+    };
+    void workerLoop();
+    void processFrame(PendingFrame& pending);
+    void finalize(const std::string& why, const FinishCallback& done);
+    void recordLatency(float ms);
+    std::string summaryJson(const SessionStats& s, const MeshResult& m) const;
+
+    const std::string id_;
+    const ServerParams params_;
+    std::function<void()> space_freed_;
+
+    mutable std::mutex mutex_;  // guards everything below unless noted
+    std::condition_variable cv_;
+    std::optional<wire::CameraInfoData> camera_;
+    std::deque<PendingFrame> queue_;
+    std::vector<PendingFrame> spare_;  // recycled buffers
+    std::deque<Control> control_;
+    bool stop_ = false;
+    bool finishing_ = false;
+    SessionStats stats_;
+    int64_t last_seq_ = -1;
+    std::vector<std::pair<int64_t, recon::Pose>> trajectory_;  // copy of the recon core's, for other threads
+    recon::Pose last_pose_ = recon::Pose::Identity();
+    std::vector<float> latency_ms_;  // ring of the last kLatencyWindow
+    size_t latency_next_ = 0;
+    std::deque<int64_t> processed_ns_;  // steady times of recently processed frames (fps)
+    int64_t first_processed_ns_ = 0, last_processed_ns_ = 0;
+    uint64_t processed_count_ = 0;
+    recon::StageTimesMs ms_sum_;
+    uint64_t ms_count_ = 0;
+    std::shared_ptr<recon::Reconstructor> recon_;  // null before the camera and after finishing
+    MeshResult final_mesh_;
+    std::vector<uint8_t> final_preview_png_;
+    bool final_snapshot_sent_ = false;
+    std::atomic<int64_t> last_activity_ns_{0};
+
+    // Worker-only state (no lock).
+    std::unique_ptr<recon::FacePipeline> pipeline_;
+    wire::FrameDecoder decoder_;
+    recon::RgbdFrame frame_;
+    PendingFrame working_;
+    // Snapshot-thread-only state (no lock).
+    recon::TsdfSnapshot snapshot_grid_;
+    int snapshot_frames_ = -1;
+
+    std::thread worker_;
+};
+
+int64_t steadyNowNs();
+int64_t realtimeNowNs();
+
+}  // namespace facescan::service

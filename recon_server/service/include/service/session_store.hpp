@@ -1,0 +1,38 @@
+// Writing a finished session to the data dir (--data-dir/SESSION/): mesh.ply (binary, normals and colours),
+// mesh.drc (Draco), trajectory.txt (TUM), summary.json. Every file goes to NAME.tmp first, is fsync'ed and then
+// renamed over NAME, so a crash leaves either the old file or the whole new one, never a half file.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "recon/mesh.hpp"
+#include "recon/status.hpp"
+
+namespace facescan::service {
+
+// Writes `bytes` to `path` atomically (path.tmp, fsync, rename, fsync of the directory).
+Status writeFileAtomic(const std::filesystem::path& path, const void* bytes, size_t size);
+inline Status writeFileAtomic(const std::filesystem::path& path, const std::string& text) {
+    return writeFileAtomic(path, text.data(), text.size());
+}
+
+// Binary PLY with vertex normals and colours (OpenMesh writer, to memory).
+StatusOr<std::string> meshToPly(const recon::Mesh& mesh);
+
+struct SessionFiles {
+    const recon::Mesh* mesh = nullptr;            // the final full-resolution mesh (may be empty: no faces)
+    const std::vector<uint8_t>* draco = nullptr;  // Draco bytes of mesh (empty when the mesh is empty)
+    std::string trajectory_tum;                   // TUM lines
+    std::string summary_json;                     // written last: its presence means the session is complete
+};
+
+// Creates dir and writes the files that have content (mesh.ply and mesh.drc only for a non-empty mesh).
+Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& files);
+
+// Minimal JSON string escaping for summaries (quotes, backslash, control characters).
+std::string jsonEscape(const std::string& s);
+
+}  // namespace facescan::service

@@ -1,0 +1,51 @@
+// facescan-server: the thin main around service::Server (recon_server/service). Parses and validates the
+// parameters, runs until SIGINT/SIGTERM, then finishes every open session to disk and exits 0.
+#include <signal.h>
+
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "service/server.hpp"
+
+int main(int argc, char** argv) {
+    using namespace facescan;
+    const std::vector<std::string> args(argv + 1, argv + argc);
+    auto parsed = service::parseServerArgs(args);
+    if (!parsed.isOk()) {
+        std::fprintf(stderr, "facescan-server: %s\n(see facescan-server --help)\n", parsed.status().message().c_str());
+        return 2;
+    }
+    if (parsed->help) {
+        std::fputs(service::serverUsage().c_str(), stdout);
+        return 0;
+    }
+    // Block the stop signals in every thread (the server's threads inherit this mask) and wait for them here.
+    sigset_t stop_signals;
+    sigemptyset(&stop_signals);
+    sigaddset(&stop_signals, SIGINT);
+    sigaddset(&stop_signals, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+
+    const service::ServerParams& p = parsed->params;
+    auto server = service::Server::create(p);
+    if (!server.isOk()) {
+        std::fprintf(stderr, "facescan-server: cannot start: %s\n", server.status().toString().c_str());
+        return 1;
+    }
+    std::fprintf(stderr,
+                 "facescan-server '%s': domain %u (profile %s), preset %s, up to %d sessions, snapshots %.2g Hz, "
+                 "data in %s\n",
+                 p.server_id.c_str(), p.domain.domain_id, p.domain.profile.c_str(), p.preset.c_str(), p.max_sessions,
+                 static_cast<double>(p.snapshot_hz), p.data_dir.c_str());
+    int sig = 0;
+    sigwait(&stop_signals, &sig);
+    std::fprintf(stderr, "facescan-server: %s: finishing %d open session(s)\n", sig == SIGINT ? "SIGINT" : "SIGTERM",
+                 (*server)->openSessions());
+    (*server)->shutdown();
+    for (const auto& s : (*server)->sessions()) {
+        std::fprintf(stderr, "  %s: %s, %u frames integrated (%s)\n", s.session_id.c_str(),
+                     service::sessionStateName(s.state), s.frames_integrated, s.detail.c_str());
+    }
+    return 0;
+}

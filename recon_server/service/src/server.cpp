@@ -1,0 +1,462 @@
+#include "service/server.hpp"
+
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <future>
+
+namespace facescan::service {
+namespace {
+
+constexpr int kBatch = 16;  // samples per take; also the reader's per-instance limit (wire::frameReaderQos)
+
+facescan_wire_ScanState toWire(SessionState s) {
+    switch (s) {
+        case SessionState::kWaiting: return facescan_wire_STATE_WAITING;
+        case SessionState::kScanning: return facescan_wire_STATE_SCANNING;
+        case SessionState::kLost: return facescan_wire_STATE_LOST;
+        case SessionState::kFinished: return facescan_wire_STATE_FINISHED;
+        case SessionState::kRefused: return facescan_wire_STATE_REFUSED;
+    }
+    return facescan_wire_STATE_WAITING;
+}
+
+template <typename T>
+StatusOr<std::unique_ptr<T>> boxed(StatusOr<T> v) {
+    if (!v.isOk()) return v.status();
+    return std::make_unique<T>(std::move(v).value());
+}
+
+}  // namespace
+
+StatusOr<std::unique_ptr<Server>> Server::create(const ServerParams& params) {
+    RETURN_IF_ERROR(params.validate());
+    std::unique_ptr<Server> server(new Server(params));
+    RETURN_IF_ERROR(server->start());
+    return server;
+}
+
+Status Server::start() {
+    ASSIGN_OR_RETURN(participant_, boxed(wire::Participant::create(params_.domain)));
+    const wire::Participant& p = *participant_;
+    ASSIGN_OR_RETURN(camera_topic_, boxed(wire::Topic<facescan_wire_CameraInfo>::create(p)));
+    ASSIGN_OR_RETURN(frame_topic_, boxed(wire::Topic<facescan_wire_RgbdFrame>::create(p)));
+    ASSIGN_OR_RETURN(status_topic_, boxed(wire::Topic<facescan_wire_ScanStatus>::create(p)));
+    ASSIGN_OR_RETURN(snapshot_topic_, boxed(wire::Topic<facescan_wire_MeshSnapshot>::create(p)));
+    ASSIGN_OR_RETURN(command_topic_, boxed(wire::Topic<facescan_wire_ScanCommand>::create(p)));
+    ASSIGN_OR_RETURN(reply_topic_, boxed(wire::Topic<facescan_wire_ScanReply>::create(p)));
+    ASSIGN_OR_RETURN(camera_reader_, boxed(wire::Reader<facescan_wire_CameraInfo>::create(*camera_topic_)));
+    const wire::Qos frame_qos = wire::frameReaderQos();
+    ASSIGN_OR_RETURN(frame_reader_, boxed(wire::Reader<facescan_wire_RgbdFrame>::create(*frame_topic_, &frame_qos)));
+    ASSIGN_OR_RETURN(command_reader_, boxed(wire::Reader<facescan_wire_ScanCommand>::create(*command_topic_)));
+    ASSIGN_OR_RETURN(status_writer_, boxed(wire::Writer<facescan_wire_ScanStatus>::create(*status_topic_)));
+    ASSIGN_OR_RETURN(snapshot_writer_, boxed(wire::Writer<facescan_wire_MeshSnapshot>::create(*snapshot_topic_)));
+    ASSIGN_OR_RETURN(reply_writer_, boxed(wire::Writer<facescan_wire_ScanReply>::create(*reply_topic_)));
+
+    const dds_entity_t ws = dds_create_waitset(p.handle());
+    if (ws < 0) return wire::ddsStatus(ws, "create waitset");
+    waitset_ = wire::Entity(ws);
+    const dds_entity_t wake = dds_create_guardcondition(p.handle());
+    if (wake < 0) return wire::ddsStatus(wake, "create guard condition");
+    wake_ = wire::Entity(wake);
+    // Frames wake the intake only while they are unread: samples of a recording whose queue is full are read
+    // once (marked) and left in the reader; the guard condition wakes the intake when that queue has room.
+    const dds_entity_t conds[] = {
+        dds_create_readcondition(camera_reader_->handle(), DDS_ANY_STATE),
+        dds_create_readcondition(command_reader_->handle(), DDS_ANY_STATE),
+        dds_create_readcondition(frame_reader_->handle(),
+                                 DDS_NOT_READ_SAMPLE_STATE | DDS_ANY_VIEW_STATE | DDS_ANY_INSTANCE_STATE),
+        wake};
+    for (const dds_entity_t c : conds) {
+        if (c < 0) return wire::ddsStatus(c, "create read condition");
+        const dds_return_t rc = dds_waitset_attach(ws, c, c);
+        if (rc < 0) return wire::ddsStatus(rc, "attach condition");
+    }
+    intake_ = std::thread([this] { intakeLoop(); });
+    command_ = std::thread([this] { commandLoop(); });
+    snapshot_ = std::thread([this] { snapshotLoop(); });
+    status_ = std::thread([this] { statusLoop(); });
+    return Status::ok();
+}
+
+Server::~Server() { shutdown(); }
+
+void Server::shutdown() {
+    if (shut_down_) return;
+    shut_down_ = true;
+    // Finish every open session to disk first, while the DDS endpoints still answer.
+    std::vector<std::shared_ptr<Session>> open;
+    {
+        std::lock_guard lk(sessions_mutex_);
+        for (auto& [id, s] : sessions_) {
+            if (s->open()) open.push_back(s);
+        }
+    }
+    std::vector<std::future<void>> done;
+    for (auto& s : open) {
+        auto promise = std::make_shared<std::promise<void>>();
+        done.push_back(promise->get_future());
+        s->requestFinish("server shutting down", [promise](const Status& st, const MeshResult&) {
+            if (!st.isOk()) std::fprintf(stderr, "facescan-server: %s\n", st.toString().c_str());
+            promise->set_value();
+        });
+    }
+    for (auto& f : done) f.wait();
+
+    stopping_ = true;
+    if (wake_.valid()) dds_set_guardcondition(wake_.handle(), true);
+    command_cv_.notify_all();
+    sleep_cv_.notify_all();
+    for (std::thread* t : {&intake_, &command_, &snapshot_, &status_}) {
+        if (t->joinable()) t->join();
+    }
+    if (!status_writer_) return;
+    // The last word on every session: final status and final mesh (durable: late subscribers still get them).
+    for (const SessionStats& s : sessions()) publishStatus(s);
+    std::vector<std::shared_ptr<Session>> all;
+    {
+        std::lock_guard lk(sessions_mutex_);
+        for (auto& [id, s] : sessions_) all.push_back(s);
+    }
+    for (auto& s : all) {
+        if (auto snap = s->takeFinalSnapshot()) publishSnapshot(s->id(), *snap);
+    }
+    (void)status_writer_->waitForAcks(std::chrono::milliseconds(1000));
+    (void)snapshot_writer_->waitForAcks(std::chrono::milliseconds(1000));
+    (void)reply_writer_->waitForAcks(std::chrono::milliseconds(1000));
+}
+
+std::vector<SessionStats> Server::sessions() const {
+    std::vector<SessionStats> out;
+    std::lock_guard lk(sessions_mutex_);
+    for (const auto& [id, s] : sessions_) out.push_back(s->stats());
+    for (const auto& [id, r] : refused_) {
+        SessionStats s;
+        s.session_id = id;
+        s.state = SessionState::kRefused;
+        s.detail = r.detail;
+        out.push_back(s);
+    }
+    return out;
+}
+
+int Server::openSessions() const {
+    std::lock_guard lk(sessions_mutex_);
+    int n = 0;
+    for (const auto& [id, s] : sessions_) n += s->open() ? 1 : 0;
+    return n;
+}
+
+std::shared_ptr<Session> Server::sessionFor(const std::string& session_id) {
+    std::unique_lock lk(sessions_mutex_);
+    if (auto it = sessions_.find(session_id); it != sessions_.end()) return it->second;
+    if (refused_.count(session_id)) return nullptr;
+    if (!wire::validateSessionId(session_id).isOk()) return nullptr;  // ids become directory names
+    int open = 0;
+    for (const auto& [id, s] : sessions_) open += s->open() ? 1 : 0;
+    if (open >= params_.max_sessions) {
+        const std::string detail = "refused: server '" + params_.server_id + "' already runs " + std::to_string(open) +
+                                   " sessions (--max-sessions " + std::to_string(params_.max_sessions) + ")";
+        refused_[session_id] = {detail};
+        lk.unlock();
+        publishRefused(session_id, detail);
+        return nullptr;
+    }
+    auto session = std::make_shared<Session>(session_id, params_, [this] {
+        if (wake_.valid()) dds_set_guardcondition(wake_.handle(), true);
+    });
+    sessions_[session_id] = session;
+    return session;
+}
+
+void Server::intakeLoop() {
+    while (!stopping_) {
+        dds_attach_t triggered[8];
+        (void)dds_waitset_wait(waitset_.handle(), triggered, 8, DDS_MSECS(200));
+        dds_set_guardcondition(wake_.handle(), false);
+        if (stopping_) break;
+        takeCameraInfos();
+        takeCommands();
+        takeFrames();
+    }
+}
+
+void Server::takeCameraInfos() {
+    auto n = camera_reader_->take([&](const facescan_wire_CameraInfo& msg, const dds_sample_info_t& info) {
+        if (!info.valid_data) return;
+        auto camera = wire::fromMessage(msg);
+        if (!camera.isOk()) {
+            std::fprintf(stderr, "facescan-server: CameraInfo of '%s' rejected: %s\n",
+                         wire::fromDds(msg.session_id).c_str(), camera.status().toString().c_str());
+            return;
+        }
+        std::shared_ptr<Session> session = sessionFor(camera->session_id);
+        if (!session) return;
+        if (const Status s = session->setCamera(*camera); !s.isOk()) {
+            std::fprintf(stderr, "facescan-server: %s\n", s.toString().c_str());
+        }
+    });
+    if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
+}
+
+void Server::takeCommands() {
+    std::vector<Command> got;
+    auto n = command_reader_->take([&](const facescan_wire_ScanCommand& msg, const dds_sample_info_t& info) {
+        if (!info.valid_data) return;
+        got.push_back({wire::fromDds(msg.session_id), wire::fromDds(msg.request_id), static_cast<uint32_t>(msg.kind)});
+    });
+    if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
+    if (got.empty()) return;
+    {
+        std::lock_guard lk(command_mutex_);
+        for (Command& c : got) commands_.push_back(std::move(c));
+    }
+    command_cv_.notify_one();
+}
+
+void Server::takeFrames() {
+    const dds_entity_t reader = frame_reader_->handle();
+    void* samples[kBatch];
+    dds_sample_info_t infos[kBatch];
+    // 1. Unread samples tell which instances (sessions) have data; reading marks them, so a full recording's
+    //    frames no longer wake the intake until its queue has room.
+    for (;;) {
+        samples[0] = nullptr;
+        const dds_return_t n = dds_read_mask(reader, samples, infos, kBatch, kBatch,
+                                             DDS_NOT_READ_SAMPLE_STATE | DDS_ANY_VIEW_STATE | DDS_ANY_INSTANCE_STATE);
+        if (n <= 0) break;
+        for (int i = 0; i < n; ++i) {
+            const auto* msg = static_cast<const facescan_wire_RgbdFrame*>(samples[i]);
+            if (!frame_instances_.count(infos[i].instance_handle)) {
+                const std::string id = wire::fromDds(msg->session_id);  // keys are valid in invalid samples too
+                frame_instances_[infos[i].instance_handle] = id;
+                (void)sessionFor(id);
+            }
+        }
+        dds_return_loan(reader, samples, n);
+        if (n < kBatch) break;
+    }
+    // 2. Take per instance, as much as each session has room for.
+    for (auto it = frame_instances_.begin(); it != frame_instances_.end();) {
+        std::shared_ptr<Session> session;
+        {
+            std::lock_guard lk(sessions_mutex_);
+            if (auto s = sessions_.find(it->second); s != sessions_.end()) session = s->second;
+        }
+        bool gone = false;
+        for (;;) {
+            const int room = session ? std::min(kBatch, session->roomForFrames()) : kBatch;
+            if (room <= 0) break;
+            samples[0] = nullptr;
+            const dds_return_t n = dds_take_instance(reader, samples, infos, static_cast<size_t>(room),
+                                                     static_cast<uint32_t>(room), it->first);
+            if (n < 0) {  // the instance no longer exists in the reader (all taken, writer gone)
+                gone = true;
+                break;
+            }
+            for (int i = 0; i < n; ++i) {
+                const auto& msg = *static_cast<const facescan_wire_RgbdFrame*>(samples[i]);
+                if (!session) continue;  // refused or invalid id: taken and discarded
+                if (!infos[i].valid_data) {
+                    if (infos[i].instance_state != DDS_IST_ALIVE) session->noteWriterGone();
+                    continue;
+                }
+                session->pushFrame(msg);
+            }
+            if (n > 0) dds_return_loan(reader, samples, n);
+            if (n < room) break;
+        }
+        it = gone ? frame_instances_.erase(it) : std::next(it);
+    }
+}
+
+void Server::commandLoop() {
+    for (;;) {
+        Command c;
+        {
+            std::unique_lock lk(command_mutex_);
+            command_cv_.wait(lk, [&] { return stopping_ || !commands_.empty(); });
+            if (commands_.empty()) return;
+            c = std::move(commands_.front());
+            commands_.pop_front();
+        }
+        runCommand(c);
+    }
+}
+
+void Server::runCommand(const Command& c) {
+    if (c.request_id.empty()) return reply(c, invalidArgument("bad request: empty request_id"));
+    if (c.kind > static_cast<uint32_t>(facescan_wire_CMD_GET_STATUS)) {
+        return reply(c, invalidArgument("bad request: unknown command kind " + std::to_string(c.kind)));
+    }
+    std::shared_ptr<Session> session;
+    {
+        std::lock_guard lk(sessions_mutex_);
+        if (auto it = sessions_.find(c.session_id); it != sessions_.end()) session = it->second;
+        if (!session) {
+            if (auto r = refused_.find(c.session_id); r != refused_.end()) {
+                return reply(c, resourceExhausted("session '" + c.session_id + "' was " + r->second.detail));
+            }
+        }
+    }
+    if (!session) return reply(c, notFound("unknown session '" + c.session_id + "'"));
+    switch (static_cast<facescan_wire_CommandKind>(c.kind)) {
+        case facescan_wire_CMD_RESET: session->requestReset([this, c](const Status& s) { reply(c, s); }); return;
+        case facescan_wire_CMD_FINISH:
+            session->requestFinish("finish command",
+                                   [this, c](const Status& s, const MeshResult& m) { reply(c, s, &m); });
+            return;
+        case facescan_wire_CMD_GET_MESH: {
+            auto m = session->mesh();
+            if (!m.isOk()) return reply(c, m.status());
+            return reply(c, Status::ok(), &*m, m->draco.get());
+        }
+        case facescan_wire_CMD_GET_TRAJECTORY: {
+            const std::string tum = session->trajectoryTum();
+            const std::vector<uint8_t> bytes(tum.begin(), tum.end());
+            return reply(c, Status::ok(), nullptr, &bytes);
+        }
+        case facescan_wire_CMD_GET_PREVIEW: {
+            auto png = session->previewPng();
+            if (!png.isOk()) return reply(c, png.status());
+            return reply(c, Status::ok(), nullptr, &*png);
+        }
+        case facescan_wire_CMD_GET_STATUS: return reply(c, Status::ok());
+    }
+}
+
+void Server::reply(const Command& c, const Status& status, const MeshResult* mesh,
+                   const std::vector<uint8_t>* payload) {
+    facescan_wire_ScanReply r{};
+    r.session_id = wire::stringView(c.session_id);
+    r.request_id = wire::stringView(c.request_id);
+    r.server_id = wire::stringView(params_.server_id);
+    r.kind = static_cast<facescan_wire_CommandKind>(c.kind);
+    r.ok = status.isOk();
+    const std::string error = status.isOk() ? std::string() : status.message();
+    r.error = wire::stringView(error);
+    if (mesh) {
+        r.vertex_count = mesh->vertex_count;
+        r.triangle_count = mesh->triangle_count;
+    }
+    if (payload) r.payload = wire::octetView(payload->data(), payload->size());
+    if (const Status s = reply_writer_->write(r); !s.isOk()) {
+        std::fprintf(stderr, "facescan-server: reply to %s: %s\n", c.request_id.c_str(), s.toString().c_str());
+    }
+}
+
+void Server::publishStatus(const SessionStats& s) {
+    facescan_wire_ScanStatus m{};
+    m.session_id = wire::stringView(s.session_id);
+    m.server_id = wire::stringView(params_.server_id);
+    m.state = toWire(s.state);
+    m.detail = wire::stringView(s.detail);
+    m.frames_received = s.frames_received;
+    m.frames_integrated = s.frames_integrated;
+    m.frames_rejected = s.frames_rejected;
+    m.frames_skipped = s.frames_skipped;
+    m.frames_dropped = s.frames_dropped;
+    m.every_frame = s.every_frame;
+    m.fps = s.fps;
+    m.ms_detect = s.ms.detect;
+    m.ms_segment = s.ms.segment;
+    m.ms_filter = s.ms.filter;
+    m.ms_icp = s.ms.icp;
+    m.ms_integrate = s.ms.integrate;
+    m.ms_raycast = s.ms.raycast;
+    m.ms_mesh = s.ms.mesh;
+    m.latency_p95_ms = s.latency_p95_ms;
+    m.snapshot_seq = s.snapshot_seq;
+    m.updated_ns = realtimeNowNs();
+    (void)status_writer_->write(m);
+}
+
+void Server::publishRefused(const std::string& session_id, const std::string& detail) {
+    SessionStats s;
+    s.session_id = session_id;
+    s.state = SessionState::kRefused;
+    s.detail = detail;
+    publishStatus(s);
+}
+
+void Server::publishSnapshot(const std::string& session_id, const SnapshotResult& snap) {
+    facescan_wire_MeshSnapshot m{};
+    m.session_id = wire::stringView(session_id);
+    m.seq = snap.seq;
+    m.frames_integrated = snap.frames_integrated;
+    m.vertex_count = snap.mesh.vertex_count;
+    m.triangle_count = snap.mesh.triangle_count;
+    m.created_ns = realtimeNowNs();
+    m.draco = wire::octetView(snap.mesh.draco->data(), snap.mesh.draco->size());
+    (void)snapshot_writer_->write(m);
+}
+
+void Server::snapshotLoop() {
+    // Snapshots are a nicety; frames are not: let the scheduler prefer the workers on a busy machine.
+    (void)setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
+    const auto period = params_.snapshot_hz > 0 ? std::chrono::duration<double>(1.0 / params_.snapshot_hz)
+                                                : std::chrono::duration<double>(0.5);
+    auto next = std::chrono::steady_clock::now();
+    while (!stopping_) {
+        next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
+        {
+            std::unique_lock lk(sleep_mutex_);
+            sleep_cv_.wait_until(lk, next, [&] { return stopping_.load(); });
+        }
+        if (stopping_) return;
+        std::vector<std::shared_ptr<Session>> all;
+        {
+            std::lock_guard lk(sessions_mutex_);
+            for (auto& [id, s] : sessions_) all.push_back(s);
+        }
+        for (auto& s : all) {
+            if (auto fin = s->takeFinalSnapshot()) {
+                publishSnapshot(s->id(), *fin);
+            } else if (params_.snapshot_hz > 0) {
+                if (auto snap = s->makeSnapshot()) publishSnapshot(s->id(), *snap);
+            }
+        }
+        if (std::chrono::steady_clock::now() > next) next = std::chrono::steady_clock::now();
+    }
+}
+
+void Server::statusLoop() {
+    const auto period = std::chrono::duration<double>(1.0 / params_.status_hz);
+    const int64_t idle_ns = static_cast<int64_t>(params_.idle_timeout_s * 1e9);
+    std::map<std::string, bool> final_sent;  // finished sessions: their FINISHED status went out once
+    auto next = std::chrono::steady_clock::now();
+    while (!stopping_) {
+        next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
+        {
+            std::unique_lock lk(sleep_mutex_);
+            sleep_cv_.wait_until(lk, next, [&] { return stopping_.load(); });
+        }
+        if (stopping_) return;
+        std::vector<std::shared_ptr<Session>> all;
+        std::map<std::string, Refused> refused;
+        {
+            std::lock_guard lk(sessions_mutex_);
+            for (auto& [id, s] : sessions_) all.push_back(s);
+            refused = refused_;
+        }
+        const int64_t now = steadyNowNs();
+        for (auto& s : all) {
+            const SessionStats st = s->stats();
+            if (st.state == SessionState::kFinished) {
+                if (final_sent[st.session_id]) continue;
+                final_sent[st.session_id] = true;
+            } else if (now - s->lastActivityNs() > idle_ns) {
+                s->requestFinish("idle for " + std::to_string(static_cast<int>(params_.idle_timeout_s)) + " s",
+                                 nullptr);
+            }
+            publishStatus(st);
+        }
+        for (const auto& [id, r] : refused) publishRefused(id, r.detail);
+        if (std::chrono::steady_clock::now() > next) next = std::chrono::steady_clock::now();
+    }
+}
+
+}  // namespace facescan::service

@@ -1,0 +1,312 @@
+#include "service/server_params.hpp"
+
+#include <unistd.h>
+
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <functional>
+#include <map>
+
+namespace facescan::service {
+namespace {
+
+StatusOr<double> parseNumber(const std::string& key, const std::string& value) {
+    try {
+        size_t used = 0;
+        const double v = std::stod(value, &used);
+        if (used != value.size() || !std::isfinite(v)) throw std::invalid_argument(value);
+        return v;
+    } catch (const std::exception&) {
+        return invalidArgument(key + ": '" + value + "' is not a number");
+    }
+}
+
+StatusOr<int> parseInt(const std::string& key, const std::string& value) {
+    int v = 0;
+    const auto [end, ec] = std::from_chars(value.data(), value.data() + value.size(), v);
+    if (ec != std::errc() || end != value.data() + value.size()) {
+        return invalidArgument(key + ": '" + value + "' is not an integer");
+    }
+    return v;
+}
+
+StatusOr<bool> parseBool(const std::string& key, const std::string& value) {
+    if (value == "true" || value == "1" || value == "yes" || value == "on") return true;
+    if (value == "false" || value == "0" || value == "no" || value == "off") return false;
+    return invalidArgument(key + ": '" + value + "' is not a boolean (true/false)");
+}
+
+using Setter = std::function<Status(ServerParams&, const std::string& key, const std::string& value)>;
+
+Setter floatField(float* (*field)(ServerParams&)) {
+    return [field](ServerParams& p, const std::string& key, const std::string& value) -> Status {
+        ASSIGN_OR_RETURN(const double v, parseNumber(key, value));
+        *field(p) = static_cast<float>(v);
+        return Status::ok();
+    };
+}
+Setter intField(int* (*field)(ServerParams&)) {
+    return [field](ServerParams& p, const std::string& key, const std::string& value) -> Status {
+        ASSIGN_OR_RETURN(const int v, parseInt(key, value));
+        *field(p) = v;
+        return Status::ok();
+    };
+}
+Setter boolField(bool* (*field)(ServerParams&)) {
+    return [field](ServerParams& p, const std::string& key, const std::string& value) -> Status {
+        ASSIGN_OR_RETURN(const bool v, parseBool(key, value));
+        *field(p) = v;
+        return Status::ok();
+    };
+}
+
+#define FLOAT(name, expr)                                         \
+    {                                                             \
+        name, floatField([](ServerParams& p) { return &(expr); }) \
+    }
+#define INT(name, expr)                                         \
+    {                                                           \
+        name, intField([](ServerParams& p) { return &(expr); }) \
+    }
+#define BOOL(name, expr)                                         \
+    {                                                            \
+        name, boolField([](ServerParams& p) { return &(expr); }) \
+    }
+
+const std::map<std::string, Setter>& setters() {
+    static const std::map<std::string, Setter> table = {
+        // Recon core (recon::ReconParams and its per-stage structs).
+        FLOAT("filter.sigma_space_px", p.recon.filter.sigma_space_px),
+        FLOAT("filter.sigma_depth_m", p.recon.filter.sigma_depth_m),
+        INT("filter.radius_px", p.recon.filter.radius_px),
+        INT("filter.levels", p.recon.filter.levels),
+        FLOAT("filter.min_depth_m", p.recon.filter.min_depth_m),
+        FLOAT("filter.max_depth_m", p.recon.filter.max_depth_m),
+        INT("icp.levels", p.recon.icp.levels),
+        INT("icp.iterations0", p.recon.icp.iterations[0]),
+        INT("icp.iterations1", p.recon.icp.iterations[1]),
+        INT("icp.iterations2", p.recon.icp.iterations[2]),
+        FLOAT("icp.max_rmse_m", p.recon.icp.max_rmse_m),
+        FLOAT("icp.max_translation_m", p.recon.icp.max_translation_m),
+        FLOAT("icp.max_rotation_deg", p.recon.icp.max_rotation_deg),
+        INT("icp.min_inliers", p.recon.icp.min_inliers),
+        INT("icp.max_failures_before_reacquire", p.recon.icp.max_failures_before_reacquire),
+        INT("tsdf.resolution_vox", p.recon.tsdf.resolution_vox),
+        FLOAT("tsdf.volume_size_m", p.recon.tsdf.volume_size_m),
+        {"tsdf.voxel_size_m",  // sets the cube edge for the current resolution
+         [](ServerParams& p, const std::string& key, const std::string& value) -> Status {
+             ASSIGN_OR_RETURN(const double v, parseNumber(key, value));
+             p.recon.tsdf.volume_size_m = static_cast<float>(v * p.recon.tsdf.resolution_vox);
+             return Status::ok();
+         }},
+        FLOAT("tsdf.trunc_dist_m", p.recon.tsdf.trunc_dist_m),
+        FLOAT("tsdf.max_weight", p.recon.tsdf.max_weight),
+        INT("tsdf.max_blocks", p.recon.tsdf.max_blocks),
+        FLOAT("raycast.step_trunc_fraction", p.recon.raycast.step_trunc_fraction),
+        INT("mesh.stride_vox", p.recon.mesh.stride_vox),
+        FLOAT("mesh.min_fragment_share", p.recon.mesh.min_fragment_share),
+        INT("min_head_pixels", p.recon.min_head_pixels),
+        INT("roi_margin_px", p.recon.roi_margin_px),
+        // Detection and segmentation (recon::FacePipelineParams).
+        BOOL("face.depth_only_fallback", p.face.depth_only_fallback),
+        INT("face.redetect_every_frames", p.face.redetect_every_frames),
+        FLOAT("face.detector.face_width_min_m", p.face.detector.face_width_min_m),
+        FLOAT("face.detector.face_width_max_m", p.face.detector.face_width_max_m),
+        FLOAT("face.segmenter.grow_jump_m", p.face.segmenter.grow_jump_m),
+        // The service.
+        INT("snapshot_stride_vox", p.snapshot_stride_vox),
+        FLOAT("snapshot_hz", p.snapshot_hz),
+        FLOAT("snapshot_max_error_m", p.snapshot_max_error_m),
+        FLOAT("status_hz", p.status_hz),
+        INT("max_sessions", p.max_sessions),
+        FLOAT("idle_timeout_s", p.idle_timeout_s),
+        INT("queue_frames", p.queue_frames),
+        {"data_dir",
+         [](ServerParams& p, const std::string&, const std::string& value) -> Status {
+             p.data_dir = value;
+             return Status::ok();
+         }},
+        {"domain",
+         [](ServerParams& p, const std::string& key, const std::string& value) -> Status {
+             ASSIGN_OR_RETURN(const int v, parseInt(key, value));
+             if (v < 0) return invalidArgument("domain must be >= 0");
+             p.domain.domain_id = static_cast<uint32_t>(v);
+             return Status::ok();
+         }},
+        {"profile",
+         [](ServerParams& p, const std::string&, const std::string& value) -> Status {
+             p.domain.profile = value;
+             return Status::ok();
+         }},
+        {"server_id",
+         [](ServerParams& p, const std::string&, const std::string& value) -> Status {
+             p.server_id = value;
+             return Status::ok();
+         }},
+    };
+    return table;
+}
+#undef FLOAT
+#undef INT
+#undef BOOL
+
+std::string trim(const std::string& s) {
+    const size_t b = s.find_first_not_of(" \t\r");
+    if (b == std::string::npos) return {};
+    const size_t e = s.find_last_not_of(" \t\r");
+    return s.substr(b, e - b + 1);
+}
+
+Status applyPreset(ServerParams& p, const std::string& preset) {
+    if (preset == "face") {
+        p.recon = recon::ReconParams::faceDefaults();
+    } else if (preset == "fast") {
+        p.recon = recon::ReconParams::fast();
+    } else {
+        return invalidArgument("--preset: '" + preset + "' is not a preset (face, fast)");
+    }
+    p.preset = preset;
+    return Status::ok();
+}
+
+std::string defaultServerId() {
+    char host[256] = {};
+    if (gethostname(host, sizeof(host) - 1) != 0) host[0] = '\0';
+    return std::string(host[0] ? host : "server") + "-" + std::to_string(getpid());
+}
+
+}  // namespace
+
+Status ServerParams::validate() const {
+    if (preset != "face" && preset != "fast") return invalidArgument("preset must be face or fast");
+    if (Status s = recon.validate(); !s.isOk()) return invalidArgument("recon parameters: " + s.message());
+    if (Status s = face.validate(); !s.isOk()) return invalidArgument("face pipeline parameters: " + s.message());
+    if (snapshot_stride_vox < 1 || snapshot_stride_vox > 8) return invalidArgument("snapshot_stride_vox: 1..8");
+    if (!(snapshot_hz >= 0 && snapshot_hz <= 30)) return invalidArgument("--snapshot-hz must be in [0, 30]");
+    if (!(snapshot_max_error_m > 0 && snapshot_max_error_m <= 0.005f)) {
+        return invalidArgument("snapshot_max_error_m must be in (0, 0.005] metres");
+    }
+    if (!(status_hz > 0 && status_hz <= 50)) return invalidArgument("status_hz must be in (0, 50]");
+    if (max_sessions < 1 || max_sessions > 64) return invalidArgument("--max-sessions must be in [1, 64]");
+    if (!(idle_timeout_s >= 1 && idle_timeout_s <= 86400)) {
+        return invalidArgument("--idle-timeout-s must be in [1, 86400] seconds");
+    }
+    if (queue_frames < 1 || queue_frames > 64) return invalidArgument("queue_frames must be in [1, 64]");
+    if (data_dir.empty()) return invalidArgument("--data-dir must not be empty");
+    if (server_id.empty() || server_id.size() > 128) return invalidArgument("--server-id must be 1-128 characters");
+    return domain.validate();
+}
+
+Status applySetting(ServerParams& params, const std::string& key, const std::string& value) {
+    if (key == "preset") return applyPreset(params, value);
+    const auto it = setters().find(key);
+    if (it == setters().end()) return invalidArgument("unknown setting '" + key + "' (see --help for the keys)");
+    return it->second(params, key, value);
+}
+
+std::vector<std::string> settingKeys() {
+    std::vector<std::string> keys{"preset"};
+    for (const auto& [key, setter] : setters()) keys.push_back(key);
+    return keys;
+}
+
+Status loadConfigFile(const std::filesystem::path& path, ServerParams& params) {
+    std::ifstream in(path);
+    if (!in) return notFound("--config: cannot read '" + path.string() + "'");
+    std::string line;
+    int line_no = 0;
+    while (std::getline(in, line)) {
+        ++line_no;
+        if (const size_t hash = line.find('#'); hash != std::string::npos) line.resize(hash);
+        line = trim(line);
+        if (line.empty()) continue;
+        const size_t eq = line.find('=');
+        const std::string where = path.string() + ":" + std::to_string(line_no) + ": ";
+        if (eq == std::string::npos) return invalidArgument(where + "expected 'key = value'");
+        const Status s = applySetting(params, trim(line.substr(0, eq)), trim(line.substr(eq + 1)));
+        if (!s.isOk()) return Status(s.code(), where + s.message());
+    }
+    return Status::ok();
+}
+
+StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args) {
+    ParsedArgs out;
+    out.params.server_id = defaultServerId();
+    // Flag -> setting key; every flag takes one value.
+    static const std::map<std::string, std::string> kFlags = {{"--snapshot-hz", "snapshot_hz"},
+                                                              {"--max-sessions", "max_sessions"},
+                                                              {"--idle-timeout-s", "idle_timeout_s"},
+                                                              {"--data-dir", "data_dir"},
+                                                              {"--profile", "profile"},
+                                                              {"--domain", "domain"},
+                                                              {"--server-id", "server_id"},
+                                                              {"--preset", "preset"},
+                                                              {"--config", ""},
+                                                              {"--set", ""}};
+    std::vector<std::pair<std::string, std::string>> pairs;
+    for (size_t i = 0; i < args.size(); ++i) {
+        const std::string& a = args[i];
+        if (a == "--help" || a == "-h") {
+            out.help = true;
+            return out;
+        }
+        std::string flag = a, value;
+        bool has_value = false;
+        if (const size_t eq = a.find('='); a.rfind("--", 0) == 0 && eq != std::string::npos) {
+            flag = a.substr(0, eq);
+            value = a.substr(eq + 1);
+            has_value = true;
+        }
+        if (kFlags.find(flag) == kFlags.end()) return invalidArgument("unknown argument '" + a + "' (see --help)");
+        if (!has_value) {
+            if (i + 1 >= args.size()) return invalidArgument(flag + " needs a value");
+            value = args[++i];
+        }
+        pairs.emplace_back(flag, value);
+    }
+    // Precedence: preset, then the config file, then flags.
+    for (const auto& [flag, value] : pairs) {
+        if (flag == "--preset") RETURN_IF_ERROR(applyPreset(out.params, value));
+    }
+    for (const auto& [flag, value] : pairs) {
+        if (flag == "--config") RETURN_IF_ERROR(loadConfigFile(value, out.params));
+    }
+    for (const auto& [flag, value] : pairs) {
+        if (flag == "--preset" || flag == "--config") continue;
+        if (flag == "--set") {  // --set key=value: any config key from the command line
+            const size_t eq = value.find('=');
+            if (eq == std::string::npos) return invalidArgument("--set expects key=value, got '" + value + "'");
+            RETURN_IF_ERROR(applySetting(out.params, trim(value.substr(0, eq)), trim(value.substr(eq + 1))));
+            continue;
+        }
+        const Status s = applySetting(out.params, kFlags.at(flag), value);
+        if (!s.isOk()) return Status(s.code(), flag + ": " + s.message());
+    }
+    RETURN_IF_ERROR(out.params.validate());
+    return out;
+}
+
+std::string serverUsage() {
+    std::string keys;
+    for (const std::string& k : settingKeys()) keys += "  " + k + "\n";
+    return "usage: facescan-server [options]\n"
+           "Runs the reconstruction service: every scan session seen on the DDS domain gets its own pipeline\n"
+           "(detection, segmentation, recon core) and worker; finished sessions are written to --data-dir.\n\n"
+           "options:\n"
+           "  --preset face|fast      recon parameters preset (default face: Meyer's values)\n"
+           "  --config FILE           'key = value' lines (keys below); flags override the file\n"
+           "  --set KEY=VALUE         one config key from the command line\n"
+           "  --snapshot-hz HZ        MeshSnapshot rate per session (default 1; 0 = none while scanning)\n"
+           "  --max-sessions N        open sessions at once (default 4); more are refused in their status\n"
+           "  --idle-timeout-s S      finish a session after S seconds without frames (default 60)\n"
+           "  --data-dir DIR          finished sessions go to DIR/SESSION/ (default ./facescan-data)\n"
+           "  --profile P             DDS profile: loopback | lan | FILE.xml (default lan)\n"
+           "  --domain N              DDS domain id (default 0)\n"
+           "  --server-id ID          name in replies and status (default HOST-PID)\n"
+           "  --help                  this text\n\n"
+           "config keys:\n" +
+           keys;
+}
+
+}  // namespace facescan::service

@@ -1,0 +1,471 @@
+#include "service/session.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <opencv2/imgcodecs.hpp>
+
+#include "recon/marching_cubes.hpp"
+#include "service/session_store.hpp"
+#include "wire/mesh_codec.hpp"
+
+namespace facescan::service {
+namespace {
+
+constexpr size_t kLatencyWindow = 512;  // frames; latency percentiles are over the last this many tracked frames
+constexpr int64_t kFpsWindowNs = 2'000'000'000;  // the status fps counts frames processed in the last 2 s
+constexpr float kEmaAlpha = 0.1f;                // per-stage ms in the status: exponential average over ~10 frames
+
+float msSince(int64_t t0_ns) { return static_cast<float>(steadyNowNs() - t0_ns) * 1e-6f; }
+
+void emaUpdate(recon::StageTimesMs& avg, const recon::StageTimesMs& x, bool first) {
+    const float a = first ? 1.0f : kEmaAlpha;
+    avg.detect += a * (x.detect - avg.detect);
+    avg.segment += a * (x.segment - avg.segment);
+    avg.filter += a * (x.filter - avg.filter);
+    avg.icp += a * (x.icp - avg.icp);
+    avg.integrate += a * (x.integrate - avg.integrate);
+    avg.raycast += a * (x.raycast - avg.raycast);
+}
+
+void accumulate(recon::StageTimesMs& sum, const recon::StageTimesMs& x) {
+    sum.detect += x.detect;
+    sum.segment += x.segment;
+    sum.filter += x.filter;
+    sum.icp += x.icp;
+    sum.integrate += x.integrate;
+    sum.raycast += x.raycast;
+}
+
+float percentile(std::vector<float> v, float q) {
+    if (v.empty()) return 0;
+    const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * static_cast<float>(v.size() - 1) + 0.5f));
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+    return v[k];
+}
+
+}  // namespace
+
+int64_t steadyNowNs() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+}
+int64_t realtimeNowNs() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+        .count();
+}
+
+const char* sessionStateName(SessionState state) {
+    switch (state) {
+        case SessionState::kWaiting: return "waiting";
+        case SessionState::kScanning: return "scanning";
+        case SessionState::kLost: return "tracking lost";
+        case SessionState::kFinished: return "finished";
+        case SessionState::kRefused: return "refused";
+    }
+    return "?";
+}
+
+void PendingFrame::assign(const facescan_wire_RgbdFrame& msg) {
+    seq = msg.seq;
+    capture_time_ns = msg.capture_time_ns;
+    source_time_ns = msg.source_time_ns;
+    depth_codec = static_cast<uint32_t>(msg.depth_codec);
+    colour_codec = static_cast<uint32_t>(msg.colour_codec);
+    end_of_stream = msg.end_of_stream;
+    // A malformed sample may claim bytes without a buffer: keep what is there, the decoder reports the rest.
+    depth.assign(msg.depth._buffer, msg.depth._buffer ? msg.depth._buffer + msg.depth._length : msg.depth._buffer);
+    colour.assign(msg.colour._buffer,
+                  msg.colour._buffer ? msg.colour._buffer + msg.colour._length : msg.colour._buffer);
+}
+
+facescan_wire_RgbdFrame PendingFrame::view() const {
+    facescan_wire_RgbdFrame msg{};
+    msg.seq = seq;
+    msg.capture_time_ns = capture_time_ns;
+    msg.source_time_ns = source_time_ns;
+    msg.depth_codec = static_cast<facescan_wire_DepthCodec>(depth_codec);
+    msg.depth = wire::octetView(depth.data(), depth.size());
+    msg.colour_codec = static_cast<facescan_wire_ColourCodec>(colour_codec);
+    msg.colour = wire::octetView(colour.data(), colour.size());
+    msg.end_of_stream = end_of_stream;
+    return msg;
+}
+
+Session::Session(std::string session_id, const ServerParams& params, std::function<void()> space_freed)
+    : id_(std::move(session_id)), params_(params), space_freed_(std::move(space_freed)) {
+    stats_.session_id = id_;
+    stats_.detail = "waiting for CameraInfo";
+    latency_ms_.reserve(kLatencyWindow);
+    last_activity_ns_ = steadyNowNs();
+}
+
+Session::~Session() {
+    {
+        std::lock_guard lk(mutex_);
+        stop_ = true;
+        queue_.clear();
+    }
+    cv_.notify_all();
+    if (worker_.joinable()) worker_.join();
+}
+
+Status Session::setCamera(const wire::CameraInfoData& camera) {
+    std::unique_lock lk(mutex_);
+    last_activity_ns_ = steadyNowNs();
+    if (finishing_ || stats_.state == SessionState::kFinished) return Status::ok();
+    if (camera_) {
+        const recon::Intrinsics& a = camera_->intrinsics;
+        const recon::Intrinsics& b = camera.intrinsics;
+        if (a.width_px != b.width_px || a.height_px != b.height_px || a.fx_px != b.fx_px || a.fy_px != b.fy_px ||
+            a.cx_px != b.cx_px || a.cy_px != b.cy_px || camera_->depth_units_m != camera.depth_units_m) {
+            return invalidArgument("CameraInfo of session '" + id_ + "' changed mid-session; ignored");
+        }
+        return Status::ok();
+    }
+    lk.unlock();
+    // Built outside the lock: loading the cascade and reserving the volume take a moment.
+    auto recon = std::make_shared<recon::Reconstructor>(camera.intrinsics, params_.recon);
+    if (!recon->initStatus().isOk()) return recon->initStatus();
+    auto pipeline = recon::FacePipeline::create(params_.face, camera.intrinsics,
+                                                recon::ColourCamera::registeredTo(camera.intrinsics));
+    if (!pipeline.isOk()) return pipeline.status();
+    lk.lock();
+    if (camera_ || finishing_) return Status::ok();
+    camera_ = camera;
+    recon_ = std::move(recon);
+    pipeline_ = std::make_unique<recon::FacePipeline>(std::move(pipeline).value());
+    stats_.camera_known = true;
+    stats_.every_frame = camera.every_frame;
+    stats_.source = camera.source;
+    stats_.detail = "waiting for frames";
+    // A live session keeps only the newest of what arrived before its CameraInfo.
+    if (!camera.every_frame) {
+        while (queue_.size() > 1 && !queue_.front().end_of_stream) {
+            spare_.push_back(std::move(queue_.front()));
+            queue_.pop_front();
+            ++stats_.frames_skipped;
+        }
+    }
+    worker_ = std::thread([this] { workerLoop(); });
+    lk.unlock();
+    cv_.notify_all();
+    return Status::ok();
+}
+
+int Session::roomForFrames() const {
+    constexpr int kUnbounded = 1 << 20;
+    std::lock_guard lk(mutex_);
+    if (finishing_ || stats_.state == SessionState::kFinished) return kUnbounded;  // taken and discarded
+    if (camera_ && !camera_->every_frame) return kUnbounded;                       // live: the newest wins
+    return std::max(0, params_.queue_frames - static_cast<int>(queue_.size()));
+}
+
+void Session::pushFrame(const facescan_wire_RgbdFrame& msg) {
+    last_activity_ns_ = steadyNowNs();
+    std::unique_lock lk(mutex_);
+    if (finishing_ || stats_.state == SessionState::kFinished) return;
+    if (!msg.end_of_stream) ++stats_.frames_received;
+    if (last_seq_ >= 0 && static_cast<int64_t>(msg.seq) > last_seq_ + 1) {
+        stats_.frames_dropped += static_cast<uint32_t>(msg.seq - last_seq_ - 1);  // lost on the way
+    }
+    last_seq_ = std::max<int64_t>(last_seq_, msg.seq);
+    if (camera_ && !camera_->every_frame && !msg.end_of_stream) {
+        // Live: anything still waiting is older than this frame and will never be worth processing.
+        while (!queue_.empty() && !queue_.back().end_of_stream) {
+            spare_.push_back(std::move(queue_.back()));
+            queue_.pop_back();
+            ++stats_.frames_skipped;
+        }
+    }
+    PendingFrame slot;
+    if (!spare_.empty()) {
+        slot = std::move(spare_.back());
+        spare_.pop_back();
+    }
+    lk.unlock();
+    slot.assign(msg);  // the copy out of the loan, outside the lock
+    lk.lock();
+    queue_.push_back(std::move(slot));
+    lk.unlock();
+    cv_.notify_all();
+}
+
+void Session::noteMalformed() {
+    std::lock_guard lk(mutex_);
+    ++stats_.frames_received;
+    ++stats_.frames_dropped;
+}
+
+void Session::noteWriterGone() {
+    std::lock_guard lk(mutex_);
+    if (finishing_ || stats_.state == SessionState::kFinished) return;
+    stats_.state = SessionState::kWaiting;
+    stats_.detail = "agent gone";
+}
+
+bool Session::finished() const {
+    std::lock_guard lk(mutex_);
+    return stats_.state == SessionState::kFinished;
+}
+
+void Session::requestReset(std::function<void(const Status&)> done) {
+    std::unique_lock lk(mutex_);
+    if (stats_.state == SessionState::kFinished || finishing_) {
+        lk.unlock();
+        done(invalidArgument("session '" + id_ + "' is finished: nothing to reset"));
+        return;
+    }
+    if (!worker_.joinable()) {
+        lk.unlock();
+        done(Status::ok());  // no model yet: nothing to clear
+        return;
+    }
+    control_.push_back({Control::kReset, "", std::move(done), nullptr});
+    lk.unlock();
+    cv_.notify_all();
+}
+
+void Session::requestFinish(const std::string& why, FinishCallback done) {
+    std::unique_lock lk(mutex_);
+    if (stats_.state == SessionState::kFinished) {
+        const MeshResult m = final_mesh_;
+        lk.unlock();
+        if (done) done(Status::ok(), m);
+        return;
+    }
+    if (finishing_ && !done) return;  // already on its way (e.g. the idle check repeating itself)
+    if (worker_.joinable() || finishing_) {
+        control_.push_back({Control::kFinish, why, nullptr, std::move(done)});
+        lk.unlock();
+        cv_.notify_all();
+        return;
+    }
+    // No worker (no CameraInfo ever came): finish here.
+    finishing_ = true;
+    lk.unlock();
+    finalize(why, done);
+}
+
+void Session::workerLoop() {
+    for (;;) {
+        std::unique_lock lk(mutex_);
+        cv_.wait(lk, [&] { return stop_ || !control_.empty() || !queue_.empty(); });
+        if (!control_.empty()) {
+            Control c = std::move(control_.front());
+            control_.pop_front();
+            if (c.kind == Control::kFinish) {
+                finishing_ = true;
+                stats_.frames_skipped += static_cast<uint32_t>(
+                    std::count_if(queue_.begin(), queue_.end(), [](const auto& f) { return !f.end_of_stream; }));
+                queue_.clear();
+                lk.unlock();
+                if (space_freed_) space_freed_();
+                finalize(c.why, c.finish_done);
+                return;
+            }
+            lk.unlock();
+            recon_->reset();
+            pipeline_->reset();
+            lk.lock();
+            trajectory_.clear();
+            last_pose_ = recon::Pose::Identity();
+            snapshot_frames_ = -1;
+            stats_.detail = "model reset";
+            lk.unlock();
+            c.reset_done(Status::ok());
+            continue;
+        }
+        if (queue_.empty()) return;  // stop_ with nothing left
+        const bool was_full = static_cast<int>(queue_.size()) >= params_.queue_frames;
+        std::swap(working_, queue_.front());
+        queue_.pop_front();
+        lk.unlock();
+        if (was_full && space_freed_) space_freed_();
+        if (working_.end_of_stream) {
+            {
+                std::lock_guard g(mutex_);
+                finishing_ = true;
+            }
+            finalize("end of stream", nullptr);
+            return;
+        }
+        processFrame(working_);
+        lk.lock();
+        spare_.push_back(std::move(working_));
+        working_ = PendingFrame();
+    }
+}
+
+void Session::processFrame(PendingFrame& pending) {
+    const int64_t t0 = steadyNowNs();
+    // camera_ is set once before the worker starts and never changes: no lock needed to read it here.
+    const Status decoded = decoder_.decode(pending.view(), *camera_, /*want_colour=*/true, frame_);
+    if (!decoded.isOk()) {
+        std::lock_guard lk(mutex_);
+        ++stats_.frames_dropped;
+        stats_.detail = "frame " + std::to_string(pending.seq) + " dropped: " + decoded.message();
+        return;
+    }
+    cv::Rect box;
+    const bool tracked = recon_->predictedHeadBox(box);
+    const recon::HeadObservation head = pipeline_->process(frame_, tracked ? &box : nullptr);
+    recon::FrameResult r;
+    if (head.found) r = recon_->processFrame(frame_, head.mask);
+    const int64_t pose_known_ns = realtimeNowNs();
+    r.ms.detect = head.detect_ms;
+    r.ms.segment = head.segment_ms;
+    const int64_t now = steadyNowNs();
+
+    std::lock_guard lk(mutex_);
+    if (processed_count_ == 0) first_processed_ns_ = t0;
+    last_processed_ns_ = now;
+    ++processed_count_;
+    processed_ns_.push_back(now);
+    while (!processed_ns_.empty() && processed_ns_.front() < now - kFpsWindowNs) processed_ns_.pop_front();
+    emaUpdate(stats_.ms, r.ms, ms_count_ == 0);
+    accumulate(ms_sum_, r.ms);
+    ++ms_count_;
+    if (!head.found) {
+        ++stats_.frames_rejected;
+        stats_.state = stats_.frames_integrated > 0 ? SessionState::kLost : SessionState::kWaiting;
+        stats_.detail = "no face: " + head.reason;
+        return;
+    }
+    if (r.integrated) {
+        ++stats_.frames_integrated;
+        stats_.state = SessionState::kScanning;
+        stats_.detail = head.depth_only ? "face found (depth only)" : "face found";
+        if (!recon_->trajectory().empty()) trajectory_.push_back(recon_->trajectory().back());
+        last_pose_ = recon_->lastPose();
+        recordLatency(static_cast<float>(pose_known_ns - pending.capture_time_ns) * 1e-6f);
+        return;
+    }
+    ++stats_.frames_rejected;
+    stats_.state = r.reacquiring ? SessionState::kLost : SessionState::kScanning;
+    stats_.detail = std::string("frame rejected: ") + r.reason;
+}
+
+void Session::recordLatency(float ms) {
+    if (latency_ms_.size() < kLatencyWindow) {
+        latency_ms_.push_back(ms);
+    } else {
+        latency_ms_[latency_next_] = ms;
+        latency_next_ = (latency_next_ + 1) % kLatencyWindow;
+    }
+}
+
+SessionStats Session::stats() const {
+    std::lock_guard lk(mutex_);
+    SessionStats s = stats_;
+    const int64_t now = steadyNowNs();
+    if (stats_.state == SessionState::kFinished) {
+        s.fps = s.duration_s > 0 ? static_cast<float>(static_cast<double>(processed_count_) / s.duration_s) : 0;
+    } else if (!processed_ns_.empty()) {
+        int n = 0;
+        for (const int64_t t : processed_ns_) n += t >= now - kFpsWindowNs ? 1 : 0;
+        const double window_s = std::min<double>(kFpsWindowNs, static_cast<double>(now - first_processed_ns_)) * 1e-9;
+        s.fps = window_s > 0.2 ? static_cast<float>(n / window_s) : 0;
+    }
+    if (ms_count_ > 0) {
+        const float inv = 1.0f / static_cast<float>(ms_count_);
+        s.ms_mean = {ms_sum_.detect * inv,
+                     ms_sum_.segment * inv,
+                     ms_sum_.filter * inv,
+                     ms_sum_.icp * inv,
+                     ms_sum_.integrate * inv,
+                     ms_sum_.raycast * inv,
+                     0};
+    }
+    s.latency_p50_ms = percentile(latency_ms_, 0.5f);
+    s.latency_p95_ms = percentile(latency_ms_, 0.95f);
+    if (stats_.state != SessionState::kFinished && processed_count_ > 0) {
+        s.duration_s = static_cast<double>(last_processed_ns_ - first_processed_ns_) * 1e-9;
+    }
+    return s;
+}
+
+std::string Session::trajectoryTum() const {
+    std::lock_guard lk(mutex_);
+    std::string out;
+    out.reserve(trajectory_.size() * 80);
+    for (const auto& [t_ns, pose] : trajectory_) out += recon::toTumLine(t_ns, pose) + "\n";
+    return out;
+}
+
+StatusOr<MeshResult> Session::mesh() {
+    std::shared_ptr<recon::Reconstructor> rec;
+    {
+        std::lock_guard lk(mutex_);
+        if (stats_.state == SessionState::kFinished) {
+            if (!final_mesh_.draco) return notFound("session '" + id_ + "' finished without a surface");
+            return final_mesh_;
+        }
+        rec = recon_;
+    }
+    if (!rec) return unavailable("session '" + id_ + "' has no model yet (no CameraInfo)");
+    const recon::Mesh m = rec->extractMesh(params_.recon.mesh);  // copies the volume under its short lock
+    if (m.n_faces() == 0) return unavailable("session '" + id_ + "' has no surface yet");
+    auto bytes = std::make_shared<std::vector<uint8_t>>();
+    RETURN_IF_ERROR(wire::encodeMeshDraco(m, wire::MeshCodecParams{}, *bytes));
+    return MeshResult{std::move(bytes), static_cast<uint32_t>(m.n_vertices()), static_cast<uint32_t>(m.n_faces())};
+}
+
+StatusOr<std::vector<uint8_t>> Session::previewPng() {
+    std::shared_ptr<recon::Reconstructor> rec;
+    recon::Pose pose;
+    {
+        std::lock_guard lk(mutex_);
+        if (stats_.state == SessionState::kFinished) {
+            if (final_preview_png_.empty()) return notFound("session '" + id_ + "' finished without a model");
+            return final_preview_png_;
+        }
+        rec = recon_;
+        pose = last_pose_;
+    }
+    if (!rec) return unavailable("session '" + id_ + "' has no model yet (no CameraInfo)");
+    cv::Mat shaded;
+    rec->renderPreview(pose, shaded);
+    std::vector<uint8_t> png;
+    if (shaded.empty() || !cv::imencode(".png", shaded, png)) return internalError("cannot render the preview");
+    return png;
+}
+
+std::optional<SnapshotResult> Session::makeSnapshot() {
+    std::shared_ptr<recon::Reconstructor> rec;
+    int integrated = 0;
+    {
+        std::lock_guard lk(mutex_);
+        if (stats_.state == SessionState::kFinished || !recon_) return std::nullopt;
+        integrated = static_cast<int>(stats_.frames_integrated);
+        if (integrated == 0 || integrated == snapshot_frames_) return std::nullopt;
+        rec = recon_;
+    }
+    const int64_t t0 = steadyNowNs();
+    rec->copyVolume(snapshot_grid_);  // the only step that holds the frame path's lock
+    const float copy_ms = msSince(t0);
+    recon::MeshParams mp = params_.recon.mesh;
+    mp.stride_vox = params_.snapshot_stride_vox;
+    const int64_t t1 = steadyNowNs();
+    const recon::Mesh m = recon::extractMesh(snapshot_grid_, mp);
+    const float mesh_ms = msSince(t1);
+    if (m.n_faces() == 0) return std::nullopt;
+    wire::MeshCodecParams cp;
+    cp.max_position_error_m = params_.snapshot_max_error_m;
+    auto bytes = std::make_shared<std::vector<uint8_t>>();
+    const int64_t t2 = steadyNowNs();
+    if (!wire::encodeMeshDraco(m, cp, *bytes).isOk()) return std::nullopt;
+    const float encode_ms = msSince(t2);
+    std::lock_guard lk(mutex_);
+    snapshot_frames_ = integrated;
+    stats_.snapshot_copy_ms = copy_ms;
+    stats_.snapshot_mesh_ms = mesh_ms;
+    stats_.snapshot_encode_ms = encode_ms;
+    stats_.ms.mesh = mesh_ms + encode_ms;
+    SnapshotResult out;
+    out.seq = ++stats_.snapshot_seq;
+    out.frames_integrated = static_cast<uint32_t>(integrated);
+    out.mesh = {std::move(bytes), static_cast<uint32_t>(m.n_vertices()), static_cast<uint32_t>(m.n_faces())};
+    return out;
+}
+
+}  // namespace facescan::service

@@ -1,0 +1,153 @@
+// Finishing a session: the final full-resolution mesh, its Draco bytes, a last preview, and the files in the
+// data dir (session_store.hpp). Runs on the session's worker (or on the caller's thread when the session never
+// had a worker), never on the intake thread.
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+
+#include "service/session.hpp"
+#include "service/session_store.hpp"
+#include "wire/mesh_codec.hpp"
+
+namespace facescan::service {
+namespace {
+
+std::string num(double v) {
+    std::ostringstream o;
+    o.precision(6);
+    o << v;
+    return o.str();
+}
+
+std::string msJson(const recon::StageTimesMs& ms) {
+    return "{\"detect\": " + num(ms.detect) + ", \"segment\": " + num(ms.segment) + ", \"filter\": " + num(ms.filter) +
+           ", \"icp\": " + num(ms.icp) + ", \"integrate\": " + num(ms.integrate) + ", \"raycast\": " + num(ms.raycast) +
+           ", \"mesh\": " + num(ms.mesh) + "}";
+}
+
+}  // namespace
+
+void Session::finalize(const std::string& why, const FinishCallback& done) {
+    std::shared_ptr<recon::Reconstructor> rec;
+    recon::Pose pose;
+    {
+        std::lock_guard lk(mutex_);
+        rec = recon_;
+        pose = last_pose_;
+    }
+    recon::Mesh mesh;
+    MeshResult result;
+    std::vector<uint8_t> png;
+    Status status;
+    if (rec) {
+        mesh = rec->extractMesh(params_.recon.mesh);
+        if (mesh.n_faces() > 0) {
+            auto bytes = std::make_shared<std::vector<uint8_t>>();
+            status = wire::encodeMeshDraco(mesh, wire::MeshCodecParams{}, *bytes);
+            if (status.isOk()) {
+                result = {std::move(bytes), static_cast<uint32_t>(mesh.n_vertices()),
+                          static_cast<uint32_t>(mesh.n_faces())};
+            }
+        }
+        cv::Mat shaded;
+        rec->renderPreview(pose, shaded);
+        if (!shaded.empty()) cv::imencode(".png", shaded, png);
+    }
+    SessionStats s = stats();
+    {
+        std::lock_guard lk(mutex_);  // the summary's fps is over the whole session, not the last 2 s
+        s.fps = s.duration_s > 0 ? static_cast<float>(static_cast<double>(processed_count_) / s.duration_s) : 0;
+    }
+    s.state = SessionState::kFinished;
+    s.detail = "finished: " + why;
+    SessionFiles files;
+    files.mesh = &mesh;
+    files.draco = result.draco.get();
+    files.trajectory_tum = trajectoryTum();
+    files.summary_json = summaryJson(s, result);
+    if (status.isOk()) status = writeSessionFiles(params_.data_dir / id_, files);
+    if (!status.isOk()) s.detail += " (not written: " + status.message() + ")";
+
+    std::deque<Control> pending;
+    {
+        std::lock_guard lk(mutex_);
+        const auto fps = s.fps;
+        stats_.state = SessionState::kFinished;
+        stats_.detail = s.detail;
+        stats_.duration_s = s.duration_s;
+        stats_.fps = fps;
+        final_mesh_ = result;
+        final_preview_png_ = std::move(png);
+        recon_.reset();  // frees the volume; finished sessions answer from the cached results
+        pending.swap(control_);
+        finishing_ = false;
+    }
+    cv_.notify_all();
+    if (done) done(status, result);
+    // Requests that arrived while finishing: a second finish is answered like the first; a reset cannot apply.
+    for (Control& c : pending) {
+        if (c.kind == Control::kFinish && c.finish_done) c.finish_done(status, result);
+        if (c.kind == Control::kReset && c.reset_done) {
+            c.reset_done(invalidArgument("session '" + id_ + "' is finished: nothing to reset"));
+        }
+    }
+}
+
+std::optional<SnapshotResult> Session::takeFinalSnapshot() {
+    std::lock_guard lk(mutex_);
+    if (stats_.state != SessionState::kFinished || final_snapshot_sent_ || !final_mesh_.draco) return std::nullopt;
+    final_snapshot_sent_ = true;
+    SnapshotResult out;
+    out.seq = ++stats_.snapshot_seq;
+    out.frames_integrated = stats_.frames_integrated;
+    out.mesh = final_mesh_;
+    return out;
+}
+
+std::string Session::summaryJson(const SessionStats& s, const MeshResult& m) const {
+    const recon::ReconParams& r = params_.recon;
+    std::string camera = "null";
+    {
+        std::lock_guard lk(mutex_);
+        if (camera_) {
+            const recon::Intrinsics& k = camera_->intrinsics;
+            camera = "{\"width\": " + std::to_string(k.width_px) + ", \"height\": " + std::to_string(k.height_px) +
+                     ", \"fx\": " + num(k.fx_px) + ", \"fy\": " + num(k.fy_px) + ", \"cx\": " + num(k.cx_px) +
+                     ", \"cy\": " + num(k.cy_px) + ", \"depth_units_m\": " + num(camera_->depth_units_m) +
+                     ", \"rate_hz\": " + num(camera_->rate_hz) + ", \"agent_host\": \"" +
+                     jsonEscape(camera_->agent_host) + "\"}";
+        }
+    }
+    std::string j = "{\n";
+    j += "  \"session_id\": \"" + jsonEscape(s.session_id) + "\",\n";
+    j += "  \"server_id\": \"" + jsonEscape(params_.server_id) + "\",\n";
+    j += "  \"state\": \"" + std::string(sessionStateName(s.state)) + "\",\n";
+    j += "  \"detail\": \"" + jsonEscape(s.detail) + "\",\n";
+    j += "  \"source\": \"" + jsonEscape(s.source) + "\",\n";
+    j += "  \"mode\": \"" + std::string(s.every_frame ? "every_frame" : "live") + "\",\n";
+    j += "  \"frames\": {\"received\": " + std::to_string(s.frames_received) +
+         ", \"integrated\": " + std::to_string(s.frames_integrated) +
+         ", \"rejected\": " + std::to_string(s.frames_rejected) + ", \"skipped\": " + std::to_string(s.frames_skipped) +
+         ", \"dropped\": " + std::to_string(s.frames_dropped) + "},\n";
+    j += "  \"fps\": " + num(s.fps) + ",\n";
+    j += "  \"duration_s\": " + num(s.duration_s) + ",\n";
+    j += "  \"latency_ms\": {\"p50\": " + num(s.latency_p50_ms) + ", \"p95\": " + num(s.latency_p95_ms) + "},\n";
+    j += "  \"ms\": " + msJson(s.ms_mean) + ",\n";
+    j += "  \"snapshot\": {\"count\": " + std::to_string(s.snapshot_seq) + ", \"copy_ms\": " + num(s.snapshot_copy_ms) +
+         ", \"mesh_ms\": " + num(s.snapshot_mesh_ms) + ", \"encode_ms\": " + num(s.snapshot_encode_ms) + "},\n";
+    j += "  \"mesh\": {\"vertices\": " + std::to_string(m.vertex_count) +
+         ", \"triangles\": " + std::to_string(m.triangle_count) + "},\n";
+    j += "  \"camera\": " + camera + ",\n";
+    j += "  \"params\": {\"preset\": \"" + params_.preset +
+         "\", \"tsdf\": {\"resolution_vox\": " + std::to_string(r.tsdf.resolution_vox) +
+         ", \"volume_size_m\": " + num(r.tsdf.volume_size_m) + ", \"voxel_size_m\": " + num(r.tsdf.voxelSizeM()) +
+         ", \"trunc_dist_m\": " + num(r.tsdf.trunc_dist_m) + ", \"max_weight\": " + num(r.tsdf.max_weight) +
+         "}, \"icp\": {\"levels\": " + std::to_string(r.icp.levels) + ", \"iterations\": [" +
+         std::to_string(r.icp.iterations[0]) + ", " + std::to_string(r.icp.iterations[1]) + ", " +
+         std::to_string(r.icp.iterations[2]) + "]}, \"filter\": {\"sigma_space_px\": " + num(r.filter.sigma_space_px) +
+         ", \"sigma_depth_m\": " + num(r.filter.sigma_depth_m) + "}, \"snapshot_hz\": " + num(params_.snapshot_hz) +
+         ", \"snapshot_stride_vox\": " + std::to_string(params_.snapshot_stride_vox) + "}\n";
+    j += "}\n";
+    return j;
+}
+
+}  // namespace facescan::service

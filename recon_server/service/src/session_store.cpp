@@ -1,0 +1,104 @@
+#include "service/session_store.hpp"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <cerrno>
+#include <cstring>
+#include <sstream>
+
+namespace facescan::service {
+namespace {
+
+Status errnoStatus(const std::string& what) { return internalError(what + ": " + std::strerror(errno)); }
+
+}  // namespace
+
+Status writeFileAtomic(const std::filesystem::path& path, const void* bytes, size_t size) {
+    const std::filesystem::path tmp = path.string() + ".tmp";
+    const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) return errnoStatus("cannot create " + tmp.string());
+    const auto* p = static_cast<const char*>(bytes);
+    size_t left = size;
+    while (left > 0) {
+        const ssize_t n = ::write(fd, p, left);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) {
+            const Status s = errnoStatus("cannot write " + tmp.string());
+            ::close(fd);
+            ::unlink(tmp.c_str());
+            return s;
+        }
+        p += n;
+        left -= static_cast<size_t>(n);
+    }
+    // The data must be on disk before the rename makes it visible under the final name.
+    if (::fsync(fd) != 0) {
+        const Status s = errnoStatus("cannot sync " + tmp.string());
+        ::close(fd);
+        ::unlink(tmp.c_str());
+        return s;
+    }
+    ::close(fd);
+    if (::rename(tmp.c_str(), path.c_str()) != 0) {
+        const Status s = errnoStatus("cannot rename " + tmp.string() + " to " + path.string());
+        ::unlink(tmp.c_str());
+        return s;
+    }
+    // And the rename itself must survive a crash: sync the directory entry.
+    const std::filesystem::path dir = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
+    const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (dfd >= 0) {
+        (void)::fsync(dfd);
+        ::close(dfd);
+    }
+    return Status::ok();
+}
+
+StatusOr<std::string> meshToPly(const recon::Mesh& mesh) {
+    std::ostringstream out(std::ios::binary);
+    OpenMesh::IO::Options opts =
+        OpenMesh::IO::Options::Binary | OpenMesh::IO::Options::VertexNormal | OpenMesh::IO::Options::VertexColor;
+    if (!OpenMesh::IO::write_mesh(mesh, out, ".ply", opts)) return internalError("OpenMesh could not write the PLY");
+    return out.str();
+}
+
+Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& files) {
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) return internalError("cannot create " + dir.string() + ": " + ec.message());
+    if (files.mesh && files.mesh->n_faces() > 0) {
+        ASSIGN_OR_RETURN(const std::string ply, meshToPly(*files.mesh));
+        RETURN_IF_ERROR(writeFileAtomic(dir / "mesh.ply", ply));
+        if (files.draco && !files.draco->empty()) {
+            RETURN_IF_ERROR(writeFileAtomic(dir / "mesh.drc", files.draco->data(), files.draco->size()));
+        }
+    }
+    RETURN_IF_ERROR(writeFileAtomic(dir / "trajectory.txt", files.trajectory_tum));
+    return writeFileAtomic(dir / "summary.json", files.summary_json);
+}
+
+std::string jsonEscape(const std::string& s) {
+    std::string out;
+    out.reserve(s.size() + 2);
+    for (const char c : s) {
+        switch (c) {
+            case '"': out += "\\\""; break;
+            case '\\': out += "\\\\"; break;
+            case '\n': out += "\\n"; break;
+            case '\t': out += "\\t"; break;
+            default:
+                if (static_cast<unsigned char>(c) < 0x20) {
+                    char buf[8];
+                    std::snprintf(buf, sizeof(buf), "\\u%04x", static_cast<unsigned>(static_cast<unsigned char>(c)));
+                    out += buf;
+                } else {
+                    out += c;
+                }
+        }
+    }
+    return out;
+}
+
+}  // namespace facescan::service
