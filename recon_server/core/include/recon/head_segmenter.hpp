@@ -1,0 +1,74 @@
+// Head segmentation (thesis section 3.2): region growing from the face (Algorithm 1), then the head/torso split
+// by the width criterion (eq. 3.7-3.13) and the neck shift. Everything outside the head becomes invalid depth.
+// Works inside a head-sized ROI around the seed, so it costs well under 2 ms per 640x480 frame.
+#pragma once
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "recon/camera.hpp"
+#include "recon/status.hpp"
+
+namespace facescan::recon {
+
+struct HeadSegmenterParams {
+    float grow_jump_m = 0.02f;          // delta_max of Algorithm 1: largest depth step between 4-neighbours (metres)
+    float seed_band_m = 0.06f;          // seed pixels lie within this of the face box's median depth (metres)
+    float min_depth_m = 0.4f;           // Kinect v1 near limit; closer depth is "too close" (metres)
+    float max_depth_m = 4.0f;           // farther depth is ignored (metres)
+    float search_half_width_m = 0.30f;  // ROI half-width around the seed centre (metres at the seed depth)
+    float search_above_m = 0.25f;       // ROI extent above the seed centre (metres)
+    float search_below_m = 0.45f;       // ROI extent below: enough torso for the width split (metres)
+    // Eq. 3.11 applies only when the torso is "significantly" wider than the head: mu_T >= ratio * mu_H.
+    float torso_width_ratio = 1.3f;  // ratio
+    // The eq. 3.11 line runs through the shoulders; the neck above it is removed by moving the line up to the
+    // narrowest row within this distance (the thesis' neck shift, made adaptive to the person).
+    float neck_shift_max_m = 0.10f;  // metres
+    // What counts as a head (DESIGN.md s1; also the depth-only fallback's blob test).
+    float head_width_min_m = 0.08f;   // metres
+    float head_width_max_m = 0.25f;   // metres
+    float head_height_min_m = 0.10f;  // metres
+    float head_height_max_m = 0.30f;  // metres
+
+    Status validate() const;
+};
+
+struct HeadSegmentation {
+    bool found = false;
+    std::string reason;                                    // why not found (empty when found)
+    cv::Mat mask;                                          // CV_8UC1, 255 on the head, full frame size
+    cv::Mat depth_m;                                       // the input depth with everything outside the head set to 0
+    cv::Rect head_box_px;                                  // bounding box of the mask
+    Eigen::Vector3f centroid_m = Eigen::Vector3f::Zero();  // mean head point, depth camera frame (metres)
+    Eigen::Vector3f extent_m = Eigen::Vector3f::Zero();    // width, height, depth of the head (metres)
+    float depth_median_m = 0;                              // median depth of the seed (metres)
+    int pixels = 0;                                        // head pixels
+    int split_row = -1;  // image row of the head/torso cut, -1 when no torso was attached
+};
+
+class HeadSegmenter {
+ public:
+    explicit HeadSegmenter(const HeadSegmenterParams& params = {}) : params_(params) {}
+
+    // seed_box_px: the face (or predicted head) box in depth pixels. Never throws; bad input gives a reason.
+    void segment(const cv::Mat& depth_m, const Intrinsics& intrinsics, const cv::Rect& seed_box_px,
+                 HeadSegmentation& out);
+
+    const HeadSegmenterParams& params() const { return params_; }
+
+ private:
+    HeadSegmenterParams params_;
+    // Scratch reused between frames.
+    cv::Mat visited_;
+    std::vector<int> queue_;
+    std::vector<int> row_count_, row_min_, row_max_;
+    std::vector<float> scratch_;
+};
+
+// Eq. 3.9-3.13: given per-row pixel counts of a region (rows with 0 pixels allowed), the split row y (last head
+// row) maximising w_H w_T (mu_H - mu_T)^2 over y in [first, last]; -1 when no row qualifies. Exposed for tests.
+int widthCriterionSplit(const std::vector<int>& row_count, int first, int last);
+
+}  // namespace facescan::recon

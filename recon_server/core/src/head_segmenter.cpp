@@ -1,0 +1,239 @@
+#include "recon/head_segmenter.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+namespace facescan::recon {
+namespace {
+
+std::string metres(float v) {
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%.2f m", static_cast<double>(v));
+    return buf;
+}
+
+}  // namespace
+
+Status HeadSegmenterParams::validate() const {
+    if (!(grow_jump_m > 0) || !(seed_band_m > 0)) return invalidArgument("grow_jump_m and seed_band_m must be > 0");
+    if (!(min_depth_m > 0 && max_depth_m > min_depth_m)) return invalidArgument("need 0 < min_depth_m < max_depth_m");
+    if (!(search_half_width_m > 0 && search_above_m > 0 && search_below_m > 0)) {
+        return invalidArgument("search extents must be > 0");
+    }
+    if (!(torso_width_ratio >= 1)) return invalidArgument("torso_width_ratio must be >= 1");
+    if (!(neck_shift_max_m >= 0)) return invalidArgument("neck_shift_max_m must be >= 0");
+    if (!(head_width_min_m > 0 && head_width_max_m > head_width_min_m && head_height_min_m > 0 &&
+          head_height_max_m > head_height_min_m)) {
+        return invalidArgument("head size ranges must be positive and ordered");
+    }
+    return Status::ok();
+}
+
+int widthCriterionSplit(const std::vector<int>& row_count, int first, int last) {
+    const int n = static_cast<int>(row_count.size());
+    first = std::max(first, 0);
+    last = std::min(last, n - 2);  // the torso needs at least one row
+    int rows_total = 0;
+    long pixels_total = 0;
+    for (int c : row_count) {
+        rows_total += c > 0;
+        pixels_total += c;
+    }
+    if (rows_total < 2 || first > last) return -1;
+    int rows_h = 0;
+    long pixels_h = 0;
+    for (int y = 0; y < first; ++y)
+        rows_h += row_count[static_cast<size_t>(y)] > 0, pixels_h += row_count[static_cast<size_t>(y)];
+    int best = -1;
+    double best_score = -1;
+    for (int y = first; y <= last; ++y) {
+        rows_h += row_count[static_cast<size_t>(y)] > 0;
+        pixels_h += row_count[static_cast<size_t>(y)];
+        const int rows_t = rows_total - rows_h;
+        if (rows_h == 0 || rows_t == 0) continue;
+        const double mu_h = static_cast<double>(pixels_h) / rows_h;                 // eq. 3.9
+        const double mu_t = static_cast<double>(pixels_total - pixels_h) / rows_t;  // eq. 3.10
+        const double w_h = static_cast<double>(rows_h) / rows_total;                // eq. 3.12
+        const double w_t = static_cast<double>(rows_t) / rows_total;                // eq. 3.13
+        const double score = w_h * w_t * (mu_h - mu_t) * (mu_h - mu_t);             // eq. 3.11
+        if (score > best_score) best_score = score, best = y;
+    }
+    return best;
+}
+
+void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const cv::Rect& seed_box_px,
+                            HeadSegmentation& out) {
+    out.found = false;
+    out.reason.clear();
+    out.pixels = 0;
+    out.split_row = -1;
+    out.head_box_px = {};
+    auto fail = [&](std::string why) {
+        out.reason = std::move(why);
+        if (!depth_m.empty()) {
+            out.mask.create(depth_m.size(), CV_8UC1);
+            out.mask.setTo(0);
+            out.depth_m.create(depth_m.size(), CV_32FC1);
+            out.depth_m.setTo(0);
+        }
+    };
+    if (const Status s = params_.validate(); !s.isOk()) return fail("bad segmenter params: " + s.message());
+    if (depth_m.empty()) return fail("depth image is empty");
+    if (depth_m.type() != CV_32FC1) return fail("depth must be CV_32FC1 metres");
+    if (depth_m.cols != k.width_px || depth_m.rows != k.height_px) {
+        return fail("depth size differs from the intrinsics");
+    }
+    const cv::Rect bounds(0, 0, depth_m.cols, depth_m.rows);
+    const cv::Rect seed = seed_box_px & bounds;
+    if (seed.area() == 0) return fail("face box lies outside the image");
+
+    // Seed depth: the median over the central half of the box (the box corners often hold background).
+    const cv::Rect core = cv::Rect(seed.x + seed.width / 4, seed.y + seed.height / 4, std::max(1, seed.width / 2),
+                                   std::max(1, seed.height / 2)) &
+                          bounds;
+    scratch_.clear();
+    int too_close = 0;
+    for (int v = core.y; v < core.br().y; ++v) {
+        const float* z = depth_m.ptr<float>(v);
+        for (int u = core.x; u < core.br().x; ++u) {
+            if (z[u] >= params_.min_depth_m && z[u] <= params_.max_depth_m) scratch_.push_back(z[u]);
+            too_close += z[u] > 0 && z[u] < params_.min_depth_m;
+        }
+    }
+    if (scratch_.empty()) {
+        return fail(too_close > 0 ? "too close: the face is nearer than " + metres(params_.min_depth_m)
+                                  : "no valid depth inside the face box");
+    }
+    auto mid = scratch_.begin() + static_cast<std::ptrdiff_t>(scratch_.size() / 2);
+    std::nth_element(scratch_.begin(), mid, scratch_.end());
+    const float z_seed = *mid;
+    out.depth_median_m = z_seed;
+    if (static_cast<size_t>(too_close) > scratch_.size()) {
+        return fail("too close: most of the face is nearer than " + metres(params_.min_depth_m));
+    }
+
+    // ROI: a head-plus-shoulders window in metres around the seed centre.
+    const float px_per_m = k.fx_px / z_seed;
+    const int cu = seed.x + seed.width / 2, cv_ = seed.y + seed.height / 2;
+    const int half_w = static_cast<int>(params_.search_half_width_m * px_per_m);
+    const int above = static_cast<int>(params_.search_above_m * px_per_m);
+    const int below = static_cast<int>(params_.search_below_m * px_per_m);
+    const cv::Rect roi =
+        cv::Rect(cv::Point(cu - half_w, cv_ - above), cv::Point(cu + half_w + 1, cv_ + below + 1)) & bounds;
+    const int w = roi.width, h = roi.height;
+
+    // Algorithm 1: grow R from the seed pixels through 4-neighbours whose depth differs by < delta_max.
+    visited_.create(h, w, CV_8UC1);
+    visited_.setTo(0);
+    queue_.clear();
+    queue_.reserve(static_cast<size_t>(w) * static_cast<size_t>(h));
+    for (int v = core.y; v < core.br().y; ++v) {
+        const float* z = depth_m.ptr<float>(v);
+        for (int u = core.x; u < core.br().x; ++u) {
+            if (!roi.contains({u, v}) || std::fabs(z[u] - z_seed) > params_.seed_band_m) continue;
+            const int idx = (v - roi.y) * w + (u - roi.x);
+            visited_.data[idx] = 1;
+            queue_.push_back(idx);
+        }
+    }
+    const float zmin = params_.min_depth_m, zmax = params_.max_depth_m, jump = params_.grow_jump_m;
+    for (size_t head = 0; head < queue_.size(); ++head) {
+        const int idx = queue_[head];
+        const int y = idx / w, x = idx - y * w;
+        const float z = depth_m.at<float>(y + roi.y, x + roi.x);
+        auto visit = [&](int nx, int ny) {
+            const int nidx = ny * w + nx;
+            if (visited_.data[nidx]) return;
+            const float nz = depth_m.at<float>(ny + roi.y, nx + roi.x);
+            if (nz < zmin || nz > zmax || std::fabs(nz - z) >= jump) return;
+            visited_.data[nidx] = 1;
+            queue_.push_back(nidx);
+        };
+        if (x > 0) visit(x - 1, y);
+        if (x + 1 < w) visit(x + 1, y);
+        if (y > 0) visit(x, y - 1);
+        if (y + 1 < h) visit(x, y + 1);
+    }
+    if (queue_.empty()) return fail("no pixel of the face box is at the face's depth");
+
+    // Per-row widths of R (eq. 3.9-3.10 count pixels per row).
+    row_count_.assign(static_cast<size_t>(h), 0);
+    row_min_.assign(static_cast<size_t>(h), w);
+    row_max_.assign(static_cast<size_t>(h), -1);
+    for (int idx : queue_) {
+        const int y = idx / w, x = idx - y * w;
+        ++row_count_[static_cast<size_t>(y)];
+        row_min_[static_cast<size_t>(y)] = std::min(row_min_[static_cast<size_t>(y)], x);
+        row_max_[static_cast<size_t>(y)] = std::max(row_max_[static_cast<size_t>(y)], x);
+    }
+    int top = 0, bottom = h - 1;
+    while (top < h && row_count_[static_cast<size_t>(top)] == 0) ++top;
+    while (bottom > top && row_count_[static_cast<size_t>(bottom)] == 0) --bottom;
+
+    // Eq. 3.7-3.13: the head/torso line, searched only where the head would have a plausible height.
+    int cut = bottom;
+    const int h_min_px = static_cast<int>(params_.head_height_min_m * px_per_m);
+    const int h_max_px = static_cast<int>(params_.head_height_max_m * px_per_m);
+    const int split = widthCriterionSplit(row_count_, top + h_min_px, top + h_max_px + h_max_px / 2);
+    if (split >= 0) {
+        long ph = 0, pt = 0;
+        int rh = 0, rt = 0;
+        for (int y = top; y <= bottom; ++y) {
+            const int c = row_count_[static_cast<size_t>(y)];
+            (y <= split ? ph : pt) += c;
+            (y <= split ? rh : rt) += c > 0;
+        }
+        const double mu_h = rh ? static_cast<double>(ph) / rh : 0, mu_t = rt ? static_cast<double>(pt) / rt : 0;
+        if (rt > 0 && mu_t >= params_.torso_width_ratio * mu_h) {
+            // Neck shift: the narrowest (3-row mean) row between the face centre and the shoulder line.
+            const int shift_px = static_cast<int>(params_.neck_shift_max_m * px_per_m);
+            const int from = std::max({top + h_min_px / 2, cv_ - roi.y, split - shift_px});
+            cut = split;
+            double narrowest = 1e30;
+            for (int y = std::max(from, top + 1); y <= split && y + 1 < h; ++y) {
+                const double width3 = row_count_[static_cast<size_t>(y - 1)] + row_count_[static_cast<size_t>(y)] +
+                                      row_count_[static_cast<size_t>(y + 1)];
+                if (width3 < narrowest) narrowest = width3, cut = y;
+            }
+            out.split_row = cut + roi.y;
+        }
+    }
+
+    // Head = R above the cut. Mask, masked depth, extents.
+    out.mask.create(depth_m.size(), CV_8UC1);
+    out.mask.setTo(0);
+    int umin = w, umax = -1, vmin = h, vmax = -1;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    float z_lo = 1e9f, z_hi = 0;
+    for (int idx : queue_) {
+        const int y = idx / w, x = idx - y * w;
+        if (y > cut) continue;
+        const int u = x + roi.x, v = y + roi.y;
+        out.mask.at<uchar>(v, u) = 255;
+        const float z = depth_m.at<float>(v, u);
+        sum += k.backProject(static_cast<float>(u), static_cast<float>(v), z).cast<double>();
+        z_lo = std::min(z_lo, z), z_hi = std::max(z_hi, z);
+        umin = std::min(umin, u), umax = std::max(umax, u), vmin = std::min(vmin, v), vmax = std::max(vmax, v);
+        ++out.pixels;
+    }
+    out.depth_m.create(depth_m.size(), CV_32FC1);
+    out.depth_m.setTo(0);
+    depth_m.copyTo(out.depth_m, out.mask);
+    if (out.pixels == 0) return fail("the head region is empty after the head/torso split");
+    out.head_box_px = cv::Rect(cv::Point(umin, vmin), cv::Point(umax + 1, vmax + 1));
+    out.centroid_m = (sum / out.pixels).cast<float>();
+    const float z_c = out.centroid_m.z();
+    out.extent_m = {static_cast<float>(out.head_box_px.width) * z_c / k.fx_px,
+                    static_cast<float>(out.head_box_px.height) * z_c / k.fy_px, z_hi - z_lo};
+    const float width_m = out.extent_m.x(), height_m = out.extent_m.y();
+    if (width_m < params_.head_width_min_m || width_m > params_.head_width_max_m ||
+        height_m < params_.head_height_min_m || height_m > params_.head_height_max_m) {
+        const std::string size = metres(width_m) + " wide, " + metres(height_m) + " tall";
+        out.reason = "region at the face is not head-sized (" + size + ")";
+        return;  // mask kept for inspection; found stays false
+    }
+    out.found = true;
+}
+
+}  // namespace facescan::recon
