@@ -1,0 +1,54 @@
+// Mesh codec for MeshSnapshot.draco and ScanReply.payload: Draco (edgebreaker) with positions in metres, vertex
+// normals and 8-bit vertex colours. Positions are quantised on a grid derived from the mesh's bounding box and
+// the allowed error (default 0.05 mm, well under the 1.51 mm voxel of DESIGN.md section 1).
+//
+// Draco's own decoder sizes its tables from counts in the bitstream; decodeMeshDraco reads and caps those counts
+// (and the header fields) itself before Draco sees the bytes, so a lying header cannot make it over-allocate.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "recon/mesh.hpp"
+#include "recon/status.hpp"
+
+namespace facescan::wire {
+
+// A face mesh from a 256^3 volume has a few 100k vertices; ten times that is still a face, more is an attack.
+inline constexpr size_t kMaxMeshVertices = 4'000'000;
+
+struct MeshCodecParams {
+    float max_position_error_m = 0.05e-3f;  // metres, Euclidean; quantisation keeps every vertex within this
+    int position_bits = 0;  // [0, 30] bits per coordinate; 0 = the fewest that honour max_position_error_m
+    int normal_bits = 10;   // [0, 30] octahedral normal bits; 0 = leave normals out (the receiver recomputes them)
+    bool colours = true;    // send the 8-bit vertex colours (lossless)
+    int speed = 7;          // Draco encode/decode speed [0, 10]: 7 measured as the sweet spot for size vs. time
+
+    Status validate() const;
+};
+
+// Bits per coordinate so that the worst Euclidean error, sqrt(3) * extent / (2^bits - 1) / 2, stays below
+// max_error_m with a 5% margin for float rounding in Draco's dequantisation. extent_m: the bounding box's largest
+// side. A face volume of 0.386 m at 0.05 mm gives 13 bits (47 um steps, at most 41 um error).
+int positionBitsFor(float extent_m, float max_error_m);
+
+// Encodes positions (+ normals, colours per params). INVALID_ARGUMENT for a mesh without faces or with non-finite
+// points. out is overwritten.
+Status encodeMeshDraco(const recon::Mesh& mesh, const MeshCodecParams& params, std::vector<uint8_t>& out);
+
+// What the Draco header and connectivity prefix claim, read without Draco (see the file comment).
+struct DracoMeshInfo {
+    int method = 0;                 // 0 sequential, 1 edgebreaker
+    uint32_t claimed_vertices = 0;  // sequential: num_points; edgebreaker: encoded vertices + split symbols
+    uint32_t claimed_faces = 0;
+};
+StatusOr<DracoMeshInfo> inspectDracoMesh(const uint8_t* data, size_t size);
+
+// Decodes a Draco triangle mesh of at most max_vertices vertices (and 4x as many faces) into `mesh` (replaced).
+// DATA_LOSS for corrupt or truncated bytes, OUT_OF_RANGE for claims over the caps; never crashes or over-allocates.
+// Normals are recomputed when the payload has none.
+Status decodeMeshDraco(const uint8_t* data, size_t size, recon::Mesh& mesh, size_t max_vertices = kMaxMeshVertices);
+StatusOr<recon::Mesh> decodeMeshDraco(const uint8_t* data, size_t size, size_t max_vertices = kMaxMeshVertices);
+
+}  // namespace facescan::wire

@@ -1,0 +1,119 @@
+// Writes the fuzzers' seed corpus: a few small valid payloads of each kind, made with our own encoders.
+// usage: facescan_fuzz_seeds OUT_DIR   ->  OUT_DIR/depth_<codec>/, OUT_DIR/colour_jpeg/, OUT_DIR/mesh_draco/
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "wire/codecs.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace facescan::wire;
+
+void writeFile(const fs::path& path, const std::vector<uint8_t>& bytes) {
+    std::ofstream(path, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+}
+
+// Small depth frames: a head-like dome before a wall, with holes; zeros; noise; a single pixel.
+std::vector<cv::Mat> depthFrames() {
+    std::vector<cv::Mat> frames;
+    cv::Mat dome(12, 16, CV_16UC1);
+    for (int v = 0; v < dome.rows; ++v) {
+        for (int u = 0; u < dome.cols; ++u) {
+            const double r2 = ((u - 8) * (u - 8) + (v - 6) * (v - 6)) / 25.0;
+            dome.at<uint16_t>(v, u) = (u * 7 + v * 3) % 11 == 0 ? 0 : r2 < 1.0 ? uint16_t(650 + 40 * r2) : 1800;
+        }
+    }
+    frames.push_back(dome);
+    frames.push_back(cv::Mat::zeros(5, 7, CV_16UC1));
+    cv::Mat noise(9, 9, CV_16UC1);
+    cv::RNG(7).fill(noise, cv::RNG::UNIFORM, 0, 65536);
+    frames.push_back(noise);
+    frames.push_back(cv::Mat(1, 1, CV_16UC1, cv::Scalar(65535)));
+    return frames;
+}
+
+facescan::recon::Mesh smallMesh(int n) {
+    facescan::recon::Mesh mesh;
+    std::vector<facescan::recon::Mesh::VertexHandle> vh;
+    for (int j = 0; j < n; ++j) {
+        for (int i = 0; i < n; ++i) {
+            const float x = 0.01f * float(i);
+            const float y = 0.01f * float(j);
+            vh.push_back(mesh.add_vertex({x, y, 0.7f + 0.02f * std::sin(30.0f * x) * std::cos(20.0f * y)}));
+        }
+    }
+    for (int j = 0; j + 1 < n; ++j) {
+        for (int i = 0; i + 1 < n; ++i) {
+            const size_t a = size_t(j) * n + i;
+            mesh.add_face(vh[a], vh[a + 1], vh[a + n + 1]);
+            mesh.add_face(vh[a], vh[a + n + 1], vh[a + n]);
+        }
+    }
+    mesh.update_normals();
+    for (const auto v : mesh.vertices()) mesh.set_color(v, {uint8_t(v.idx() * 7), uint8_t(v.idx() * 13), 128});
+    return mesh;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    if (argc != 2) {
+        std::fprintf(stderr, "usage: %s OUT_DIR\n", argv[0]);
+        return 2;
+    }
+    const fs::path out = argv[1];
+    int written = 0;
+    for (int c = 0; c < kDepthCodecCount; ++c) {
+        DepthCodecParams params;
+        params.codec = static_cast<DepthCodecId>(c);
+        std::string name = depthCodecName(params.codec);
+        for (char& ch : name) ch = ch == '-' ? '_' : ch;
+        const fs::path dir = out / ("depth_" + name);
+        fs::create_directories(dir);
+        int i = 0;
+        for (const cv::Mat& frame : depthFrames()) {
+            std::vector<uint8_t> payload;
+            if (!encodeDepth(frame, params, payload).isOk()) return 1;
+            // Mode 0 (whole payload) and mode 1 (size bytes + body), see fuzz_depth.cpp.
+            std::vector<uint8_t> whole{0};
+            whole.insert(whole.end(), payload.begin(), payload.end());
+            writeFile(dir / ("whole_" + std::to_string(i) + ".bin"), whole);
+            std::vector<uint8_t> body{1, uint8_t(frame.cols - 1), uint8_t(frame.rows - 1)};
+            body.insert(body.end(), payload.begin() + kDepthHeaderBytes, payload.end());
+            writeFile(dir / ("body_" + std::to_string(i) + ".bin"), body);
+            written += 2;
+            ++i;
+        }
+    }
+    fs::create_directories(out / "colour_jpeg");
+    for (const int quality : {50, 90}) {
+        for (const cv::Size size : {cv::Size(16, 16), cv::Size(33, 17)}) {
+            cv::Mat bgr(size, CV_8UC3);
+            cv::RNG(quality).fill(bgr, cv::RNG::UNIFORM, 0, 256);
+            std::vector<uint8_t> jpeg;
+            if (!encodeColourJpeg(bgr, quality, jpeg).isOk()) return 1;
+            writeFile(out / "colour_jpeg" / ("q" + std::to_string(quality) + "_" + std::to_string(size.width) + ".jpg"),
+                      jpeg);
+            ++written;
+        }
+    }
+    fs::create_directories(out / "mesh_draco");
+    for (const int n : {3, 6}) {
+        for (const int normal_bits : {0, 10}) {
+            MeshCodecParams params;
+            params.normal_bits = normal_bits;
+            std::vector<uint8_t> drc;
+            if (!encodeMeshDraco(smallMesh(n), params, drc).isOk()) return 1;
+            writeFile(out / "mesh_draco" / ("grid" + std::to_string(n) + "_n" + std::to_string(normal_bits) + ".drc"),
+                      drc);
+            ++written;
+        }
+    }
+    std::printf("wrote %d seeds under %s\n", written, out.c_str());
+    return 0;
+}

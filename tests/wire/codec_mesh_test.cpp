@@ -1,0 +1,200 @@
+// Draco mesh codec: round trips keep counts, faces, colours and positions within 0.05 mm; the decoder refuses
+// truncated, corrupt and lying input with a Status.
+#include <gtest/gtest.h>
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <random>
+
+#include "test_data.hpp"
+#include "wire/codecs.hpp"
+
+namespace facescan::wire {
+namespace {
+
+// Vertex colours are lossless in the codec, so a test can give every vertex a unique colour (its index) and find
+// each decoded vertex's original even though Draco reorders vertices.
+OpenMesh::Vec3uc idColour(uint32_t id) {
+    return {static_cast<uint8_t>(id), static_cast<uint8_t>(id >> 8), static_cast<uint8_t>(id >> 16)};
+}
+uint32_t colourId(const OpenMesh::Vec3uc& c) { return uint32_t{c[0]} | uint32_t{c[1]} << 8 | uint32_t{c[2]} << 16; }
+
+void paintIds(recon::Mesh& mesh) {
+    for (const auto vh : mesh.vertices()) mesh.set_color(vh, idColour(static_cast<uint32_t>(vh.idx())));
+}
+
+// A face-sized height field: side_m wide, a nose-like bump and a curved cheek surface.
+recon::Mesh bumpGrid(int n, float side_m) {
+    recon::Mesh mesh;
+    std::vector<recon::Mesh::VertexHandle> vh(static_cast<size_t>(n) * n);
+    for (int j = 0; j < n; ++j) {
+        for (int i = 0; i < n; ++i) {
+            const float x = side_m * (float(i) / float(n - 1) - 0.5f);
+            const float y = side_m * (float(j) / float(n - 1) - 0.5f);
+            const float z =
+                0.7f - 0.04f * std::exp(-(x * x + y * y) / (0.02f * side_m * side_m)) + 0.3f * (x * x + y * y) / side_m;
+            vh[size_t(j) * n + i] = mesh.add_vertex({x, y, z});
+        }
+    }
+    for (int j = 0; j + 1 < n; ++j) {
+        for (int i = 0; i + 1 < n; ++i) {
+            const auto a = vh[size_t(j) * n + i], b = vh[size_t(j) * n + i + 1];
+            const auto c = vh[size_t(j + 1) * n + i], d = vh[size_t(j + 1) * n + i + 1];
+            mesh.add_face(a, b, d);
+            mesh.add_face(a, d, c);
+        }
+    }
+    mesh.update_normals();
+    paintIds(mesh);
+    return mesh;
+}
+
+using Tri = std::array<uint32_t, 3>;
+// Faces as sorted list of id triples, each rotated so its smallest id comes first (orientation kept).
+std::vector<Tri> faceIds(const recon::Mesh& mesh, bool by_colour) {
+    std::vector<Tri> faces;
+    for (const auto fh : mesh.faces()) {
+        Tri t{};
+        int k = 0;
+        for (const auto v : mesh.fv_range(fh)) t[k++] = by_colour ? colourId(mesh.color(v)) : uint32_t(v.idx());
+        std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
+        faces.push_back(t);
+    }
+    std::sort(faces.begin(), faces.end());
+    return faces;
+}
+
+struct RoundTrip {
+    size_t bytes = 0;
+    double max_error_m = 0.0;
+    double max_normal_deg = 0.0;
+};
+
+RoundTrip expectRoundTrip(const recon::Mesh& mesh, const MeshCodecParams& params = {}) {
+    std::vector<uint8_t> bytes;
+    const Status enc = encodeMeshDraco(mesh, params, bytes);
+    EXPECT_TRUE(enc.isOk()) << enc.toString();
+    auto decoded = decodeMeshDraco(bytes.data(), bytes.size());
+    EXPECT_TRUE(decoded.isOk()) << decoded.status().toString();
+    RoundTrip r;
+    r.bytes = bytes.size();
+    if (!decoded.isOk()) return r;
+    EXPECT_EQ(decoded->n_vertices(), mesh.n_vertices());
+    EXPECT_EQ(decoded->n_faces(), mesh.n_faces());
+    for (const auto vh : decoded->vertices()) {
+        const uint32_t id = colourId(decoded->color(vh));
+        EXPECT_LT(id, mesh.n_vertices());
+        if (id >= mesh.n_vertices()) return r;
+        const auto original = recon::Mesh::VertexHandle(static_cast<int>(id));
+        r.max_error_m = std::max(r.max_error_m, double((decoded->point(vh) - mesh.point(original)).norm()));
+        const float cos_angle = std::clamp(decoded->normal(vh) | mesh.normal(original), -1.0f, 1.0f);
+        r.max_normal_deg = std::max(r.max_normal_deg, std::acos(double(cos_angle)) * 180.0 / M_PI);
+    }
+    EXPECT_EQ(faceIds(*decoded, true), faceIds(mesh, false));
+    return r;
+}
+
+TEST(MeshDraco, PositionBitsHonourTheErrorBudget) {
+    EXPECT_EQ(positionBitsFor(0.386f, 0.05e-3f), 13);  // the face volume: 47 um steps, <= 41 um error
+    for (const float extent : {0.01f, 0.2f, 0.386f, 2.0f}) {
+        const int bits = positionBitsFor(extent, 0.05e-3f);
+        EXPECT_LE(std::sqrt(3.0) * extent / double((1u << bits) - 1) / 2.0, 0.05e-3);
+        EXPECT_GT(std::sqrt(3.0) * extent / double((1u << (bits - 1)) - 1) / 2.0, 0.95 * 0.05e-3);  // fewest
+    }
+}
+
+TEST(MeshDraco, RoundTripKeepsTopologyColoursAndPositionsWithinBudget) {
+    // Spans the whole 0.386 m face volume, the largest extent a snapshot can have.
+    const RoundTrip r = expectRoundTrip(bumpGrid(120, 0.386f));
+    EXPECT_LT(r.max_error_m, 0.05e-3);
+    EXPECT_LT(r.max_normal_deg, 1.0);  // 10-bit octahedral normals: well under a degree
+}
+
+TEST(MeshDraco, TighterBudgetAndNoNormals) {
+    MeshCodecParams params;
+    params.max_position_error_m = 0.005e-3f;
+    params.normal_bits = 0;
+    const recon::Mesh mesh = bumpGrid(40, 0.2f);
+    const RoundTrip r = expectRoundTrip(mesh, params);
+    EXPECT_LT(r.max_error_m, 0.005e-3);
+    EXPECT_LT(r.max_normal_deg, 5.0);  // recomputed from the decoded faces
+}
+
+TEST(MeshDraco, RealHeadScanRoundTrip) {
+    FACESCAN_REQUIRE_DATA(dir, "leeperrysmith");
+    recon::Mesh mesh;
+    ASSERT_TRUE(OpenMesh::IO::read_mesh(mesh, (dir / "LeePerrySmith_converted.ply").string()));
+    for (const auto vh : mesh.vertices()) mesh.set_point(vh, mesh.point(vh) * 0.049f);  // units -> metres
+    mesh.update_normals();
+    paintIds(mesh);
+    const RoundTrip r = expectRoundTrip(mesh);
+    EXPECT_LT(r.max_error_m, 0.05e-3);
+    // ~17 bytes per vertex here (positions, normals and 24-bit id colours, which are noise to Draco).
+    EXPECT_LT(r.bytes, 25 * mesh.n_vertices());
+}
+
+TEST(MeshDraco, RejectsEveryTruncation) {
+    const recon::Mesh mesh = bumpGrid(8, 0.1f);
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(encodeMeshDraco(mesh, {}, bytes).isOk());
+    recon::Mesh out;
+    for (size_t len = 0; len < bytes.size(); ++len) {
+        EXPECT_FALSE(decodeMeshDraco(bytes.data(), len, out).isOk()) << "prefix " << len << " of " << bytes.size();
+    }
+    EXPECT_TRUE(decodeMeshDraco(bytes.data(), bytes.size(), out).isOk());
+}
+
+TEST(MeshDraco, CorruptBytesNeverCrash) {
+    const recon::Mesh mesh = bumpGrid(8, 0.1f);
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(encodeMeshDraco(mesh, {}, bytes).isOk());
+    recon::Mesh out;
+    std::mt19937 rng(1);
+    for (size_t i = 0; i < bytes.size(); ++i) {
+        for (const uint8_t mask : {uint8_t{0x01}, uint8_t{0x10}, uint8_t{0xff}}) {
+            std::vector<uint8_t> corrupt = bytes;
+            corrupt[i] ^= mask;
+            const Status st = decodeMeshDraco(corrupt.data(), corrupt.size(), out);
+            if (i < 11) EXPECT_FALSE(st.isOk()) << "header byte " << i;  // magic, version, type, method, flags
+            if (st.isOk()) EXPECT_LE(out.n_vertices(), 4 * mesh.n_vertices());
+        }
+    }
+    std::vector<uint8_t> garbage(4096);
+    for (auto& b : garbage) b = static_cast<uint8_t>(rng());
+    EXPECT_FALSE(decodeMeshDraco(garbage.data(), garbage.size(), out).isOk());
+    std::copy_n("DRACO\x02\x02\x01\x01\x00\x00", 11, garbage.begin());
+    EXPECT_FALSE(decodeMeshDraco(garbage.data(), garbage.size(), out).isOk());
+}
+
+TEST(MeshDraco, RefusesLyingCountsBeforeDracoAllocates) {
+    // Edgebreaker header claiming 2^32-1 vertices and faces in 20 bytes.
+    const uint8_t lying[] = {'D',  'R',  'A',  'C',  'O',  2,    2,    1, 1,    0,    0,    0,    0xff, 0xff, 0xff,
+                             0xff, 0x0f, 0xff, 0xff, 0xff, 0xff, 0x0f, 0, 0xff, 0xff, 0xff, 0xff, 0x0f, 0,    0};
+    recon::Mesh out;
+    EXPECT_EQ(decodeMeshDraco(lying, sizeof(lying), out).code(), StatusCode::kDataLoss);
+    // An honest mesh over the caller's cap.
+    const recon::Mesh mesh = bumpGrid(20, 0.1f);
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(encodeMeshDraco(mesh, {}, bytes).isOk());
+    const auto info = inspectDracoMesh(bytes.data(), bytes.size());
+    ASSERT_TRUE(info.isOk());
+    EXPECT_EQ(info->claimed_faces, mesh.n_faces());
+    EXPECT_GE(info->claimed_vertices, mesh.n_vertices());
+    EXPECT_EQ(decodeMeshDraco(bytes.data(), bytes.size(), out, 100).code(), StatusCode::kOutOfRange);
+}
+
+TEST(MeshDraco, EncoderRejectsBadInput) {
+    std::vector<uint8_t> bytes;
+    EXPECT_EQ(encodeMeshDraco(recon::Mesh(), {}, bytes).code(), StatusCode::kInvalidArgument);
+    recon::Mesh mesh = bumpGrid(4, 0.1f);
+    mesh.set_point(recon::Mesh::VertexHandle(0), {NAN, 0, 0});
+    EXPECT_EQ(encodeMeshDraco(mesh, {}, bytes).code(), StatusCode::kInvalidArgument);
+    MeshCodecParams params;
+    params.speed = 11;
+    EXPECT_EQ(encodeMeshDraco(bumpGrid(4, 0.1f), params, bytes).code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace facescan::wire
