@@ -1,0 +1,118 @@
+// The client side of the scan protocol (notes/protocol.md): commands with replies collected from every server,
+// the live ScanStatus of all sessions, and MeshSnapshots. One DDS participant; readers are made on first use so
+// that `facescan mesh` never pulls the durable snapshots of every session.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "recon/status.hpp"
+#include "wire/topics.hpp"
+
+namespace facescan::client {
+
+struct ClientConfig {
+    wire::DomainConfig domain{0, "lan"};
+    std::chrono::milliseconds timeout{10'000};  // no server answers within this: DeadlineExceeded
+    std::chrono::milliseconds grace{500};       // after an error reply, wait this long for another server's ok
+    // After the first server is discovered, wait this long for more (each server answers for its own sessions).
+    std::chrono::milliseconds discovery_settle{250};
+
+    Status validate() const;
+};
+
+struct CommandReply {
+    std::string session_id;
+    std::string server_id;
+    bool ok = false;
+    std::string error;
+    uint32_t vertex_count = 0;
+    uint32_t triangle_count = 0;
+    std::vector<uint8_t> payload;
+};
+
+struct SessionStatus {
+    std::string session_id;
+    std::string server_id;
+    facescan_wire_ScanState state = facescan_wire_STATE_WAITING;
+    std::string detail;
+    uint32_t frames_received = 0;
+    uint32_t frames_integrated = 0;
+    uint32_t frames_rejected = 0;
+    uint32_t frames_skipped = 0;
+    uint32_t frames_dropped = 0;
+    bool every_frame = false;
+    float fps = 0;
+    float ms_detect = 0, ms_segment = 0, ms_filter = 0, ms_icp = 0, ms_integrate = 0, ms_raycast = 0, ms_mesh = 0;
+    float latency_p95_ms = 0;
+    uint32_t snapshot_seq = 0;
+    int64_t updated_ns = 0;
+    bool alive = true;  // false once the server that publishes it is gone
+};
+
+struct MeshSnapshotData {
+    std::string session_id;
+    uint32_t seq = 0;
+    uint32_t frames_integrated = 0;
+    uint32_t vertex_count = 0;
+    uint32_t triangle_count = 0;
+    int64_t created_ns = 0;
+    std::vector<uint8_t> draco;
+    std::chrono::steady_clock::time_point received;  // our clock: snapshot age needs no synchronised clocks
+};
+
+const char* scanStateName(facescan_wire_ScanState state);  // "WAITING", "SCANNING", ...
+const char* commandKindName(facescan_wire_CommandKind kind);
+
+// "no server answered on domain N (profile P): is facescan-server running?"
+std::string noServerMessage(const wire::DomainConfig& domain);
+
+class ScanClient {
+ public:
+    // Creates the participant and the command endpoints. Errors come from the profile (NotFound,
+    // InvalidArgument) or from DDS itself (e.g. the socket buffer limit, Unavailable).
+    static StatusOr<std::unique_ptr<ScanClient>> connect(const ClientConfig& config);
+    ~ScanClient();
+    ScanClient(const ScanClient&) = delete;
+    ScanClient& operator=(const ScanClient&) = delete;
+
+    const ClientConfig& config() const { return config_; }
+
+    // Waits until at least one server is discovered (a ScanCommand reader), up to the timeout.
+    // DeadlineExceeded with noServerMessage() when none is.
+    Status waitForServer();
+
+    // Sends one command and collects replies with its request id (notes/protocol.md): the first ok reply wins;
+    // after an error reply, other servers get `grace` to answer ok. Errors: DeadlineExceeded (no server),
+    // NotFound ("unknown session 'X'", the server's text), InvalidArgument (any other refusal).
+    StatusOr<CommandReply> request(const std::string& session_id, facescan_wire_CommandKind kind);
+
+    // The ScanStatus of every session on the domain, as far as it has arrived: waits for a server, then up to
+    // `settle` for the durable samples. Sorted by session id.
+    StatusOr<std::vector<SessionStatus>> sessions(std::chrono::milliseconds settle);
+
+    // Live following: takes what has arrived into `statuses` (by session id) and returns new snapshots of
+    // `snapshot_session` (empty: none wanted). Waits at most `wait` for something to arrive.
+    Status poll(std::chrono::milliseconds wait, std::map<std::string, SessionStatus>& statuses,
+                const std::string& snapshot_session, std::vector<MeshSnapshotData>* snapshots);
+
+ private:
+    explicit ScanClient(ClientConfig config);
+    Status ensureStatusReader();
+    Status ensureSnapshotReader();
+    Status takeStatuses(std::map<std::string, SessionStatus>& statuses);
+    std::string nextRequestId();
+
+    struct Endpoints;
+    ClientConfig config_;
+    std::unique_ptr<Endpoints> endpoints_;
+    std::string client_id_;
+    uint64_t request_counter_ = 0;
+};
+
+}  // namespace facescan::client

@@ -1,0 +1,291 @@
+// Command-line parsing of `facescan`: one table of commands, the options each accepts, and their help pages.
+#include "client/cli_args.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <map>
+#include <set>
+
+#include "client/mesh_file.hpp"
+#include "wire/messages.hpp"
+
+namespace facescan::client {
+namespace {
+
+struct CommandSpec {
+    Command command;
+    const char* name;
+    int min_args;  // positional arguments (the session)
+    int max_args;
+    std::set<std::string> options;  // accepted command options besides the global ones
+    const char* usage;
+};
+
+constexpr const char* kGlobalOptions =
+    "Options shared by every command (and by facescan-agent and facescan-server):\n"
+    "  --profile P     DDS network profile: loopback, lan (default) or a Cyclone FILE.xml\n"
+    "  --domain N      DDS domain id 0..232 (default 0); programs only meet in the same domain\n"
+    "  --timeout S     seconds to wait for a server before giving up (default 10)\n"
+    "  -h, --help      this help\n";
+
+constexpr const char* kExitCodes =
+    "Exit codes: 0 ok, 1 the server refused (unknown session, bad request), 2 usage error,\n"
+    "            3 no server answered in time, 4 the output file cannot be written, 130 interrupted.\n";
+
+const std::vector<CommandSpec>& commandSpecs() {
+    static const std::vector<CommandSpec> specs = {
+        {Command::kSessions,
+         "sessions",
+         0,
+         0,
+         {"--json"},
+         "Usage: facescan sessions [--json]\n"
+         "Lists the scan sessions live on the domain (found by discovery): state, frames, fps, server.\n"
+         "  --json          one JSON object per session instead of the table\n"},
+        {Command::kWatch,
+         "watch",
+         0,
+         1,
+         {"--save", "--save-format"},
+         "Usage: facescan watch [SESSION] [--save DIR [--save-format ply|obj|stl|off|drc]]\n"
+         "Follows one scan live until it is finished (Ctrl-C stops watching; the scan goes on).\n"
+         "Without SESSION it follows the newest live scan, waiting for one to start.\n"
+         "On a terminal it redraws a small panel; into a pipe or log it prints one line per second.\n"
+         "  --save DIR      write every mesh snapshot as it arrives: DIR/SESSION-SEQ.ply\n"
+         "  --save-format F format of the saved snapshots (default ply)\n"},
+        {Command::kStatus,
+         "status",
+         1,
+         1,
+         {"--json"},
+         "Usage: facescan status SESSION [--json]\n"
+         "Asks the servers who owns SESSION and prints its state, frame counts and per-stage times.\n"
+         "  --json          one JSON object\n"},
+        {Command::kMesh,
+         "mesh",
+         1,
+         1,
+         {"-o", "--finish"},
+         "Usage: facescan mesh SESSION -o FILE [--finish]\n"
+         "Fetches the full-resolution mesh (the final one, or the current model while scanning) and writes it\n"
+         "atomically. The format follows the extension: .ply (binary, colours), .obj and .off (colours),\n"
+         ".stl (no colours), .drc (Draco, colours). Positions are in metres.\n"
+         "  -o FILE         output file (required)\n"
+         "  --finish        end the scan first (the server writes it to its data folder)\n"},
+        {Command::kPreview,
+         "preview",
+         1,
+         1,
+         {"-o"},
+         "Usage: facescan preview SESSION -o FILE.png\n"
+         "Fetches a shaded picture of the current model, seen from the last camera pose.\n"
+         "  -o FILE.png     output file (required)\n"},
+        {Command::kTrajectory,
+         "trajectory",
+         1,
+         1,
+         {"-o"},
+         "Usage: facescan trajectory SESSION [-o FILE]\n"
+         "Fetches the camera trajectory as TUM lines `timestamp tx ty tz qx qy qz qw` (camera to the first\n"
+         "camera's frame).\n"
+         "  -o FILE         output file (default: standard output)\n"},
+        {Command::kFinish,
+         "finish",
+         1,
+         1,
+         {},
+         "Usage: facescan finish SESSION\n"
+         "Ends the scan now: the server makes the final mesh and writes the session to its data folder.\n"},
+        {Command::kReset,
+         "reset",
+         1,
+         1,
+         {},
+         "Usage: facescan reset SESSION\n"
+         "Clears the model of a scan and starts again from the next frame (the session stays).\n"},
+    };
+    return specs;
+}
+
+const CommandSpec* findSpec(const std::string& name) {
+    for (const CommandSpec& spec : commandSpecs()) {
+        if (name == spec.name) return &spec;
+    }
+    return nullptr;
+}
+
+bool takesValue(const std::string& option) {
+    static const std::set<std::string> kValued = {"--profile", "--domain", "--timeout",
+                                                  "-o",        "--save",   "--save-format"};
+    return kValued.count(option) > 0;
+}
+
+template <typename T>
+bool parseNumber(const std::string& text, T& value) {
+    const char* end = text.data() + text.size();
+    auto [ptr, ec] = std::from_chars(text.data(), end, value);
+    return ec == std::errc() && ptr == end;
+}
+
+}  // namespace
+
+std::string commandName(Command command) {
+    for (const CommandSpec& spec : commandSpecs()) {
+        if (spec.command == command) return spec.name;
+    }
+    return "?";
+}
+
+std::string usageText(const std::string& command) {
+    if (const CommandSpec* spec = findSpec(command)) {
+        return std::string(spec->usage) + "\n" + kGlobalOptions + "\n" + kExitCodes;
+    }
+    return std::string(
+               "Usage: facescan [OPTIONS] COMMAND [ARGS]\n"
+               "The client of facescan: watch scans live and fetch their results over DDS.\n"
+               "\n"
+               "Commands:\n"
+               "  sessions                       the live sessions on the domain, with state and frames\n"
+               "  watch [SESSION]                follow a scan live (--save DIR keeps every snapshot)\n"
+               "  status SESSION                 state, frame counts and timings of one session\n"
+               "  mesh SESSION -o FILE           the mesh as .ply .obj .stl .off or .drc (--finish ends the scan)\n"
+               "  preview SESSION -o FILE.png    a shaded picture of the current model\n"
+               "  trajectory SESSION [-o FILE]   the camera trajectory (TUM text)\n"
+               "  finish SESSION                 end a scan now\n"
+               "  reset SESSION                  clear a scan's model and start again\n"
+               "\n") +
+           kGlobalOptions + "\n" + kExitCodes + "\n'facescan COMMAND --help' describes one command.\n";
+}
+
+Status CliOptions::validate() const {
+    RETURN_IF_ERROR(domain.validate());
+    if (timeout.count() <= 0) return invalidArgument("--timeout must be positive");
+    if (!session.empty()) {
+        if (Status s = wire::validateSessionId(session); !s.isOk()) return invalidArgument(s.message());
+    }
+    return Status::ok();
+}
+
+StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
+    CliOptions options;
+    const CommandSpec* spec = nullptr;
+    std::vector<std::string> positional;
+    std::map<std::string, std::string> values;  // option -> value ("" for flags)
+    bool help = false;
+
+    for (size_t i = 0; i < args.size(); ++i) {
+        std::string arg = args[i];
+        if (arg == "-h" || arg == "--help") {
+            help = true;
+            continue;
+        }
+        if (arg == "--version") {
+            options.version = true;
+            continue;
+        }
+        if (arg.size() > 1 && arg[0] == '-') {
+            std::string value;
+            bool has_value = false;
+            if (const size_t eq = arg.find('='); arg.starts_with("--") && eq != std::string::npos) {
+                value = arg.substr(eq + 1);
+                arg = arg.substr(0, eq);
+                has_value = true;
+            }
+            if (arg == "--output") arg = "-o";
+            if (takesValue(arg)) {
+                if (!has_value) {
+                    if (i + 1 >= args.size()) return invalidArgument(arg + " needs a value");
+                    value = args[++i];
+                }
+            } else if (has_value) {
+                return invalidArgument(arg + " takes no value");
+            }
+            if (values.count(arg)) return invalidArgument(arg + " given twice");
+            values[arg] = value;
+            continue;
+        }
+        if (!spec) {
+            if (arg == "help") {  // `facescan help [COMMAND]`
+                help = true;
+                continue;
+            }
+            spec = findSpec(arg);
+            if (!spec) {
+                if (help) break;  // `facescan help nonsense`: the overview
+                return invalidArgument("unknown command '" + arg + "'");
+            }
+            continue;
+        }
+        positional.push_back(arg);
+    }
+
+    if (help || options.version) {
+        options.help = help;
+        if (spec) {
+            options.command = spec->command;
+            options.help_topic = spec->name;
+        }
+        return options;
+    }
+    if (!spec) return invalidArgument("no command given");
+    options.command = spec->command;
+
+    for (const auto& [option, value] : values) {
+        const bool global = option == "--profile" || option == "--domain" || option == "--timeout";
+        if (!global && !spec->options.count(option)) {
+            return invalidArgument("unknown option " + option + " for '" + spec->name + "'");
+        }
+        if (option == "--profile") {
+            options.domain.profile = value;
+        } else if (option == "--domain") {
+            if (!parseNumber(value, options.domain.domain_id)) {
+                return invalidArgument("--domain must be a number 0..232, got '" + value + "'");
+            }
+        } else if (option == "--timeout") {
+            double seconds = 0;
+            if (!parseNumber(value, seconds) || !std::isfinite(seconds) || seconds <= 0 || seconds > 86400) {
+                return invalidArgument("--timeout must be seconds > 0, got '" + value + "'");
+            }
+            options.timeout = std::chrono::milliseconds(static_cast<int64_t>(std::ceil(seconds * 1000)));
+        } else if (option == "-o") {
+            if (value.empty()) return invalidArgument("-o needs a file name");
+            options.output = value;
+        } else if (option == "--finish") {
+            options.finish = true;
+        } else if (option == "--save") {
+            if (value.empty()) return invalidArgument("--save needs a folder");
+            options.save_dir = value;
+        } else if (option == "--save-format") {
+            options.save_format = value;
+            if (!meshFormatFor("x." + value).isOk()) {
+                return invalidArgument("--save-format must be ply, obj, stl, off or drc, got '" + value + "'");
+            }
+        } else if (option == "--json") {
+            options.json = true;
+        }
+    }
+
+    const int n = static_cast<int>(positional.size());
+    if (n < spec->min_args) return invalidArgument(std::string("'") + spec->name + "' needs a SESSION");
+    if (n > spec->max_args) return invalidArgument("unexpected argument '" + positional[spec->max_args] + "'");
+    if (n > 0) options.session = positional[0];
+
+    if (options.command == Command::kMesh) {
+        if (options.output.empty()) return invalidArgument("'mesh' needs -o FILE (.ply .obj .stl .off .drc)");
+        if (Status s = meshFormatFor(options.output).status(); !s.isOk()) return s;
+    }
+    if (options.command == Command::kPreview) {
+        if (options.output.empty()) return invalidArgument("'preview' needs -o FILE.png");
+        std::string ext = std::filesystem::path(options.output).extension().string();
+        std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+        if (ext != ".png") return invalidArgument("the preview is a PNG picture: -o must end in .png");
+    }
+    if (!values.count("--save") && values.count("--save-format")) {
+        return invalidArgument("--save-format needs --save DIR");
+    }
+    RETURN_IF_ERROR(options.validate());
+    return options;
+}
+
+}  // namespace facescan::client

@@ -1,0 +1,291 @@
+// The one-shot commands of `facescan` (sessions, status, mesh, preview, trajectory, finish, reset) and the
+// program's entry point. `watch` lives in watch_command.cpp.
+#include "client/commands.hpp"
+
+#include <csignal>
+#include <cstdio>
+#include <iostream>
+
+#include "client/mesh_file.hpp"
+#include "command_util.hpp"
+#include "wire/mesh_codec.hpp"
+
+namespace facescan::client {
+namespace detail {
+
+std::atomic<bool> g_interrupted{false};
+
+namespace {
+extern "C" void onInterrupt(int) { g_interrupted = true; }
+}  // namespace
+
+void installInterruptHandler() {
+    struct sigaction action {};
+    action.sa_handler = onInterrupt;
+    sigemptyset(&action.sa_mask);
+    sigaction(SIGINT, &action, nullptr);
+    sigaction(SIGTERM, &action, nullptr);
+}
+
+int fail(int code, const std::string& message) {
+    std::fprintf(stderr, "facescan: error: %s\n", message.c_str());
+    return code;
+}
+
+int exitCodeForRequest(const Status& status) {
+    switch (status.code()) {
+        case StatusCode::kDeadlineExceeded:
+        case StatusCode::kUnavailable: return kExitNoServer;
+        default: return kExitServerError;
+    }
+}
+
+std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_code) {
+    ClientConfig config;
+    config.domain = options.domain;
+    config.timeout = options.timeout;
+    auto client = ScanClient::connect(config);
+    if (client.isOk()) return std::move(client).value();
+    // A profile that does not exist or does not parse is the user's command line; anything else is DDS.
+    const StatusCode code = client.status().code();
+    exit_code = fail(code == StatusCode::kNotFound || code == StatusCode::kInvalidArgument ? kExitUsage : kExitNoServer,
+                     client.status().message());
+    return nullptr;
+}
+
+}  // namespace detail
+
+namespace {
+
+using namespace detail;
+
+std::string jsonString(const std::string& s) {
+    std::string out = "\"";
+    for (const char c : s) {
+        if (c == '"' || c == '\\') {
+            out += '\\';
+            out += c;
+        } else if (static_cast<unsigned char>(c) < 0x20) {
+            char buf[8];
+            std::snprintf(buf, sizeof(buf), "\\u%04x", c);
+            out += buf;
+        } else {
+            out += c;
+        }
+    }
+    return out + "\"";
+}
+
+std::string statusJson(const SessionStatus& s) {
+    char numbers[640];
+    std::snprintf(numbers, sizeof(numbers),
+                  "\"frames_received\":%u,\"frames_integrated\":%u,\"frames_rejected\":%u,\"frames_skipped\":%u,"
+                  "\"frames_dropped\":%u,\"every_frame\":%s,\"fps\":%.2f,\"ms\":{\"detect\":%.3f,\"segment\":%.3f,"
+                  "\"filter\":%.3f,\"icp\":%.3f,\"integrate\":%.3f,\"raycast\":%.3f,\"mesh\":%.3f},"
+                  "\"latency_p95_ms\":%.2f,\"snapshot_seq\":%u",
+                  s.frames_received, s.frames_integrated, s.frames_rejected, s.frames_skipped, s.frames_dropped,
+                  s.every_frame ? "true" : "false", s.fps, s.ms_detect, s.ms_segment, s.ms_filter, s.ms_icp,
+                  s.ms_integrate, s.ms_raycast, s.ms_mesh, s.latency_p95_ms, s.snapshot_seq);
+    return "{\"session\":" + jsonString(s.session_id) + ",\"server\":" + jsonString(s.server_id) +
+           ",\"state\":" + jsonString(scanStateName(s.state)) + ",\"detail\":" + jsonString(s.detail) + "," + numbers +
+           "}";
+}
+
+int runSessions(const CliOptions& options) {
+    int code = kExitOk;
+    auto client = connectOrFail(options, code);
+    if (!client) return code;
+    auto sessions = client->sessions(std::chrono::milliseconds(1000));
+    if (!sessions.isOk()) return fail(exitCodeForRequest(sessions.status()), sessions.status().message());
+    if (options.json) {
+        for (const SessionStatus& s : *sessions) std::printf("%s\n", statusJson(s).c_str());
+        return kExitOk;
+    }
+    if (sessions->empty()) {
+        std::printf("no sessions on domain %u (a server is running; start an agent to scan)\n",
+                    options.domain.domain_id);
+        return kExitOk;
+    }
+    std::printf("%-24s %-9s %10s %10s %8s %6s  %s\n", "SESSION", "STATE", "INTEGRATED", "RECEIVED", "REJECTED", "FPS",
+                "SERVER");
+    for (const SessionStatus& s : *sessions) {
+        std::printf("%-24s %-9s %10u %10u %8u %6.1f  %s\n", s.session_id.c_str(), scanStateName(s.state),
+                    s.frames_integrated, s.frames_received, s.frames_rejected, s.fps, s.server_id.c_str());
+    }
+    return kExitOk;
+}
+
+int runStatus(const CliOptions& options) {
+    int code = kExitOk;
+    auto client = connectOrFail(options, code);
+    if (!client) return code;
+    // The ping says who owns the session (or that nobody does); the state itself is on ScanStatus.
+    auto ping = client->request(options.session, facescan_wire_CMD_GET_STATUS);
+    if (!ping.isOk()) return fail(exitCodeForRequest(ping.status()), ping.status().message());
+    auto sessions = client->sessions(std::chrono::milliseconds(600));
+    if (!sessions.isOk()) return fail(exitCodeForRequest(sessions.status()), sessions.status().message());
+    const SessionStatus* found = nullptr;
+    for (const SessionStatus& s : *sessions) {
+        if (s.session_id == options.session) found = &s;
+    }
+    if (!found) {
+        if (options.json) {
+            std::printf("{\"session\":%s,\"server\":%s,\"state\":null}\n", jsonString(options.session).c_str(),
+                        jsonString(ping->server_id).c_str());
+        } else {
+            std::printf("%s: owned by %s; no status published yet\n", options.session.c_str(), ping->server_id.c_str());
+        }
+        return kExitOk;
+    }
+    const SessionStatus& s = *found;
+    if (options.json) {
+        std::printf("%s\n", statusJson(s).c_str());
+        return kExitOk;
+    }
+    std::printf("session     %s\n", s.session_id.c_str());
+    std::printf("server      %s\n", s.server_id.c_str());
+    std::printf("state       %s%s%s\n", scanStateName(s.state), s.detail.empty() ? "" : " - ", s.detail.c_str());
+    std::printf("mode        %s\n", s.every_frame ? "recording (every frame processed)" : "live (newest frame)");
+    std::printf("frames      %u received, %u integrated, %u rejected, %u skipped, %u dropped\n", s.frames_received,
+                s.frames_integrated, s.frames_rejected, s.frames_skipped, s.frames_dropped);
+    std::printf("speed       %.1f fps, latency p95 %.1f ms\n", s.fps, s.latency_p95_ms);
+    std::printf(
+        "stages ms   detect %.2f  segment %.2f  filter %.2f  icp %.2f  integrate %.2f  raycast %.2f  "
+        "mesh %.2f\n",
+        s.ms_detect, s.ms_segment, s.ms_filter, s.ms_icp, s.ms_integrate, s.ms_raycast, s.ms_mesh);
+    std::printf("snapshot    #%u\n", s.snapshot_seq);
+    return kExitOk;
+}
+
+std::string sizeText(size_t bytes) {
+    char buf[32];
+    if (bytes >= (1u << 20)) {
+        std::snprintf(buf, sizeof(buf), "%.1f MB", static_cast<double>(bytes) / (1 << 20));
+    } else {
+        std::snprintf(buf, sizeof(buf), "%.1f kB", static_cast<double>(bytes) / 1024);
+    }
+    return buf;
+}
+
+int runMesh(const CliOptions& options) {
+    // Fail before any network work when the result could not be written anyway.
+    if (Status s = checkWritable(options.output); !s.isOk()) return fail(kExitCannotWrite, s.message());
+    const MeshFormat format = meshFormatFor(options.output).value();  // checked by parseArgs
+    int code = kExitOk;
+    auto client = connectOrFail(options, code);
+    if (!client) return code;
+    if (options.finish) {
+        auto finished = client->request(options.session, facescan_wire_CMD_FINISH);
+        if (!finished.isOk()) return fail(exitCodeForRequest(finished.status()), finished.status().message());
+        std::printf("finished %s on %s: %s triangles\n", options.session.c_str(), finished->server_id.c_str(),
+                    std::to_string(finished->triangle_count).c_str());
+    }
+    auto reply = client->request(options.session, facescan_wire_CMD_GET_MESH);
+    if (!reply.isOk()) return fail(exitCodeForRequest(reply.status()), reply.status().message());
+    if (reply->payload.empty()) {
+        return fail(kExitServerError,
+                    "the server sent no mesh for '" + options.session + "' (nothing integrated yet?)");
+    }
+    // Decoded even for .drc: the bytes are checked before they land in a file, and the counts are reported.
+    auto mesh = wire::decodeMeshDraco(reply->payload.data(), reply->payload.size());
+    if (!mesh.isOk()) return fail(kExitServerError, "the server's mesh cannot be decoded: " + mesh.status().message());
+    if (Status s = writeMeshFile(*mesh, options.output, &reply->payload); !s.isOk()) {
+        return fail(s.code() == StatusCode::kUnavailable ? kExitCannotWrite : kExitServerError, s.message());
+    }
+    std::error_code ec;
+    const auto bytes = std::filesystem::file_size(options.output, ec);
+    std::printf("wrote %s: %s vertices, %s triangles, %s (%s)\n", options.output.c_str(),
+                std::to_string(mesh->n_vertices()).c_str(), std::to_string(mesh->n_faces()).c_str(),
+                formatHasColours(format) && mesh->has_vertex_colors() ? "with colours" : "no colours",
+                sizeText(ec ? 0 : bytes).c_str());
+    return kExitOk;
+}
+
+// preview and trajectory: the reply's payload is the file.
+int runPayloadCommand(const CliOptions& options, facescan_wire_CommandKind kind) {
+    const bool to_stdout = options.output.empty() || options.output == "-";
+    if (!to_stdout) {
+        if (Status s = checkWritable(options.output); !s.isOk()) return fail(kExitCannotWrite, s.message());
+    }
+    int code = kExitOk;
+    auto client = connectOrFail(options, code);
+    if (!client) return code;
+    auto reply = client->request(options.session, kind);
+    if (!reply.isOk()) return fail(exitCodeForRequest(reply.status()), reply.status().message());
+    const std::vector<uint8_t>& payload = reply->payload;
+    if (kind == facescan_wire_CMD_GET_PREVIEW) {
+        static constexpr uint8_t kPngSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+        if (payload.size() < 8 || !std::equal(kPngSignature, kPngSignature + 8, payload.begin())) {
+            return fail(kExitServerError,
+                        "the server's preview is not a PNG picture (" + std::to_string(payload.size()) + " bytes)");
+        }
+    }
+    const std::string_view bytes(reinterpret_cast<const char*>(payload.data()), payload.size());
+    if (to_stdout) {
+        std::fwrite(bytes.data(), 1, bytes.size(), stdout);
+        return std::fflush(stdout) == 0 ? kExitOk : fail(kExitCannotWrite, "cannot write to standard output");
+    }
+    if (Status s = writeFileAtomically(options.output, bytes); !s.isOk()) return fail(kExitCannotWrite, s.message());
+    std::printf("wrote %s (%s)\n", options.output.c_str(), sizeText(payload.size()).c_str());
+    return kExitOk;
+}
+
+int runSimpleCommand(const CliOptions& options, facescan_wire_CommandKind kind) {
+    int code = kExitOk;
+    auto client = connectOrFail(options, code);
+    if (!client) return code;
+    auto reply = client->request(options.session, kind);
+    if (!reply.isOk()) return fail(exitCodeForRequest(reply.status()), reply.status().message());
+    if (kind == facescan_wire_CMD_FINISH) {
+        std::printf("finished %s on %s: %u vertices, %u triangles\n", options.session.c_str(), reply->server_id.c_str(),
+                    reply->vertex_count, reply->triangle_count);
+    } else {
+        std::printf("reset %s on %s: scanning starts again\n", options.session.c_str(), reply->server_id.c_str());
+    }
+    return kExitOk;
+}
+
+}  // namespace
+
+int runCommand(const CliOptions& options) {
+    if (options.version) {
+        std::printf("facescan 0.1.0\n");
+        return kExitOk;
+    }
+    if (options.help) {
+        std::fputs(usageText(options.help_topic).c_str(), stdout);
+        return kExitOk;
+    }
+    switch (options.command) {
+        case Command::kSessions: return runSessions(options);
+        case Command::kWatch: return runWatch(options);
+        case Command::kStatus: return runStatus(options);
+        case Command::kMesh: return runMesh(options);
+        case Command::kPreview: return runPayloadCommand(options, facescan_wire_CMD_GET_PREVIEW);
+        case Command::kTrajectory: return runPayloadCommand(options, facescan_wire_CMD_GET_TRAJECTORY);
+        case Command::kFinish: return runSimpleCommand(options, facescan_wire_CMD_FINISH);
+        case Command::kReset: return runSimpleCommand(options, facescan_wire_CMD_RESET);
+    }
+    return kExitUsage;
+}
+
+int facescanMain(int argc, char** argv) {
+    std::vector<std::string> args(argv + 1, argv + argc);
+    auto options = parseArgs(args);
+    if (!options.isOk()) {
+        // One line and where to read more: the full usage would bury the message.
+        std::string command;
+        for (const std::string& a : args) {
+            if (!usageText(a).starts_with("Usage: facescan [OPTIONS]")) {
+                command = a;
+                break;
+            }
+        }
+        std::fprintf(stderr, "facescan: %s\nTry 'facescan %s--help'.\n", options.status().message().c_str(),
+                     command.empty() ? "" : (command + " ").c_str());
+        return kExitUsage;
+    }
+    return runCommand(*options);
+}
+
+}  // namespace facescan::client

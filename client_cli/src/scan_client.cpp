@@ -1,0 +1,288 @@
+// The client side of the scan protocol over DDS (notes/protocol.md).
+#include "client/scan_client.hpp"
+
+#include <unistd.h>
+
+#include <random>
+#include <thread>
+
+namespace facescan::client {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using std::chrono::milliseconds;
+
+std::vector<uint8_t> copyBytes(const dds_sequence_octet& seq) {
+    if (!seq._buffer || seq._length == 0) return {};
+    return std::vector<uint8_t>(seq._buffer, seq._buffer + seq._length);
+}
+
+SessionStatus fromMessage(const facescan_wire_ScanStatus& m) {
+    SessionStatus s;
+    s.session_id = wire::fromDds(m.session_id);
+    s.server_id = wire::fromDds(m.server_id);
+    s.state = m.state;
+    s.detail = wire::fromDds(m.detail);
+    s.frames_received = m.frames_received;
+    s.frames_integrated = m.frames_integrated;
+    s.frames_rejected = m.frames_rejected;
+    s.frames_skipped = m.frames_skipped;
+    s.frames_dropped = m.frames_dropped;
+    s.every_frame = m.every_frame;
+    s.fps = m.fps;
+    s.ms_detect = m.ms_detect;
+    s.ms_segment = m.ms_segment;
+    s.ms_filter = m.ms_filter;
+    s.ms_icp = m.ms_icp;
+    s.ms_integrate = m.ms_integrate;
+    s.ms_raycast = m.ms_raycast;
+    s.ms_mesh = m.ms_mesh;
+    s.latency_p95_ms = m.latency_p95_ms;
+    s.snapshot_seq = m.snapshot_seq;
+    s.updated_ns = m.updated_ns;
+    return s;
+}
+
+milliseconds remaining(Clock::time_point deadline) {
+    return std::max(milliseconds(0), std::chrono::duration_cast<milliseconds>(deadline - Clock::now()));
+}
+
+}  // namespace
+
+const char* scanStateName(facescan_wire_ScanState state) {
+    switch (state) {
+        case facescan_wire_STATE_WAITING: return "WAITING";
+        case facescan_wire_STATE_SCANNING: return "SCANNING";
+        case facescan_wire_STATE_LOST: return "LOST";
+        case facescan_wire_STATE_FINISHED: return "FINISHED";
+        case facescan_wire_STATE_REFUSED: return "REFUSED";
+    }
+    return "UNKNOWN";
+}
+
+const char* commandKindName(facescan_wire_CommandKind kind) {
+    switch (kind) {
+        case facescan_wire_CMD_RESET: return "reset";
+        case facescan_wire_CMD_FINISH: return "finish";
+        case facescan_wire_CMD_GET_MESH: return "get mesh";
+        case facescan_wire_CMD_GET_TRAJECTORY: return "get trajectory";
+        case facescan_wire_CMD_GET_PREVIEW: return "get preview";
+        case facescan_wire_CMD_GET_STATUS: return "get status";
+    }
+    return "unknown command";
+}
+
+std::string noServerMessage(const wire::DomainConfig& domain) {
+    return "no server answered on domain " + std::to_string(domain.domain_id) + " (profile " + domain.profile +
+           "): is facescan-server running?";
+}
+
+Status ClientConfig::validate() const {
+    RETURN_IF_ERROR(domain.validate());
+    if (timeout.count() <= 0) return invalidArgument("timeout must be positive");
+    if (grace.count() < 0 || discovery_settle.count() < 0) return invalidArgument("grace and settle must be >= 0");
+    return Status::ok();
+}
+
+struct ScanClient::Endpoints {
+    Endpoints(wire::Participant p, wire::Topic<facescan_wire_ScanCommand> ct, wire::Topic<facescan_wire_ScanReply> rt,
+              wire::Writer<facescan_wire_ScanCommand> cw, wire::Reader<facescan_wire_ScanReply> rr)
+        : participant(std::move(p)),
+          command_topic(std::move(ct)),
+          reply_topic(std::move(rt)),
+          command_writer(std::move(cw)),
+          reply_reader(std::move(rr)) {}
+
+    // Declared first so that it is destroyed last (deleting a participant deletes its children).
+    wire::Participant participant;
+    wire::Topic<facescan_wire_ScanCommand> command_topic;
+    wire::Topic<facescan_wire_ScanReply> reply_topic;
+    wire::Writer<facescan_wire_ScanCommand> command_writer;
+    wire::Reader<facescan_wire_ScanReply> reply_reader;
+    std::optional<wire::Topic<facescan_wire_ScanStatus>> status_topic;
+    std::optional<wire::Reader<facescan_wire_ScanStatus>> status_reader;
+    std::optional<wire::Topic<facescan_wire_MeshSnapshot>> snapshot_topic;
+    std::optional<wire::Reader<facescan_wire_MeshSnapshot>> snapshot_reader;
+    std::map<dds_instance_handle_t, std::string> status_instances;  // for not-alive notices, which carry no data
+    bool server_seen = false;
+};
+
+ScanClient::ScanClient(ClientConfig config) : config_(std::move(config)) {}
+ScanClient::~ScanClient() = default;
+
+StatusOr<std::unique_ptr<ScanClient>> ScanClient::connect(const ClientConfig& config) {
+    RETURN_IF_ERROR(config.validate());
+    std::unique_ptr<ScanClient> client(new ScanClient(config));
+    ASSIGN_OR_RETURN(wire::Participant participant, wire::Participant::create(config.domain));
+    ASSIGN_OR_RETURN(auto command_topic, wire::Topic<facescan_wire_ScanCommand>::create(participant));
+    ASSIGN_OR_RETURN(auto reply_topic, wire::Topic<facescan_wire_ScanReply>::create(participant));
+    ASSIGN_OR_RETURN(auto command_writer, wire::Writer<facescan_wire_ScanCommand>::create(command_topic));
+    ASSIGN_OR_RETURN(auto reply_reader, wire::Reader<facescan_wire_ScanReply>::create(reply_topic));
+    client->endpoints_ =
+        std::make_unique<Endpoints>(std::move(participant), std::move(command_topic), std::move(reply_topic),
+                                    std::move(command_writer), std::move(reply_reader));
+    // Unique across clients and hosts: pid + random; the counter makes it unique per request.
+    std::random_device rd;
+    char host[64] = {};
+    ::gethostname(host, sizeof(host) - 1);
+    client->client_id_ = std::string(host) + ":" + std::to_string(::getpid()) + ":" + std::to_string(rd() % 1000000);
+    return client;
+}
+
+std::string ScanClient::nextRequestId() { return client_id_ + ":" + std::to_string(++request_counter_); }
+
+Status ScanClient::waitForServer() {
+    Endpoints& e = *endpoints_;
+    if (e.server_seen) return Status::ok();
+    // Every server reads ScanCommand and writes ScanReply: both directions must be matched before a command is
+    // sent, or the (volatile) command or its reply would go to nobody.
+    const auto deadline = Clock::now() + config_.timeout;
+    const bool found = wire::pollUntil(
+        [&] { return e.command_writer.matchedReaders() > 0 && e.reply_reader.matchedWriters() > 0; }, config_.timeout);
+    if (!found) return deadlineExceeded(noServerMessage(config_.domain));
+    // Other servers on the domain are discovered at about the same time; give them a moment so that the
+    // command reaches the one that owns the session.
+    std::this_thread::sleep_for(std::min(config_.discovery_settle, remaining(deadline)));
+    e.server_seen = true;
+    return Status::ok();
+}
+
+StatusOr<CommandReply> ScanClient::request(const std::string& session_id, facescan_wire_CommandKind kind) {
+    RETURN_IF_ERROR(waitForServer());
+    Endpoints& e = *endpoints_;
+    const std::string request_id = nextRequestId();
+    facescan_wire_ScanCommand command{};
+    command.session_id = wire::stringView(session_id);
+    command.request_id = wire::stringView(request_id);
+    command.client_id = wire::stringView(client_id_);
+    command.kind = kind;
+    RETURN_IF_ERROR(e.command_writer.write(command));
+
+    const auto deadline = Clock::now() + config_.timeout;
+    std::optional<Clock::time_point> error_deadline;
+    std::optional<CommandReply> ok_reply;
+    std::optional<CommandReply> error_reply;
+    while (!ok_reply) {
+        const auto now = Clock::now();
+        if (error_deadline && now >= *error_deadline) break;
+        if (now >= deadline) break;
+        auto until = error_deadline ? std::min(*error_deadline, deadline) : deadline;
+        e.reply_reader.waitForData(std::min(milliseconds(100), remaining(until)));
+        auto taken = e.reply_reader.take(
+            [&](const facescan_wire_ScanReply& r, const dds_sample_info_t& info) {
+                if (!info.valid_data || wire::fromDds(r.request_id) != request_id) return;
+                CommandReply reply;
+                reply.session_id = wire::fromDds(r.session_id);
+                reply.server_id = wire::fromDds(r.server_id);
+                reply.ok = r.ok;
+                reply.error = wire::fromDds(r.error);
+                reply.vertex_count = r.vertex_count;
+                reply.triangle_count = r.triangle_count;
+                if (r.ok) {
+                    reply.payload = copyBytes(r.payload);
+                    if (!ok_reply) ok_reply = std::move(reply);
+                } else if (!error_reply) {
+                    error_reply = std::move(reply);
+                    error_deadline = Clock::now() + config_.grace;
+                }
+            },
+            64);
+        if (!taken.isOk()) return taken.status();
+    }
+    if (ok_reply) return std::move(*ok_reply);
+    if (error_reply) {
+        const std::string& why = error_reply->error.empty() ? std::string("refused") : error_reply->error;
+        if (why.starts_with("unknown session")) return notFound(why);
+        return invalidArgument(std::string(commandKindName(kind)) + " '" + session_id + "': " + why);
+    }
+    return deadlineExceeded(noServerMessage(config_.domain) + " (no reply to " + commandKindName(kind) + " within " +
+                            std::to_string(config_.timeout.count() / 1000.0).substr(0, 4) + " s)");
+}
+
+Status ScanClient::ensureStatusReader() {
+    Endpoints& e = *endpoints_;
+    if (e.status_reader) return Status::ok();
+    ASSIGN_OR_RETURN(auto topic, wire::Topic<facescan_wire_ScanStatus>::create(e.participant));
+    e.status_topic.emplace(std::move(topic));
+    ASSIGN_OR_RETURN(auto reader, wire::Reader<facescan_wire_ScanStatus>::create(*e.status_topic));
+    e.status_reader.emplace(std::move(reader));
+    return Status::ok();
+}
+
+Status ScanClient::ensureSnapshotReader() {
+    Endpoints& e = *endpoints_;
+    if (e.snapshot_reader) return Status::ok();
+    ASSIGN_OR_RETURN(auto topic, wire::Topic<facescan_wire_MeshSnapshot>::create(e.participant));
+    e.snapshot_topic.emplace(std::move(topic));
+    ASSIGN_OR_RETURN(auto reader, wire::Reader<facescan_wire_MeshSnapshot>::create(*e.snapshot_topic));
+    e.snapshot_reader.emplace(std::move(reader));
+    return Status::ok();
+}
+
+Status ScanClient::takeStatuses(std::map<std::string, SessionStatus>& statuses) {
+    Endpoints& e = *endpoints_;
+    auto taken = e.status_reader->take(
+        [&](const facescan_wire_ScanStatus& m, const dds_sample_info_t& info) {
+            if (info.valid_data) {
+                SessionStatus s = fromMessage(m);
+                s.alive = info.instance_state == DDS_IST_ALIVE;
+                e.status_instances[info.instance_handle] = s.session_id;
+                statuses[s.session_id] = std::move(s);
+                return;
+            }
+            // No data: the instance changed state (its server died or disposed it).
+            const auto it = e.status_instances.find(info.instance_handle);
+            if (it == e.status_instances.end()) return;
+            if (auto st = statuses.find(it->second); st != statuses.end()) {
+                st->second.alive = info.instance_state == DDS_IST_ALIVE;
+            }
+        },
+        1024);
+    return taken.isOk() ? Status::ok() : taken.status();
+}
+
+StatusOr<std::vector<SessionStatus>> ScanClient::sessions(milliseconds settle) {
+    RETURN_IF_ERROR(ensureStatusReader());
+    RETURN_IF_ERROR(waitForServer());
+    Endpoints& e = *endpoints_;
+    // Durable ScanStatus samples arrive right after the match; a server with sessions has a ScanStatus writer.
+    const auto deadline = Clock::now() + settle;
+    std::map<std::string, SessionStatus> statuses;
+    while (Clock::now() < deadline) {
+        e.status_reader->waitForData(std::min(milliseconds(50), remaining(deadline)));
+        RETURN_IF_ERROR(takeStatuses(statuses));
+    }
+    std::vector<SessionStatus> out;
+    for (auto& [id, s] : statuses) {
+        if (s.alive) out.push_back(std::move(s));
+    }
+    return out;
+}
+
+Status ScanClient::poll(milliseconds wait, std::map<std::string, SessionStatus>& statuses,
+                        const std::string& snapshot_session, std::vector<MeshSnapshotData>* snapshots) {
+    RETURN_IF_ERROR(ensureStatusReader());
+    Endpoints& e = *endpoints_;
+    if (snapshots && !snapshot_session.empty()) RETURN_IF_ERROR(ensureSnapshotReader());
+    e.status_reader->waitForData(wait);
+    RETURN_IF_ERROR(takeStatuses(statuses));
+    if (!e.snapshot_reader) return Status::ok();
+    auto taken = e.snapshot_reader->take(
+        [&](const facescan_wire_MeshSnapshot& m, const dds_sample_info_t& info) {
+            if (!info.valid_data || !snapshots || wire::fromDds(m.session_id) != snapshot_session) return;
+            MeshSnapshotData snap;
+            snap.session_id = wire::fromDds(m.session_id);
+            snap.seq = m.seq;
+            snap.frames_integrated = m.frames_integrated;
+            snap.vertex_count = m.vertex_count;
+            snap.triangle_count = m.triangle_count;
+            snap.created_ns = m.created_ns;
+            snap.draco = copyBytes(m.draco);
+            snap.received = Clock::now();
+            snapshots->push_back(std::move(snap));
+        },
+        64);
+    return taken.isOk() ? Status::ok() : taken.status();
+}
+
+}  // namespace facescan::client
