@@ -87,8 +87,16 @@ Status ColourJpegDecoder::decode(const uint8_t* data, size_t size, int expected_
     int h = 0;
     int subsamp = 0;
     int colourspace = 0;
+    // libjpeg-turbo 2.1 leaves a handle unusable after some header errors (a later valid JPEG then fails with the
+    // same "Bogus DQT index"): after any failure the handle is replaced, so one bad frame cannot poison the next.
+    auto fail = [this](const std::string& what) {
+        const std::string message = what + tjError(handle_);
+        tjDestroy(static_cast<tjhandle>(handle_));
+        handle_ = tjInitDecompress();
+        return dataLoss(message);
+    };
     if (tjDecompressHeader3(handle, data, size, &w, &h, &subsamp, &colourspace) != 0) {
-        return dataLoss("JPEG header corrupt: " + tjError(handle_));
+        return fail("JPEG header corrupt: ");
     }
     if (w != expected_width || h != expected_height) {
         return dataLoss("JPEG is " + sizeText(w, h) + ", camera says " + sizeText(expected_width, expected_height));
@@ -98,7 +106,7 @@ Status ColourJpegDecoder::decode(const uint8_t* data, size_t size, int expected_
     // bytes that is data loss. LIMITSCANS: caps progressive scans (a tiny file can otherwise take seconds).
     const int flags = TJFLAG_STOPONWARNING | TJFLAG_LIMITSCANS | TJFLAG_FASTDCT;
     if (tjDecompress2(handle, data, size, bgr.data, w, static_cast<int>(bgr.step[0]), h, TJPF_BGR, flags) != 0) {
-        return dataLoss("JPEG data corrupt or truncated: " + tjError(handle_));
+        return fail("JPEG data corrupt or truncated: ");
     }
     return Status::ok();
 }

@@ -117,7 +117,9 @@ TEST(ColourJpeg, CorruptBytesNeverCrash) {
         corrupt[i] ^= 0xa5;
         const Status st = decoder.decode(corrupt.data(), corrupt.size(), 32, 24, out);
         if (!st.isOk()) ++failures;
-        if (st.isOk()) EXPECT_EQ(out.size(), cv::Size(32, 24));
+        if (st.isOk()) {
+            EXPECT_EQ(out.size(), cv::Size(32, 24));
+        }
     }
     EXPECT_GT(failures, 0);  // the markers and tables are checked; entropy-coded damage may pass as noise
 }

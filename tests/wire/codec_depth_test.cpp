@@ -138,7 +138,9 @@ TEST_P(DepthCodecTest, CorruptBytesNeverCrashAndHeaderDamageIsCaught) {
             const Status st = decoder.decode(codec, corrupt.data(), corrupt.size(), 24, 18, out);
             // Every header byte is checked; body damage either fails or yields some 24x18 image (raw16 has no
             // redundancy to notice a flipped bit), but never a crash or a wrong-sized image.
-            if (i < kDepthHeaderBytes) EXPECT_FALSE(st.isOk()) << "header byte " << i;
+            if (i < kDepthHeaderBytes) {
+                EXPECT_FALSE(st.isOk()) << "header byte " << i;
+            }
             if (st.isOk()) EXPECT_EQ(out.size(), cv::Size(24, 18));
         }
     }

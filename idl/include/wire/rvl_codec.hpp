@@ -13,7 +13,7 @@
 namespace facescan::wire::rvl {
 
 // Worst case: a 17-bit zigzag delta takes 6 nibbles per pixel; run counts and the last partial word add a few.
-inline size_t maxEncodedBytes(size_t pixel_count) { return pixel_count * 3 + 32; }
+inline constexpr size_t maxEncodedBytes(size_t pixel_count) { return pixel_count * 3 + 32; }
 
 // Encodes pixel_count pixels into out (capacity >= maxEncodedBytes(pixel_count)); returns the bytes written,
 // always a multiple of 4.
