@@ -1,0 +1,333 @@
+// The synthetic Kinect v1: scene assembly (head, torso, wall), head trajectory, shading and ground truth.
+// Rasterisation is in raster.cpp, the sensor noise in depth_noise.cpp.
+#include "synth/kinect_simulator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/core/utility.hpp>
+
+#include "depth_noise.hpp"
+#include "raster.hpp"
+
+namespace facescan::synth {
+namespace {
+
+constexpr float kDegToRad = static_cast<float>(M_PI / 180.0);
+// The head turns about the neck joint, below and behind the head-frame origin (metres, head frame).
+const Eigen::Vector3f kPivotHead(0.0f, -0.07f, -0.03f);
+// Linear-blend skinning of the neck: head-frame points above kSkinTopY move with the head, below kSkinBottomY
+// with the body, so a bust's shoulders do not swing with the head (metres, head frame).
+constexpr float kSkinTopY = -0.12f, kSkinBottomY = -0.18f;
+// Periods (frames) of the slow body sway; the phases come from the seed.
+constexpr float kSwayPeriodX = 230.0f, kSwayPeriodY = 170.0f;
+
+using Vec3 = Eigen::Vector3f;
+
+Vec3 toVec(const OpenMesh::Vec3f& v) { return {v[0], v[1], v[2]}; }
+
+}  // namespace
+
+Status NoiseParams::validate() const {
+    if (!(axial_a_m >= 0 && axial_b_per_m >= 0 && angle_coeff_m >= 0 && lateral_sigma_px >= 0)) {
+        return invalidArgument("noise: sigmas must be >= 0");
+    }
+    if (!(disparity_step_px >= 0 && disparity_step_px < 4))
+        return invalidArgument("noise: disparity step in [0, 4) px");
+    if (!(baseline_m > 0 && baseline_m < 1)) return invalidArgument("noise: baseline in (0, 1) m");
+    if (!(max_incidence_deg > 0 && max_incidence_deg <= 90)) return invalidArgument("noise: max incidence in (0, 90]");
+    if (!(min_range_m >= 0 && max_range_m > min_range_m)) return invalidArgument("noise: need 0 <= min < max range");
+    if (!(dropout_rate >= 0 && dropout_rate < 1)) return invalidArgument("noise: dropout rate in [0, 1)");
+    return Status::ok();
+}
+
+Status SequenceParams::validate() const {
+    if (frames < 1 || frames > 1'000'000) return invalidArgument("synthetic: frames must be in [1, 1e6]");
+    if (!(fps > 0 && fps <= 1000)) return invalidArgument("synthetic: fps must be in (0, 1000]");
+    if (!(distance_m >= 0.3f && distance_m <= 5.0f)) return invalidArgument("synthetic: distance must be 0.3-5 m");
+    if (!(std::abs(yaw_amplitude_deg) <= 80 && std::abs(pitch_amplitude_deg) <= 60)) {
+        return invalidArgument("synthetic: yaw amplitude <= 80 deg, pitch amplitude <= 60 deg");
+    }
+    if (!(yaw_period_frames >= 2 && pitch_period_frames >= 2)) return invalidArgument("synthetic: periods >= 2 frames");
+    if (!(sway_amplitude_m >= 0 && sway_amplitude_m <= 0.2f)) return invalidArgument("synthetic: sway in [0, 0.2] m");
+    if (wall && !(wall_distance_m > distance_m + 0.25f && wall_distance_m < 10)) {
+        return invalidArgument("synthetic: the wall must be at least 0.25 m behind the head and within 10 m");
+    }
+    return noise_model.validate();
+}
+
+struct KinectSimulator::Scene {
+    // Vertices of head [0, head_end), torso [head_end, torso_end), wall [torso_end, end).
+    std::vector<Vec3> points, normals, colours;  // object frame; colours BGR 0-255
+    std::vector<Eigen::Vector2f> uvs;            // head only, when textured
+    std::vector<float> head_weight;              // skinning weight of head vertices (1 = rigid with the head)
+    std::vector<Eigen::Vector3i> tris;
+    std::vector<uint8_t> tri_label;  // PixelLabel
+    int head_end = 0, torso_end = 0, head_tri_end = 0;
+    std::vector<int> face_vertices;  // head vertices of the face box (brows to chin, cheek to cheek)
+    float sway_phase_x = 0, sway_phase_y = 0;
+
+    void addTorso(const recon::Mesh& head_mesh);
+    void addWall(float distance_m);
+};
+
+// A torso continuing the head mesh downwards: an elliptic cylinder sized from the mesh's lowest band
+// (at least shoulder-wide), capped by shoulders that slope up towards the neck. Body frame = head frame at rest.
+void KinectSimulator::Scene::addTorso(const recon::Mesh& head_mesh) {
+    float y_min = std::numeric_limits<float>::max();
+    for (const auto vh : head_mesh.vertices()) y_min = std::min(y_min, head_mesh.point(vh)[1]);
+    Eigen::AlignedBox3f band;
+    for (const auto vh : head_mesh.vertices()) {
+        if (head_mesh.point(vh)[1] < y_min + 0.02f) band.extend(toVec(head_mesh.point(vh)));
+    }
+    const float top_y = y_min + 0.02f, bottom_y = -0.9f;
+    const float rx = std::max(0.19f, 0.5f * band.sizes().x()), rz = std::max(0.11f, 0.5f * band.sizes().z());
+    const float cz = band.center().z();
+    constexpr int kSectors = 72;
+    constexpr int kCapRings = 6;
+    const Vec3 shirt(110, 80, 60);
+    const int base = static_cast<int>(points.size());
+    // Rings from the bottom up: 0 bottom, 1 shoulder line, then the cap rings narrowing to the neck.
+    std::vector<std::pair<float, Eigen::Vector2f>> rings = {{bottom_y, {rx, rz}}, {top_y, {rx, rz}}};
+    for (int r = 1; r <= kCapRings; ++r) {
+        const float t = static_cast<float>(r) / kCapRings;
+        const float s = std::sqrt(1.0f - 0.8f * t * t);  // rounded shoulders
+        rings.push_back({top_y + 0.05f * t, {std::max(0.06f, rx * s * (1 - 0.6f * t)), std::max(0.06f, rz * s)}});
+    }
+    for (const auto& [y, r] : rings) {
+        for (int j = 0; j < kSectors; ++j) {
+            const float phi = 2.0f * static_cast<float>(M_PI) * j / kSectors;
+            const Vec3 n(std::sin(phi) / r.x(), 0.3f, std::cos(phi) / r.y());
+            points.emplace_back(r.x() * std::sin(phi), y, cz + r.y() * std::cos(phi));
+            normals.push_back(n.normalized());
+            colours.push_back(shirt);
+        }
+    }
+    for (int i = 0; i + 1 < static_cast<int>(rings.size()); ++i) {
+        for (int j = 0; j < kSectors; ++j) {
+            const int a = base + i * kSectors + j, b = base + i * kSectors + (j + 1) % kSectors;
+            tris.emplace_back(a, b, b + kSectors);
+            tris.emplace_back(a, b + kSectors, a + kSectors);
+            tri_label.push_back(static_cast<uint8_t>(PixelLabel::kBody));
+            tri_label.push_back(static_cast<uint8_t>(PixelLabel::kBody));
+        }
+    }
+}
+
+// The wall: one large quad facing the camera (camera frame), beyond the frustum on every side.
+void KinectSimulator::Scene::addWall(float distance_m) {
+    const int base = static_cast<int>(points.size());
+    const float half = 1.2f * distance_m;
+    for (const auto& [x, y] : {std::pair{-half, -half}, {half, -half}, {half, half}, {-half, half}}) {
+        points.emplace_back(x, y, distance_m);
+        normals.emplace_back(0, 0, -1);
+        colours.emplace_back(175, 190, 200);
+    }
+    tris.emplace_back(base, base + 1, base + 2);
+    tris.emplace_back(base, base + 2, base + 3);
+    tri_label.insert(tri_label.end(), 2, static_cast<uint8_t>(PixelLabel::kNone));
+}
+
+KinectSimulator::KinectSimulator(HeadModel head, SequenceParams params, recon::Intrinsics intrinsics)
+    : head_(std::move(head)), params_(params), intrinsics_(intrinsics), scene_(std::make_unique<Scene>()) {
+    Scene& s = *scene_;
+    recon::Mesh& m = head_.mesh;
+    if (!m.has_vertex_normals()) m.request_vertex_normals();
+    if (!m.has_face_normals()) m.request_face_normals();
+    m.update_face_normals();
+    m.update_vertex_normals();
+    const bool textured = !head_.texture_bgr.empty() && m.has_vertex_texcoords2D();
+    for (const auto vh : m.vertices()) {
+        const Vec3 p = toVec(m.point(vh));
+        s.points.push_back(p);
+        s.normals.push_back(toVec(m.normal(vh)));
+        const auto c = m.has_vertex_colors() ? m.color(vh) : recon::Mesh::Color(200, 170, 150);
+        s.colours.emplace_back(c[0], c[1], c[2]);
+        if (textured) s.uvs.emplace_back(m.texcoord2D(vh)[0], m.texcoord2D(vh)[1]);
+        s.head_weight.push_back(std::clamp((p.y() - kSkinBottomY) / (kSkinTopY - kSkinBottomY), 0.0f, 1.0f));
+        const Vec3 d = p - head_.nose_tip_head;
+        if (std::abs(d.x()) < 0.065f && d.y() > -0.08f && d.y() < 0.055f && d.z() > -0.08f && m.normal(vh)[2] > 0.25f) {
+            s.face_vertices.push_back(vh.idx());
+        }
+    }
+    for (const auto fh : m.faces()) {
+        Eigen::Vector3i t;
+        int k = 0;
+        float y_sum = 0;
+        for (const auto vh : m.fv_range(fh)) {
+            if (k < 3) t[k] = vh.idx();
+            y_sum += m.point(vh)[1];
+            ++k;
+        }
+        if (k != 3) continue;
+        s.tris.push_back(t);
+        s.tri_label.push_back(
+            static_cast<uint8_t>(y_sum / 3 > head_.neck_cut_y_m ? PixelLabel::kHead : PixelLabel::kBody));
+    }
+    s.head_end = static_cast<int>(s.points.size());
+    s.head_tri_end = static_cast<int>(s.tris.size());
+    if (params_.torso) s.addTorso(m);
+    s.torso_end = static_cast<int>(s.points.size());
+    if (params_.wall) s.addWall(params_.wall_distance_m);
+    const uint64_t r = detail::mix64(params_.seed ^ 0x5157A7ull);
+    s.sway_phase_x = static_cast<float>(r & 0xFFFF) / 65536.0f * 2.0f * static_cast<float>(M_PI);
+    s.sway_phase_y = static_cast<float>((r >> 16) & 0xFFFF) / 65536.0f * 2.0f * static_cast<float>(M_PI);
+}
+
+KinectSimulator::~KinectSimulator() = default;
+KinectSimulator::KinectSimulator(KinectSimulator&&) noexcept = default;
+KinectSimulator& KinectSimulator::operator=(KinectSimulator&&) noexcept = default;
+
+// The body (torso, and the head at rest) relative to the camera: facing it at the set distance, swaying.
+static recon::Pose bodyPose(const SequenceParams& p, float phase_x, float phase_y, int index) {
+    const float two_pi = 2.0f * static_cast<float>(M_PI);
+    const Vec3 sway(p.sway_amplitude_m * (std::sin(two_pi * index / kSwayPeriodX + phase_x) - std::sin(phase_x)),
+                    p.sway_amplitude_m * (std::sin(two_pi * index / kSwayPeriodY + phase_y) - std::sin(phase_y)), 0);
+    recon::Pose T = recon::Pose::Identity();
+    T.translation() = Vec3(0, 0, p.distance_m) + sway;
+    // Head frame (y up, face along +z) to camera (y down, looking along +z): 180 deg about x.
+    T.linear() = Eigen::Vector3f(1, -1, -1).asDiagonal();
+    return T;
+}
+
+recon::Pose KinectSimulator::poseAt(int index) const {
+    const float two_pi = 2.0f * static_cast<float>(M_PI);
+    const float yaw = params_.yaw_amplitude_deg * kDegToRad * std::sin(two_pi * index / params_.yaw_period_frames);
+    const float pitch =
+        params_.pitch_amplitude_deg * kDegToRad * std::sin(two_pi * index / params_.pitch_period_frames);
+    const Eigen::Matrix3f R =
+        (Eigen::AngleAxisf(yaw, Vec3::UnitY()) * Eigen::AngleAxisf(pitch, Vec3::UnitX())).toRotationMatrix();
+    recon::Pose motion = recon::Pose::Identity();  // rotation about the neck pivot, in the head frame
+    motion.linear() = R;
+    motion.translation() = kPivotHead - R * kPivotHead;
+    return bodyPose(params_, scene_->sway_phase_x, scene_->sway_phase_y, index) * motion;
+}
+
+recon::Mesh KinectSimulator::headInFirstCamera() const {
+    recon::Mesh out = head_.mesh;
+    const recon::Pose T = poseAt(0);
+    for (const auto vh : out.vertices()) {
+        const Vec3 p = T * toVec(out.point(vh));
+        out.point(vh) = recon::Mesh::Point(p.x(), p.y(), p.z());
+    }
+    out.update_face_normals();
+    out.update_vertex_normals();
+    return out;
+}
+
+void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth) const {
+    const Scene& s = *scene_;
+    const recon::Intrinsics& k = intrinsics_;
+    const recon::Pose T_camera_head = poseAt(index);
+    const recon::Pose T_camera_body = bodyPose(params_, s.sway_phase_x, s.sway_phase_y, index);
+
+    // Vertices into the camera frame; the neck blends between head and body (linear-blend skinning).
+    std::vector<Vec3> pc(s.points.size()), nc(s.points.size());
+    for (int i = 0; i < s.head_end; ++i) {
+        const float w = s.head_weight[i];
+        if (w >= 1.0f) {
+            pc[i] = T_camera_head * s.points[i];
+            nc[i] = T_camera_head.linear() * s.normals[i];
+        } else {
+            pc[i] = w * (T_camera_head * s.points[i]) + (1 - w) * (T_camera_body * s.points[i]);
+            nc[i] = (w * T_camera_head.linear() * s.normals[i] + (1 - w) * T_camera_body.linear() * s.normals[i])
+                        .normalized();
+        }
+    }
+    for (int i = s.head_end; i < s.torso_end; ++i) {
+        pc[i] = T_camera_body * s.points[i];
+        nc[i] = T_camera_body.linear() * s.normals[i];
+    }
+    for (int i = s.torso_end; i < static_cast<int>(s.points.size()); ++i) pc[i] = s.points[i], nc[i] = s.normals[i];
+
+    detail::GBuffer g;
+    detail::rasterise(pc, s.tris, k, g);
+
+    const int w = k.width_px, h = k.height_px;
+    out.colour_bgr.create(h, w, CV_8UC3);
+    cv::Mat label(h, w, CV_8U), cos_incidence(h, w, CV_32F);
+    const cv::Mat& tex = head_.texture_bgr;
+    const bool textured = !s.uvs.empty();
+    // A lamp above and left of the camera; Lambert shading with ambient light.
+    const Vec3 lamp(-0.25f, -0.35f, 0.0f);
+    cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
+        for (int v = rows.start; v < rows.end; ++v) {
+            const int* trow = g.tri.ptr<int>(v);
+            const float* zrow = g.depth_m.ptr<float>(v);
+            const cv::Vec2f* brow = g.bary.ptr<cv::Vec2f>(v);
+            cv::Vec3b* crow = out.colour_bgr.ptr<cv::Vec3b>(v);
+            for (int u = 0; u < w; ++u) {
+                const int t = trow[u];
+                label.at<uint8_t>(v, u) = 0;
+                cos_incidence.at<float>(v, u) = 0;
+                if (t < 0) {
+                    crow[u] = cv::Vec3b(0, 0, 0);
+                    continue;
+                }
+                const Eigen::Vector3i& tri = s.tris[t];
+                const float b1 = brow[u][0], b2 = brow[u][1], b0 = 1.0f - b1 - b2;
+                const Vec3 p = k.backProject(static_cast<float>(u), static_cast<float>(v), zrow[u]);
+                Vec3 n = (b0 * nc[tri[0]] + b1 * nc[tri[1]] + b2 * nc[tri[2]]).normalized();
+                const Vec3 view = -p.normalized();
+                float cos_view = n.dot(view);
+                if (cos_view < 0) n = -n, cos_view = -cos_view;  // back side (open mesh): shade the side we see
+                cos_incidence.at<float>(v, u) = cos_view;
+                label.at<uint8_t>(v, u) = s.tri_label[t];
+                Vec3 albedo;
+                if (textured && t < s.head_tri_end) {
+                    const Eigen::Vector2f uv = b0 * s.uvs[tri[0]] + b1 * s.uvs[tri[1]] + b2 * s.uvs[tri[2]];
+                    // The scan's texture coordinates have v up (row 0 of the image is v = 1).
+                    const float x = std::clamp(uv.x(), 0.0f, 1.0f) * (tex.cols - 1);
+                    const float y = (1.0f - std::clamp(uv.y(), 0.0f, 1.0f)) * (tex.rows - 1);
+                    const int x0 = std::min(static_cast<int>(x), tex.cols - 2),
+                              y0 = std::min(static_cast<int>(y), tex.rows - 2);
+                    const float fx = x - x0, fy = y - y0;
+                    const cv::Vec3b c00 = tex.at<cv::Vec3b>(y0, x0), c01 = tex.at<cv::Vec3b>(y0, x0 + 1);
+                    const cv::Vec3b c10 = tex.at<cv::Vec3b>(y0 + 1, x0), c11 = tex.at<cv::Vec3b>(y0 + 1, x0 + 1);
+                    for (int c = 0; c < 3; ++c) {
+                        albedo[c] =
+                            (1 - fy) * ((1 - fx) * c00[c] + fx * c01[c]) + fy * ((1 - fx) * c10[c] + fx * c11[c]);
+                    }
+                } else {
+                    albedo = b0 * s.colours[tri[0]] + b1 * s.colours[tri[1]] + b2 * s.colours[tri[2]];
+                }
+                const float diffuse = std::max(0.0f, n.dot((lamp - p).normalized()));
+                const float shade = 0.35f + 0.75f * diffuse;
+                for (int c = 0; c < 3; ++c) crow[u][c] = cv::saturate_cast<uint8_t>(albedo[c] * shade);
+            }
+        }
+    });
+
+    if (params_.noise) {
+        detail::applyKinectNoise(
+            params_.noise_model, k, g.depth_m, cos_incidence,
+            detail::mix64(params_.seed) ^ detail::mix64(static_cast<uint64_t>(index) + 0x1234567ull), out.depth_m);
+    } else {
+        g.depth_m.copyTo(out.depth_m);
+    }
+    out.timestamp_ns = static_cast<int64_t>(std::llround(index * 1e9 / params_.fps));
+
+    if (truth) {
+        truth->T_camera_head = T_camera_head;
+        truth->label = label;
+        truth->depth_true_m = g.depth_m;
+        const float two_pi = 2.0f * static_cast<float>(M_PI);
+        truth->yaw_deg = params_.yaw_amplitude_deg * std::sin(two_pi * index / params_.yaw_period_frames);
+        truth->pitch_deg = params_.pitch_amplitude_deg * std::sin(two_pi * index / params_.pitch_period_frames);
+        // Face box: the visible face-region vertices (not hidden in the ideal depth), projected.
+        int u_lo = w, v_lo = h, u_hi = -1, v_hi = -1, visible = 0;
+        for (const int i : s.face_vertices) {
+            const Vec3& p = pc[i];
+            if (p.z() <= 0) continue;
+            const Eigen::Vector2f px = k.project(p);
+            const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
+            if (!k.contains(u, v) || std::abs(g.depth_m.at<float>(v, u) - p.z()) > 0.01f) continue;
+            u_lo = std::min(u_lo, u), u_hi = std::max(u_hi, u), v_lo = std::min(v_lo, v), v_hi = std::max(v_hi, v);
+            ++visible;
+        }
+        const bool enough = visible * 4 >= static_cast<int>(s.face_vertices.size());
+        truth->face_box_px = enough ? cv::Rect(u_lo, v_lo, u_hi - u_lo + 1, v_hi - v_lo + 1) : cv::Rect();
+    }
+}
+
+}  // namespace facescan::synth

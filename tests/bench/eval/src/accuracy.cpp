@@ -1,0 +1,246 @@
+// The accuracy ruler (DESIGN.md s6): rigid point-to-plane ICP of M onto G from several starting poses, then
+// point-to-surface distances over G's face region, completeness and outliers.
+#include "eval/accuracy.hpp"
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/core/utility.hpp>
+#include <vector>
+
+namespace facescan::eval {
+namespace {
+
+using Vec3 = Eigen::Vector3f;
+
+std::vector<Vec3> pointsOf(const recon::Mesh& mesh) {
+    std::vector<Vec3> pts;
+    pts.reserve(mesh.n_vertices());
+    for (const auto vh : mesh.vertices()) pts.emplace_back(mesh.point(vh)[0], mesh.point(vh)[1], mesh.point(vh)[2]);
+    return pts;
+}
+
+// G's face region, as flags per vertex and per face (a face belongs when at least two corners do).
+struct FaceRegion {
+    std::vector<uint8_t> vertex, face;
+    int vertex_count = 0;
+};
+
+FaceRegion faceRegion(const recon::Mesh& gt, const Vec3& nose, const Vec3& face_dir, const AccuracyParams& p) {
+    FaceRegion r;
+    r.vertex.assign(gt.n_vertices(), 0);
+    r.face.assign(gt.n_faces(), 0);
+    for (const auto vh : gt.vertices()) {
+        const auto& q = gt.point(vh);
+        const auto& n = gt.normal(vh);
+        const bool in = (Vec3(q[0], q[1], q[2]) - nose).norm() <= p.face_radius_m &&
+                        Vec3(n[0], n[1], n[2]).dot(face_dir) >= p.min_facing_cos;
+        r.vertex[vh.idx()] = in;
+        r.vertex_count += in;
+    }
+    for (const auto fh : gt.faces()) {
+        int in = 0;
+        for (const auto vh : gt.fv_range(fh)) in += r.vertex[vh.idx()];
+        r.face[fh.idx()] = in >= 2;
+    }
+    return r;
+}
+
+// Samples of M in the face region after transform T: |d| per sample (metres), computed in parallel.
+std::vector<float> faceDistances(const std::vector<Vec3>& pts, const recon::Pose& T, const SurfaceDistance& gt_dist,
+                                 const FaceRegion& region) {
+    std::vector<float> d(pts.size(), -1.0f);
+    cv::parallel_for_(cv::Range(0, static_cast<int>(pts.size())), [&](const cv::Range& range) {
+        for (int i = range.start; i < range.end; ++i) {
+            const auto hit = gt_dist.query(T * pts[i]);
+            if (hit.face >= 0 && region.face[hit.face]) d[i] = hit.distance_m;
+        }
+    });
+    std::vector<float> out;
+    for (const float x : d) {
+        if (x >= 0) out.push_back(x);
+    }
+    return out;
+}
+
+struct IcpResult {
+    recon::Pose T = recon::Pose::Identity();
+    int inliers = 0;     // samples within 3 mm of G's face after alignment
+    double rms_m = 1e9;  // of those inliers
+};
+
+// Point-to-plane ICP (the thesis' tracking metric, eq. 4.22, here between meshes): correspondences are the
+// nearest points on G's face region; the gate shrinks from 50 mm to 10 mm so that far starts can converge.
+IcpResult runIcp(const std::vector<Vec3>& samples, const SurfaceDistance& gt_dist, const FaceRegion& region,
+                 recon::Pose T, int iterations) {
+    struct Corr {
+        Vec3 p, q, n;
+        bool ok;
+    };
+    std::vector<Corr> corr(samples.size());
+    for (int it = 0; it < iterations; ++it) {
+        const float gate = std::max(0.01f, 0.05f * std::pow(0.85f, static_cast<float>(it)));
+        cv::parallel_for_(cv::Range(0, static_cast<int>(samples.size())), [&](const cv::Range& range) {
+            for (int i = range.start; i < range.end; ++i) {
+                const Vec3 p = T * samples[i];
+                const auto hit = gt_dist.query(p);
+                corr[i] = {p, hit.closest, hit.normal, hit.face >= 0 && region.face[hit.face] && hit.distance_m < gate};
+            }
+        });
+        Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+        Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+        int n_ok = 0;
+        for (const Corr& c : corr) {
+            if (!c.ok) continue;
+            Eigen::Matrix<double, 6, 1> J;
+            J.head<3>() = c.p.cross(c.n).cast<double>();
+            J.tail<3>() = c.n.cast<double>();
+            const double r = static_cast<double>((c.q - c.p).dot(c.n));
+            A += J * J.transpose();
+            b += J * r;
+            ++n_ok;
+        }
+        if (n_ok < 6) break;
+        const Eigen::Matrix<double, 6, 1> x = A.ldlt().solve(b);
+        if (!x.allFinite()) break;
+        recon::Pose dT = recon::Pose::Identity();
+        const Eigen::Vector3d w = x.head<3>();
+        if (w.norm() > 0) dT.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix().cast<float>();
+        dT.translation() = x.tail<3>().cast<float>();
+        T = dT * T;
+        if (w.norm() < 1e-6 && x.tail<3>().norm() < 1e-7 && gate <= 0.0101f) break;
+    }
+    IcpResult res;
+    res.T = T;
+    const std::vector<float> d = faceDistances(samples, T, gt_dist, region);
+    double ss = 0;
+    for (const float x : d) {
+        if (x < 0.003f) ++res.inliers, ss += static_cast<double>(x) * x;
+    }
+    res.rms_m = res.inliers > 0 ? std::sqrt(ss / res.inliers) : 1e9;
+    return res;
+}
+
+double percentile(std::vector<float> v, double q) {
+    if (v.empty()) return 0;
+    const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5));
+    std::nth_element(v.begin(), v.begin() + static_cast<long>(k), v.end());
+    return v[k];
+}
+
+}  // namespace
+
+Status AccuracyParams::validate() const {
+    if (!(face_radius_m > 0.01f && face_radius_m < 1.0f)) return invalidArgument("accuracy: face radius 0.01-1 m");
+    if (!(min_facing_cos >= -1 && min_facing_cos <= 1)) return invalidArgument("accuracy: facing cosine in [-1, 1]");
+    if (!(complete_within_m > 0 && outlier_m > 0)) return invalidArgument("accuracy: thresholds must be > 0");
+    if (icp_iterations < 0 || icp_iterations > 1000) return invalidArgument("accuracy: ICP iterations 0-1000");
+    if (max_icp_samples < 100) return invalidArgument("accuracy: at least 100 ICP samples");
+    return Status::ok();
+}
+
+Eigen::Vector3f findNoseTip(const recon::Mesh& gt) {
+    float y_min = std::numeric_limits<float>::max(), y_max = -y_min;
+    for (const auto vh : gt.vertices()) {
+        y_min = std::min(y_min, gt.point(vh)[1]);
+        y_max = std::max(y_max, gt.point(vh)[1]);
+    }
+    // The chest of a bust may stick out further than the nose; the upper 60 % of the height is the head.
+    const float y_floor = y_min + 0.4f * (y_max - y_min);
+    Vec3 best(0, 0, -std::numeric_limits<float>::max());
+    for (const auto vh : gt.vertices()) {
+        const auto& p = gt.point(vh);
+        if (p[1] >= y_floor && p[2] > best.z()) best = Vec3(p[0], p[1], p[2]);
+    }
+    return best;
+}
+
+StatusOr<AccuracyReport> measureAccuracy(const recon::Mesh& mesh, const recon::Mesh& gt, const Vec3& gt_nose_tip,
+                                         const AccuracyParams& params, const std::optional<recon::Pose>& guess,
+                                         const Vec3& face_direction) {
+    RETURN_IF_ERROR(params.validate());
+    if (mesh.n_vertices() == 0) return invalidArgument("accuracy: the mesh has no vertices");
+    if (gt.n_faces() == 0 || !gt.has_vertex_normals()) return invalidArgument("accuracy: GT needs faces and normals");
+    if (!gt_nose_tip.allFinite() || face_direction.norm() < 0.5f) return invalidArgument("accuracy: bad nose/facing");
+    const Vec3 face_dir = face_direction.normalized();
+    const FaceRegion region = faceRegion(gt, gt_nose_tip, face_dir, params);
+    if (region.vertex_count == 0) return invalidArgument("accuracy: no GT vertex in the face region");
+    const SurfaceDistance gt_dist(gt);
+    const std::vector<Vec3> pts = pointsOf(mesh);
+
+    std::vector<Vec3> samples;
+    const size_t stride = std::max<size_t>(1, pts.size() / static_cast<size_t>(params.max_icp_samples));
+    for (size_t i = 0; i < pts.size(); i += stride) samples.push_back(pts[i]);
+
+    recon::Pose best_T = guess.value_or(recon::Pose::Identity());
+    if (params.align) {
+        // Starting poses: the guess, then M turned four ways with its most forward point put on G's nose tip
+        // (a mesh in camera coordinates faces -z, one in head coordinates +z).
+        std::vector<recon::Pose> starts;
+        if (guess) starts.push_back(*guess);
+        const Eigen::Matrix3f flips[] = {Eigen::Vector3f(1, -1, -1).asDiagonal(), Eigen::Matrix3f::Identity(),
+                                         Eigen::Vector3f(-1, 1, -1).asDiagonal(),
+                                         Eigen::Vector3f(-1, -1, 1).asDiagonal()};
+        for (const auto& R : flips) {
+            Vec3 tip = R * pts[0];
+            for (const auto& p : pts) {
+                if ((R * p).dot(face_dir) > tip.dot(face_dir)) tip = R * p;
+            }
+            recon::Pose T = recon::Pose::Identity();
+            T.linear() = R;
+            T.translation() = gt_nose_tip - tip;
+            starts.push_back(T);
+        }
+        IcpResult best;
+        best.inliers = -1;
+        for (const auto& start : starts) {
+            const IcpResult r = runIcp(samples, gt_dist, region, start, params.icp_iterations);
+            if (r.inliers > best.inliers || (r.inliers == best.inliers && r.rms_m < best.rms_m)) best = r;
+        }
+        best_T = best.T;
+    }
+
+    const std::vector<float> d = faceDistances(pts, best_T, gt_dist, region);
+    if (d.empty()) return notFound("accuracy: no vertex of the mesh lies over the GT face region");
+    AccuracyReport rep;
+    rep.T_gt_mesh = best_T;
+    rep.mesh_vertices_used = static_cast<int>(d.size());
+    rep.gt_face_vertices = region.vertex_count;
+    double sum = 0, ss = 0;
+    int far = 0;
+    for (const float x : d) {
+        sum += x;
+        ss += static_cast<double>(x) * x;
+        far += x > params.outlier_m;
+    }
+    rep.mean_mm = 1000.0 * sum / static_cast<double>(d.size());
+    rep.rms_mm = 1000.0 * std::sqrt(ss / static_cast<double>(d.size()));
+    rep.median_mm = 1000.0 * percentile(d, 0.5);
+    rep.p90_mm = 1000.0 * percentile(d, 0.9);
+    rep.outliers = static_cast<double>(far) / static_cast<double>(d.size());
+
+    // Completeness: G's face vertices within complete_within_m of M's surface (M moved into G's frame).
+    recon::Mesh moved = mesh;
+    for (const auto vh : moved.vertices()) {
+        const Vec3 p = best_T * pts[vh.idx()];
+        moved.point(vh) = recon::Mesh::Point(p.x(), p.y(), p.z());
+    }
+    const SurfaceDistance mesh_dist(moved);
+    std::vector<int> gt_face_ids;
+    for (const auto vh : gt.vertices()) {
+        if (region.vertex[vh.idx()]) gt_face_ids.push_back(vh.idx());
+    }
+    std::vector<uint8_t> covered(gt_face_ids.size(), 0);
+    cv::parallel_for_(cv::Range(0, static_cast<int>(gt_face_ids.size())), [&](const cv::Range& range) {
+        for (int i = range.start; i < range.end; ++i) {
+            const auto& q = gt.point(recon::Mesh::VertexHandle(gt_face_ids[i]));
+            covered[i] = mesh_dist.query(Vec3(q[0], q[1], q[2])).distance_m <= params.complete_within_m;
+        }
+    });
+    rep.completeness =
+        static_cast<double>(std::count(covered.begin(), covered.end(), 1)) / static_cast<double>(gt_face_ids.size());
+    return rep;
+}
+
+}  // namespace facescan::eval

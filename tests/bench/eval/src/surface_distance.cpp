@@ -1,0 +1,128 @@
+// Point-to-surface distance: nanoflann k-d tree over the vertices, then exact point-triangle distance over the
+// triangles incident to the k nearest vertices (the closest surface point lies on one of them unless the mesh is
+// far coarser than the query's distance, which the ruler's 3 mm GT edges never are).
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <nanoflann.hpp>
+#include <vector>
+
+#include "eval/accuracy.hpp"
+
+namespace facescan::eval {
+namespace {
+
+using Vec3 = Eigen::Vector3f;
+
+// Closest point on triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
+Vec3 closestOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+    const Vec3 ab = b - a, ac = c - a, ap = p - a;
+    const float d1 = ab.dot(ap), d2 = ac.dot(ap);
+    if (d1 <= 0 && d2 <= 0) return a;
+    const Vec3 bp = p - b;
+    const float d3 = ab.dot(bp), d4 = ac.dot(bp);
+    if (d3 >= 0 && d4 <= d3) return b;
+    const float vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
+    const Vec3 cp = p - c;
+    const float d5 = ab.dot(cp), d6 = ac.dot(cp);
+    if (d6 >= 0 && d5 <= d6) return c;
+    const float vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
+    const float va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    const float denom = 1.0f / (va + vb + vc);
+    return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+struct Cloud {
+    std::vector<Vec3> pts;
+    size_t kdtree_get_point_count() const { return pts.size(); }
+    float kdtree_get_pt(size_t i, size_t dim) const { return pts[i][static_cast<int>(dim)]; }
+    template <class Box>
+    bool kdtree_get_bbox(Box&) const {
+        return false;
+    }
+};
+using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, Cloud>, Cloud, 3, uint32_t>;
+constexpr int kNeighbours = 6;
+
+}  // namespace
+
+struct SurfaceDistance::Impl {
+    Cloud cloud;
+    std::vector<Eigen::Vector3i> tris;
+    std::vector<Vec3> tri_normals;
+    std::vector<int> face_ids;          // mesh face index of each triangle
+    std::vector<int> ring_start, ring;  // CSR: triangles incident to each vertex
+    std::unique_ptr<KdTree> tree;
+};
+
+SurfaceDistance::SurfaceDistance(const recon::Mesh& mesh) : impl_(std::make_unique<Impl>()) {
+    Impl& m = *impl_;
+    m.cloud.pts.reserve(mesh.n_vertices());
+    for (const auto vh : mesh.vertices()) {
+        const auto& p = mesh.point(vh);
+        m.cloud.pts.emplace_back(p[0], p[1], p[2]);
+    }
+    std::vector<int> count(mesh.n_vertices() + 1, 0);
+    for (const auto fh : mesh.faces()) {
+        Eigen::Vector3i t;
+        int k = 0;
+        for (const auto vh : mesh.fv_range(fh)) {
+            if (k < 3) t[k] = vh.idx();
+            ++k;
+        }
+        if (k != 3) continue;
+        m.tris.push_back(t);
+        m.face_ids.push_back(fh.idx());
+        const Vec3 n = (m.cloud.pts[t[1]] - m.cloud.pts[t[0]]).cross(m.cloud.pts[t[2]] - m.cloud.pts[t[0]]);
+        m.tri_normals.push_back(n.norm() > 0 ? Vec3(n.normalized()) : Vec3::UnitZ());
+        for (int c = 0; c < 3; ++c) ++count[t[c] + 1];
+    }
+    for (size_t i = 1; i < count.size(); ++i) count[i] += count[i - 1];
+    m.ring_start = count;
+    m.ring.resize(count.back());
+    std::vector<int> fill(count.begin(), count.end() - 1);
+    for (int f = 0; f < static_cast<int>(m.tris.size()); ++f) {
+        for (int c = 0; c < 3; ++c) m.ring[fill[m.tris[f][c]]++] = f;
+    }
+    m.tree = std::make_unique<KdTree>(3, m.cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    if (!m.cloud.pts.empty()) m.tree->buildIndex();
+}
+
+SurfaceDistance::~SurfaceDistance() = default;
+
+SurfaceDistance::Hit SurfaceDistance::query(const Vec3& p) const {
+    const Impl& m = *impl_;
+    Hit hit;
+    hit.distance_m = std::numeric_limits<float>::infinity();
+    if (m.cloud.pts.empty()) return hit;
+    uint32_t idx[kNeighbours];
+    float d2[kNeighbours];
+    const size_t found = m.tree->knnSearch(p.data(), kNeighbours, idx, d2);
+    if (found == 0) return hit;
+    hit.nearest_vertex = static_cast<int>(idx[0]);
+    hit.closest = m.cloud.pts[idx[0]];
+    hit.distance_m = std::sqrt(d2[0]);  // an isolated vertex (no triangles) still has a distance
+    // Every vertex lies on its incident triangles, so the best triangle is never worse than the vertex.
+    float best = std::numeric_limits<float>::infinity();
+    for (size_t i = 0; i < found; ++i) {
+        for (int r = m.ring_start[idx[i]]; r < m.ring_start[idx[i] + 1]; ++r) {
+            const int f = m.ring[r];
+            const auto& t = m.tris[f];
+            const Vec3 q = closestOnTriangle(p, m.cloud.pts[t[0]], m.cloud.pts[t[1]], m.cloud.pts[t[2]]);
+            const float d = (q - p).norm();
+            if (d < best) {
+                best = d;
+                hit.distance_m = d;
+                hit.closest = q;
+                hit.face = m.face_ids[f];
+                hit.normal = m.tri_normals[f];
+            }
+        }
+    }
+    return hit;
+}
+
+}  // namespace facescan::eval
