@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/System/omstream.hh>
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
@@ -31,6 +32,44 @@ Status cannotWrite(const fs::path& path, const std::string& why) {
 fs::path folderOf(const fs::path& path) {
     const fs::path parent = path.parent_path();
     return parent.empty() ? fs::path(".") : parent;
+}
+
+// OBJ written here: OpenMesh's OBJ writer keeps colours only as per-face materials in a separate .mtl file, and
+// cannot write those into a stream. Vertex colours go on the `v` lines (x y z r g b, colours in [0, 1]), the
+// extension MeshLab, Blender, Open3D and OpenMesh's own reader understand.
+std::string objText(const recon::Mesh& mesh) {
+    std::ostringstream out;
+    out.precision(9);
+    out << "# facescan mesh: metres, " << mesh.n_vertices() << " vertices, " << mesh.n_faces() << " triangles\n";
+    const bool colours = mesh.has_vertex_colors();
+    const bool normals = mesh.has_vertex_normals();
+    for (const auto vh : mesh.vertices()) {
+        const auto& p = mesh.point(vh);
+        out << "v " << p[0] << ' ' << p[1] << ' ' << p[2];
+        if (colours) {
+            const auto& c = mesh.color(vh);
+            out.precision(6);
+            out << ' ' << c[0] / 255.0 << ' ' << c[1] / 255.0 << ' ' << c[2] / 255.0;
+            out.precision(9);
+        }
+        out << '\n';
+    }
+    if (normals) {
+        for (const auto vh : mesh.vertices()) {
+            const auto& n = mesh.normal(vh);
+            out << "vn " << n[0] << ' ' << n[1] << ' ' << n[2] << '\n';
+        }
+    }
+    for (const auto fh : mesh.faces()) {
+        out << 'f';
+        for (const auto vh : mesh.fv_range(fh)) {
+            const int i = vh.idx() + 1;  // OBJ indices start at 1
+            out << ' ' << i;
+            if (normals) out << "//" << i;
+        }
+        out << '\n';
+    }
+    return out.str();
 }
 
 }  // namespace
@@ -123,13 +162,15 @@ Status writeMeshFile(const recon::Mesh& mesh, const fs::path& path, const std::v
                                    std::string_view(reinterpret_cast<const char*>(encoded.data()), encoded.size()));
     }
 
+    if (format == MeshFormat::kObj) return writeFileAtomically(path, objText(mesh));
+
     using OpenMesh::IO::Options;
     Options opts;
     switch (format) {
         case MeshFormat::kPly: opts = Options(Options::Binary | Options::VertexNormal | Options::VertexColor); break;
-        case MeshFormat::kObj:
         case MeshFormat::kOff: opts = Options(Options::VertexNormal | Options::VertexColor); break;
         case MeshFormat::kStl: opts = Options(Options::Binary); break;
+        case MeshFormat::kObj:
         case MeshFormat::kDrc: break;
     }
     if (!mesh.has_vertex_normals()) opts -= Options::VertexNormal;
@@ -137,6 +178,7 @@ Status writeMeshFile(const recon::Mesh& mesh, const fs::path& path, const std::v
     // OpenMesh writes into memory first: its writers report failure only as a bool, so the file itself is
     // written (and its errors reported) by writeFileAtomically.
     std::ostringstream out(std::ios::binary);
+    omlog().disable();  // OpenMesh's writers chatter on the log stream ("[STLWriter] : write binary file")
     // Positions in metres: 6 significant digits would round to 1 micron at 1 m; 9 keep floats exact.
     if (!OpenMesh::IO::write_mesh(mesh, out, std::string(".") + meshFormatName(format), opts, 9)) {
         return internalError(std::string("OpenMesh could not encode the mesh as ") + meshFormatName(format));

@@ -1,0 +1,105 @@
+// The command line of `facescan`: every command's arguments and every usage error.
+#include "client/cli_args.hpp"
+
+#include <gtest/gtest.h>
+
+namespace facescan::client {
+namespace {
+
+StatusOr<CliOptions> parse(std::vector<std::string> args) { return parseArgs(args); }
+
+void expectUsageError(std::vector<std::string> args, const std::string& needle) {
+    auto parsed = parse(args);
+    ASSERT_FALSE(parsed.isOk()) << "accepted: " << ::testing::PrintToString(args);
+    EXPECT_EQ(parsed.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(parsed.status().message().find(needle), std::string::npos) << parsed.status().message();
+}
+
+TEST(CliArgs, MeshWithGlobalOptionsAnywhere) {
+    auto parsed = parse({"--profile", "loopback", "mesh", "scan-1", "-o", "out/face.ply", "--finish", "--domain=42",
+                         "--timeout", "2.5"});
+    ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+    EXPECT_EQ(parsed->command, Command::kMesh);
+    EXPECT_EQ(parsed->session, "scan-1");
+    EXPECT_EQ(parsed->output, "out/face.ply");
+    EXPECT_TRUE(parsed->finish);
+    EXPECT_EQ(parsed->domain.profile, "loopback");
+    EXPECT_EQ(parsed->domain.domain_id, 42u);
+    EXPECT_EQ(parsed->timeout.count(), 2500);
+}
+
+TEST(CliArgs, DefaultsAreLanDomainZeroTenSeconds) {
+    auto parsed = parse({"sessions"});
+    ASSERT_TRUE(parsed.isOk());
+    EXPECT_EQ(parsed->domain.profile, "lan");
+    EXPECT_EQ(parsed->domain.domain_id, 0u);
+    EXPECT_EQ(parsed->timeout.count(), 10'000);
+    EXPECT_FALSE(parsed->json);
+}
+
+TEST(CliArgs, WatchSessionIsOptionalAndSaveTakesAFormat) {
+    auto newest = parse({"watch"});
+    ASSERT_TRUE(newest.isOk());
+    EXPECT_EQ(newest->command, Command::kWatch);
+    EXPECT_TRUE(newest->session.empty());
+    auto saving = parse({"watch", "s", "--save", "snaps", "--save-format", "drc"});
+    ASSERT_TRUE(saving.isOk()) << saving.status().toString();
+    EXPECT_EQ(saving->save_dir, "snaps");
+    EXPECT_EQ(saving->save_format, "drc");
+    expectUsageError({"watch", "s", "--save", "d", "--save-format", "xyz"}, "--save-format");
+    expectUsageError({"watch", "s", "--save-format", "ply"}, "needs --save");
+}
+
+TEST(CliArgs, EveryMeshExtensionIsAcceptedCaseInsensitively) {
+    for (const char* file : {"a.ply", "a.obj", "a.stl", "a.off", "a.drc", "A.PLY", "dir/b.Obj"}) {
+        EXPECT_TRUE(parse({"mesh", "s", "-o", file}).isOk()) << file;
+    }
+    expectUsageError({"mesh", "s", "-o", "a.xyz"}, "unknown mesh format");
+    expectUsageError({"mesh", "s", "-o", "noext"}, "unknown mesh format");
+}
+
+TEST(CliArgs, HelpWinsAndNamesTheCommand) {
+    auto help = parse({"mesh", "--help"});
+    ASSERT_TRUE(help.isOk());
+    EXPECT_TRUE(help->help);
+    EXPECT_EQ(help->help_topic, "mesh");
+    EXPECT_NE(usageText(help->help_topic).find("--finish"), std::string::npos);
+    auto overview = parse({"-h"});
+    ASSERT_TRUE(overview.isOk());
+    EXPECT_TRUE(overview->help);
+    EXPECT_TRUE(overview->help_topic.empty());
+    EXPECT_NE(usageText("").find("trajectory SESSION"), std::string::npos);
+    auto help_cmd = parse({"help", "watch"});
+    ASSERT_TRUE(help_cmd.isOk());
+    EXPECT_EQ(help_cmd->help_topic, "watch");
+}
+
+TEST(CliArgs, TrajectoryOutputIsOptional) {
+    auto parsed = parse({"trajectory", "s"});
+    ASSERT_TRUE(parsed.isOk());
+    EXPECT_TRUE(parsed->output.empty());
+}
+
+TEST(CliArgs, UsageErrorsSayWhatIsWrong) {
+    expectUsageError({}, "no command");
+    expectUsageError({"scan"}, "unknown command 'scan'");
+    expectUsageError({"mesh", "s"}, "needs -o");
+    expectUsageError({"mesh", "-o", "a.ply"}, "needs a SESSION");
+    expectUsageError({"status"}, "needs a SESSION");
+    expectUsageError({"status", "a", "b"}, "unexpected argument 'b'");
+    expectUsageError({"sessions", "extra"}, "unexpected argument");
+    expectUsageError({"preview", "s", "-o", "p.jpg"}, ".png");
+    expectUsageError({"status", "s", "--finish"}, "unknown option --finish");
+    expectUsageError({"status", "s", "--domain"}, "--domain needs a value");
+    expectUsageError({"status", "s", "--domain", "x"}, "--domain must be a number");
+    expectUsageError({"status", "s", "--domain", "300"}, "0..232");
+    expectUsageError({"status", "s", "--timeout", "0"}, "--timeout");
+    expectUsageError({"status", "s", "--timeout", "-1"}, "--timeout");
+    expectUsageError({"status", "s", "--finish=yes"}, "takes no value");
+    expectUsageError({"status", "../etc"}, "session id");
+    expectUsageError({"status", "s", "--profile", ""}, "profile");
+    expectUsageError({"mesh", "s", "-o", "a.ply", "-o", "b.ply"}, "given twice");
+}
+
+}  // namespace
+}  // namespace facescan::client

@@ -1,0 +1,182 @@
+// Mesh files of the client: every format read back through OpenMesh (and .drc through the Draco codec) with the
+// same vertex and face counts, colours where the format has them, atomic writes, and unwritable paths.
+#include "client/mesh_file.hpp"
+
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "wire/mesh_codec.hpp"
+
+namespace facescan::client {
+namespace {
+namespace fs = std::filesystem;
+
+// A face-sized curved patch (a 24 x 20 grid on a sphere of 9 cm radius, 0.7 m from the camera), with a colour
+// gradient: every vertex distinct, every vertex used, so all formats must keep the counts exactly.
+recon::Mesh testMesh() {
+    recon::Mesh mesh;
+    constexpr int kCols = 24, kRows = 20;
+    std::vector<recon::Mesh::VertexHandle> v;
+    for (int r = 0; r < kRows; ++r) {
+        for (int c = 0; c < kCols; ++c) {
+            const float yaw = (static_cast<float>(c) / (kCols - 1) - 0.5f) * 1.6f;
+            const float pitch = (static_cast<float>(r) / (kRows - 1) - 0.5f) * 1.4f;
+            const float radius_m = 0.09f;
+            const auto vh = mesh.add_vertex(recon::Mesh::Point(radius_m * std::sin(yaw) * std::cos(pitch),
+                                                               radius_m * std::sin(pitch),
+                                                               0.7f - radius_m * std::cos(yaw) * std::cos(pitch)));
+            mesh.set_color(
+                vh, recon::Mesh::Color(static_cast<unsigned char>(10 * c), static_cast<unsigned char>(12 * r), 200));
+            v.push_back(vh);
+        }
+    }
+    for (int r = 0; r + 1 < kRows; ++r) {
+        for (int c = 0; c + 1 < kCols; ++c) {
+            const auto a = v[r * kCols + c], b = v[r * kCols + c + 1], d = v[(r + 1) * kCols + c],
+                       e = v[(r + 1) * kCols + c + 1];
+            mesh.add_face(a, d, b);
+            mesh.add_face(b, d, e);
+        }
+    }
+    mesh.update_normals();
+    return mesh;
+}
+
+class MeshFileTest : public ::testing::Test {
+ protected:
+    void SetUp() override {
+        dir_ = fs::temp_directory_path() / ("facescan_mesh_file_test_" + std::to_string(::getpid()));
+        fs::create_directories(dir_);
+    }
+    void TearDown() override {
+        std::error_code ec;
+        fs::permissions(dir_, fs::perms::owner_all, ec);
+        fs::remove_all(dir_, ec);
+    }
+    // Only the target itself: no temporary left beside it.
+    void expectOnlyFile(const fs::path& path) {
+        int files = 0;
+        for (const auto& entry : fs::directory_iterator(dir_)) {
+            ++files;
+            EXPECT_EQ(entry.path(), path) << "left behind: " << entry.path();
+        }
+        EXPECT_EQ(files, 1);
+    }
+    fs::path dir_;
+};
+
+TEST_F(MeshFileTest, FormatsByExtension) {
+    EXPECT_EQ(meshFormatFor("a.ply").value(), MeshFormat::kPly);
+    EXPECT_EQ(meshFormatFor("a.OBJ").value(), MeshFormat::kObj);
+    EXPECT_EQ(meshFormatFor("x/a.stl").value(), MeshFormat::kStl);
+    EXPECT_EQ(meshFormatFor("a.off").value(), MeshFormat::kOff);
+    EXPECT_EQ(meshFormatFor("a.drc").value(), MeshFormat::kDrc);
+    EXPECT_FALSE(meshFormatFor("a.png").isOk());
+    EXPECT_FALSE(formatHasColours(MeshFormat::kStl));
+    EXPECT_TRUE(formatHasColours(MeshFormat::kPly));
+}
+
+TEST_F(MeshFileTest, EveryOpenMeshFormatReadsBackWithTheSameCountsAndColours) {
+    const recon::Mesh mesh = testMesh();
+    for (const char* ext : {"ply", "obj", "stl", "off"}) {
+        SCOPED_TRACE(ext);
+        const fs::path path = dir_ / (std::string("face.") + ext);
+        ASSERT_TRUE(writeMeshFile(mesh, path).isOk());
+        expectOnlyFile(path);
+
+        recon::Mesh back;
+        OpenMesh::IO::Options opts = OpenMesh::IO::Options::VertexColor;
+        ASSERT_TRUE(OpenMesh::IO::read_mesh(back, path.string(), opts));
+        EXPECT_EQ(back.n_vertices(), mesh.n_vertices());
+        EXPECT_EQ(back.n_faces(), mesh.n_faces());
+        const bool colours = formatHasColours(meshFormatFor(path).value());
+        if (colours) {
+            EXPECT_TRUE(opts.check(OpenMesh::IO::Options::VertexColor));
+        }
+        // Positions survive to well under a micron (written with 9 significant digits or binary floats).
+        float max_error_m = 0;
+        if (std::string(ext) != "stl") {  // STL merges and reorders vertices
+            for (const auto vh : mesh.vertices()) {
+                const auto bh = back.vertex_handle(vh.idx());
+                max_error_m = std::max(max_error_m, (mesh.point(vh) - back.point(bh)).norm());
+                if (colours) {
+                    EXPECT_EQ(back.color(bh), mesh.color(vh)) << "vertex " << vh.idx();
+                }
+            }
+        }
+        EXPECT_LT(max_error_m, 1e-6f);
+        fs::remove(path);
+    }
+}
+
+TEST_F(MeshFileTest, DracoFileDecodesWithTheSameCountsAndColours) {
+    const recon::Mesh mesh = testMesh();
+    const fs::path path = dir_ / "face.drc";
+    ASSERT_TRUE(writeMeshFile(mesh, path).isOk());
+    expectOnlyFile(path);
+    std::ifstream in(path, std::ios::binary);
+    const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    auto back = wire::decodeMeshDraco(bytes.data(), bytes.size());
+    ASSERT_TRUE(back.isOk()) << back.status().toString();
+    EXPECT_EQ(back->n_vertices(), mesh.n_vertices());
+    EXPECT_EQ(back->n_faces(), mesh.n_faces());
+    ASSERT_TRUE(back->has_vertex_colors());
+    // Draco reorders vertices: compare the colour histogram's extremes instead of vertex by vertex.
+    int max_red = 0;
+    for (const auto vh : back->vertices()) max_red = std::max<int>(max_red, back->color(vh)[0]);
+    EXPECT_EQ(max_red, 230);
+}
+
+TEST_F(MeshFileTest, DracoPayloadIsWrittenAsItIs) {
+    const std::vector<uint8_t> payload = {1, 2, 3, 4, 5};
+    const fs::path path = dir_ / "server.drc";
+    ASSERT_TRUE(writeMeshFile(recon::Mesh(), path, &payload).isOk());
+    EXPECT_EQ(fs::file_size(path), payload.size());
+}
+
+TEST_F(MeshFileTest, ReplacesAnExistingFileAtomically) {
+    const fs::path path = dir_ / "face.ply";
+    { std::ofstream(path) << "old content"; }
+    ASSERT_TRUE(writeMeshFile(testMesh(), path).isOk());
+    expectOnlyFile(path);
+    recon::Mesh back;
+    ASSERT_TRUE(OpenMesh::IO::read_mesh(back, path.string()));
+    EXPECT_EQ(back.n_faces(), testMesh().n_faces());
+}
+
+TEST_F(MeshFileTest, UnwritablePathsAreUnavailableAndLeaveNothing) {
+    const recon::Mesh mesh = testMesh();
+    const Status missing = writeMeshFile(mesh, dir_ / "no" / "such" / "face.ply");
+    EXPECT_EQ(missing.code(), StatusCode::kUnavailable);
+    EXPECT_NE(missing.message().find("does not exist"), std::string::npos) << missing.message();
+
+    const Status folder = writeFileAtomically(dir_, "x");
+    EXPECT_EQ(folder.code(), StatusCode::kUnavailable);
+    EXPECT_NE(folder.message().find("is a folder"), std::string::npos) << folder.message();
+
+    if (::geteuid() != 0) {  // root writes anywhere
+        const fs::path locked = dir_ / "locked";
+        fs::create_directories(locked);
+        fs::permissions(locked, fs::perms::owner_read | fs::perms::owner_exec);
+        const Status denied = writeMeshFile(mesh, locked / "face.obj");
+        EXPECT_EQ(denied.code(), StatusCode::kUnavailable);
+        EXPECT_NE(denied.message().find("not writable"), std::string::npos) << denied.message();
+        EXPECT_TRUE(fs::is_empty(locked));
+        fs::permissions(locked, fs::perms::owner_all);
+    }
+}
+
+TEST_F(MeshFileTest, EmptyMeshIsRefused) {
+    const Status s = writeMeshFile(recon::Mesh(), dir_ / "empty.ply");
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+    EXPECT_FALSE(fs::exists(dir_ / "empty.ply"));
+}
+
+}  // namespace
+}  // namespace facescan::client

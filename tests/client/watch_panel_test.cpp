@@ -1,0 +1,70 @@
+// The watch panel and log line carry every figure the issue asks for: frames integrated, fps, tracking state,
+// triangles and snapshot age.
+#include "client/watch_panel.hpp"
+
+#include <gtest/gtest.h>
+
+namespace facescan::client {
+namespace {
+
+WatchView scanningView() {
+    WatchView view;
+    view.have_status = true;
+    view.status.session_id = "demo-7";
+    view.status.server_id = "box:42";
+    view.status.state = facescan_wire_STATE_SCANNING;
+    view.status.detail = "face found";
+    view.status.frames_received = 151;
+    view.status.frames_integrated = 142;
+    view.status.frames_rejected = 3;
+    view.status.fps = 28.44f;
+    view.snapshot_seq = 12;
+    view.snapshot_triangles = 1234567;
+    view.snapshot_age_s = 0.42;
+    view.elapsed_s = 5.0;
+    return view;
+}
+
+bool contains(const std::string& text, const std::string& needle) { return text.find(needle) != std::string::npos; }
+
+TEST(WatchPanel, GroupsThousands) {
+    EXPECT_EQ(groupThousands(0), "0");
+    EXPECT_EQ(groupThousands(999), "999");
+    EXPECT_EQ(groupThousands(1000), "1,000");
+    EXPECT_EQ(groupThousands(1234567), "1,234,567");
+}
+
+TEST(WatchPanel, PanelShowsStateFramesFpsTrianglesAndAge) {
+    const std::vector<std::string> lines = panelLines(scanningView());
+    ASSERT_EQ(lines.size(), 3u);
+    EXPECT_TRUE(contains(lines[0], "demo-7"));
+    EXPECT_TRUE(contains(lines[0], "SCANNING - face found"));
+    EXPECT_TRUE(contains(lines[1], "142 integrated / 151 received"));
+    EXPECT_TRUE(contains(lines[1], "28.4 fps"));
+    EXPECT_TRUE(contains(lines[2], "1,234,567 triangles"));
+    EXPECT_TRUE(contains(lines[2], "snapshot #12, 0.4 s old"));
+}
+
+TEST(WatchPanel, LogLineIsOneLineWithTheSameFigures) {
+    const std::string line = logLine(scanningView());
+    EXPECT_EQ(line.find('\n'), std::string::npos);
+    for (const char* part :
+         {"demo-7", "SCANNING", "integrated 142/151", "fps 28.4", "triangles 1,234,567", "0.4 s old", "(face found)"}) {
+        EXPECT_TRUE(contains(line, part)) << part << " missing from: " << line;
+    }
+}
+
+TEST(WatchPanel, SaysWhenNothingHasArrivedYetAndWhenTheServerIsGone) {
+    WatchView waiting;
+    waiting.status.session_id = "s1";
+    EXPECT_TRUE(contains(panelLines(waiting)[0], "waiting for session s1"));
+    EXPECT_TRUE(contains(logLine(waiting), "waiting for session s1"));
+    WatchView gone = scanningView();
+    gone.snapshot_age_s.reset();
+    gone.status.alive = false;
+    EXPECT_TRUE(contains(logLine(gone), "server gone"));
+    EXPECT_TRUE(contains(logLine(gone), "no snapshot yet"));
+}
+
+}  // namespace
+}  // namespace facescan::client
