@@ -1,0 +1,123 @@
+// Parameters of facescan-server: config file and flags map onto the recon core's Params structs, with errors
+// that name the key, the file and the line. And the data-dir writer: atomic files, nothing half-written.
+#include "service/server_params.hpp"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "service/session_store.hpp"
+
+namespace facescan::service {
+namespace {
+
+std::filesystem::path tempDir(const std::string& name) {
+    const auto dir =
+        std::filesystem::temp_directory_path() / ("facescan-server-test-" + std::to_string(getpid()) + "-" + name);
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+    return dir;
+}
+
+TEST(ServerParams, DefaultsAreMeyersAndValid) {
+    auto parsed = parseServerArgs({});
+    ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+    EXPECT_FALSE(parsed->help);
+    const ServerParams& p = parsed->params;
+    EXPECT_EQ(p.preset, "face");
+    EXPECT_EQ(p.recon.tsdf.resolution_vox, 256);
+    EXPECT_NEAR(p.recon.tsdf.volume_size_m, 0.386f, 1e-6f);
+    EXPECT_FLOAT_EQ(p.snapshot_hz, 1.0f);
+    EXPECT_EQ(p.data_dir, std::filesystem::path("facescan-data"));
+    EXPECT_FALSE(p.server_id.empty());
+}
+
+TEST(ServerParams, ConfigFileThenFlagsOverride) {
+    const auto dir = tempDir("config");
+    const auto file = dir / "server.conf";
+    std::ofstream(file) << "# a comment\n"
+                           "tsdf.resolution_vox = 128\n"
+                           "tsdf.voxel_size_m = 0.002   # 2 mm voxels: a 0.256 m cube\n"
+                           "icp.iterations0 = 7\n"
+                           "max_sessions = 3\n"
+                           "snapshot_hz = 2\n";
+    auto parsed = parseServerArgs({"--config", file.string(), "--snapshot-hz", "0.5", "--domain=42", "--profile",
+                                   "loopback", "--set", "filter.sigma_depth_m=0.03"});
+    ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+    const ServerParams& p = parsed->params;
+    EXPECT_EQ(p.recon.tsdf.resolution_vox, 128);
+    EXPECT_NEAR(p.recon.tsdf.volume_size_m, 0.256f, 1e-6f);
+    EXPECT_EQ(p.recon.icp.iterations[0], 7);
+    EXPECT_EQ(p.max_sessions, 3);
+    EXPECT_FLOAT_EQ(p.snapshot_hz, 0.5f);  // the flag wins over the file
+    EXPECT_EQ(p.domain.domain_id, 42u);
+    EXPECT_EQ(p.domain.profile, "loopback");
+    EXPECT_FLOAT_EQ(p.recon.filter.sigma_depth_m, 0.03f);
+}
+
+TEST(ServerParams, PresetFastChangesTheReconParams) {
+    auto fast = parseServerArgs({"--preset", "fast"});
+    ASSERT_TRUE(fast.isOk()) << fast.status().toString();
+    EXPECT_EQ(fast->params.preset, "fast");
+    const recon::ReconParams expected = recon::ReconParams::fast();
+    EXPECT_EQ(fast->params.recon.icp.iterations, expected.icp.iterations);
+    EXPECT_FALSE(parseServerArgs({"--preset", "slow"}).isOk());
+}
+
+TEST(ServerParams, BadInputGivesClearErrors) {
+    auto unknown_flag = parseServerArgs({"--frobnicate", "1"});
+    ASSERT_FALSE(unknown_flag.isOk());
+    EXPECT_NE(unknown_flag.status().message().find("--frobnicate"), std::string::npos);
+
+    auto missing = parseServerArgs({"--max-sessions"});
+    ASSERT_FALSE(missing.isOk());
+    EXPECT_NE(missing.status().message().find("needs a value"), std::string::npos);
+
+    auto not_number = parseServerArgs({"--snapshot-hz", "fast"});
+    ASSERT_FALSE(not_number.isOk());
+    EXPECT_NE(not_number.status().message().find("snapshot_hz"), std::string::npos);
+
+    auto out_of_range = parseServerArgs({"--max-sessions", "0"});
+    ASSERT_FALSE(out_of_range.isOk());
+    EXPECT_NE(out_of_range.status().message().find("--max-sessions"), std::string::npos);
+
+    // A recon core value that its own validate() rejects is reported at start, not at the first frame.
+    auto bad_recon = parseServerArgs({"--set", "tsdf.trunc_dist_m=-1"});
+    ASSERT_FALSE(bad_recon.isOk());
+    EXPECT_NE(bad_recon.status().message().find("recon parameters"), std::string::npos);
+
+    const auto dir = tempDir("badconfig");
+    std::ofstream(dir / "a.conf") << "tsdf.resolution_vox = 128\nnot_a_key = 3\n";
+    auto bad_key = parseServerArgs({"--config", (dir / "a.conf").string()});
+    ASSERT_FALSE(bad_key.isOk());
+    EXPECT_NE(bad_key.status().message().find("a.conf:2"), std::string::npos) << bad_key.status().message();
+    EXPECT_NE(bad_key.status().message().find("not_a_key"), std::string::npos);
+
+    std::ofstream(dir / "b.conf") << "tsdf.resolution_vox 128\n";
+    EXPECT_FALSE(parseServerArgs({"--config", (dir / "b.conf").string()}).isOk());
+    EXPECT_EQ(parseServerArgs({"--config", (dir / "none.conf").string()}).status().code(), StatusCode::kNotFound);
+    EXPECT_TRUE(parseServerArgs({"--help"})->help);
+}
+
+TEST(SessionStore, WritesAtomicallyAndLeavesNoTemporaryFiles) {
+    const auto dir = tempDir("store");
+    const auto path = dir / "summary.json";
+    ASSERT_TRUE(writeFileAtomic(path, std::string("{\"a\": 1}\n")).isOk());
+    ASSERT_TRUE(writeFileAtomic(path, std::string("{\"a\": 2}\n")).isOk());  // replaces, never appends
+    std::ifstream in(path);
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_EQ(text, "{\"a\": 2}\n");
+    EXPECT_FALSE(std::filesystem::exists(dir / "summary.json.tmp"));
+    // A directory that cannot be written: an error, and no file under the final name.
+    EXPECT_FALSE(writeFileAtomic(dir / "missing" / "x.txt", std::string("x")).isOk());
+    EXPECT_FALSE(std::filesystem::exists(dir / "missing" / "x.txt"));
+}
+
+TEST(SessionStore, JsonEscapesQuotesAndControlCharacters) {
+    EXPECT_EQ(jsonEscape("a\"b\\c\nd\x01"), "a\\\"b\\\\c\\nd\\u0001");
+}
+
+}  // namespace
+}  // namespace facescan::service

@@ -1,0 +1,301 @@
+// facescan-server's service over real Cyclone DDS (loopback profile, a private domain per test): a test agent
+// publishes synthetic Kinect frames through the wire layer, a test client sends commands and reads status,
+// snapshots and replies. No mocks: the server runs the real detection, segmentation and recon core.
+#include "service/server.hpp"
+
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "test_agent.hpp"
+#include "wire/mesh_codec.hpp"
+
+namespace facescan::service {
+namespace {
+
+using namespace std::chrono_literals;
+using testing::EncodedSequence;
+using testing::privateDomain;
+using testing::StatusCopy;
+using testing::TestAgent;
+using testing::TestClient;
+
+std::filesystem::path tempDataDir(const std::string& name) {
+    const auto dir =
+        std::filesystem::temp_directory_path() / ("facescan-server-data-" + std::to_string(getpid()) + "-" + name);
+    std::filesystem::remove_all(dir);
+    return dir;
+}
+
+ServerParams testParams(uint32_t domain, const std::string& name) {
+    ServerParams p;
+    p.domain = {domain, "loopback"};
+    p.data_dir = tempDataDir(name);
+    p.server_id = "test-server";
+    p.snapshot_hz = 2.0f;
+    return p;
+}
+
+std::string readFile(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+// The data dir of a finished session: every file complete, nothing temporary left behind.
+void expectSessionWritten(const std::filesystem::path& dir, bool with_mesh) {
+    ASSERT_TRUE(std::filesystem::exists(dir / "summary.json")) << dir;
+    const std::string summary = readFile(dir / "summary.json");
+    EXPECT_NE(summary.find("\"state\": \"finished\""), std::string::npos) << summary;
+    EXPECT_NE(summary.find("\"integrated\": "), std::string::npos);
+    EXPECT_EQ(summary.back(), '\n');
+    EXPECT_TRUE(std::filesystem::exists(dir / "trajectory.txt"));
+    for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+        EXPECT_EQ(entry.path().extension(), entry.path().extension() == ".tmp" ? ".none" : entry.path().extension())
+            << "temporary file left: " << entry.path();
+    }
+    if (!with_mesh) return;
+    recon::Mesh ply;
+    OpenMesh::IO::Options opts = OpenMesh::IO::Options::VertexColor | OpenMesh::IO::Options::VertexNormal;
+    ply.request_vertex_colors();
+    ASSERT_TRUE(OpenMesh::IO::read_mesh(ply, (dir / "mesh.ply").string(), opts));
+    EXPECT_GT(ply.n_faces(), 1000u);
+    EXPECT_TRUE(opts.check(OpenMesh::IO::Options::VertexColor));
+    const std::string drc = readFile(dir / "mesh.drc");
+    auto decoded = wire::decodeMeshDraco(reinterpret_cast<const uint8_t*>(drc.data()), drc.size());
+    ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
+    EXPECT_EQ(decoded->n_faces(), ply.n_faces());
+}
+
+const EncodedSequence& sequence() {
+    static const EncodedSequence seq = testing::renderSequence(45);
+    return seq;
+}
+
+struct Rig {
+    std::unique_ptr<Server> server;
+    std::unique_ptr<TestClient> client;
+};
+
+Rig makeRig(const ServerParams& params) {
+    Rig rig;
+    auto server = Server::create(params);
+    EXPECT_TRUE(server.isOk()) << server.status().toString();
+    if (server.isOk()) rig.server = std::move(server).value();
+    auto client = TestClient::create(params.domain.domain_id);
+    EXPECT_TRUE(client.isOk()) << client.status().toString();
+    if (client.isOk()) rig.client = std::move(client).value();
+    if (rig.client) {
+        EXPECT_TRUE(rig.client->waitForServer(10s));
+    }
+    return rig;
+}
+
+std::unique_ptr<TestAgent> makeAgent(uint32_t domain, const std::string& session, bool every_frame) {
+    auto agent = TestAgent::create(domain, session, sequence().intrinsics, every_frame);
+    EXPECT_TRUE(agent.isOk()) << agent.status().toString();
+    if (!agent.isOk()) return nullptr;
+    EXPECT_TRUE((*agent)->waitForServer(10s));
+    EXPECT_TRUE((*agent)->sendCamera().isOk());
+    return std::move(agent).value();
+}
+
+bool settled(const StatusCopy& s) {
+    return s.received > 0 && s.integrated + s.rejected + s.skipped + s.dropped >= s.received;
+}
+
+TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) {
+    const uint32_t domain = privateDomain(11);
+    const ServerParams params = testParams(domain, "live");
+    Rig rig = makeRig(params);
+    ASSERT_TRUE(rig.server && rig.client);
+    auto agent = makeAgent(domain, "live-1", /*every_frame=*/false);
+    ASSERT_TRUE(agent);
+    ASSERT_TRUE(agent->stream(sequence(), 45, 30.0f, /*end_of_stream=*/false).isOk());
+
+    auto status = rig.client->waitForStatus(
+        "live-1", [](const StatusCopy& s) { return s.received == 45 && settled(s); }, 20s);
+    ASSERT_TRUE(status) << "status never settled";
+    EXPECT_FALSE(status->every_frame);
+    // Throughput depends on the machine (live mode skips what it cannot process); correctness does not.
+    EXPECT_GE(status->integrated, 10u) << status->detail << "; rejected " << status->rejected << ", skipped "
+                                       << status->skipped << ", fps " << status->fps;
+    EXPECT_EQ(status->dropped, 0u);
+    EXPECT_GT(status->latency_p95_ms, 0.0f);
+
+    auto snapshot = rig.client->waitForSnapshot("live-1", 5s);
+    ASSERT_TRUE(snapshot) << "no MeshSnapshot";
+    auto snap_mesh = wire::decodeMeshDraco(snapshot->draco.data(), snapshot->draco.size());
+    ASSERT_TRUE(snap_mesh.isOk()) << snap_mesh.status().toString();
+    EXPECT_EQ(snap_mesh->n_faces(), snapshot->triangle_count);
+
+    auto traj = rig.client->command("live-1", facescan_wire_CMD_GET_TRAJECTORY);
+    ASSERT_TRUE(traj.isOk()) << traj.status().toString();
+    EXPECT_TRUE(traj->ok) << traj->error;
+    EXPECT_EQ(traj->server_id, "test-server");
+    EXPECT_EQ(traj->kind, static_cast<uint32_t>(facescan_wire_CMD_GET_TRAJECTORY));
+    const std::string tum(traj->payload.begin(), traj->payload.end());
+    EXPECT_EQ(static_cast<uint32_t>(std::count(tum.begin(), tum.end(), '\n')), status->integrated);
+
+    auto mesh = rig.client->command("live-1", facescan_wire_CMD_GET_MESH);
+    ASSERT_TRUE(mesh.isOk() && mesh->ok) << (mesh.isOk() ? mesh->error : mesh.status().toString());
+    auto decoded = wire::decodeMeshDraco(mesh->payload.data(), mesh->payload.size());
+    ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
+    EXPECT_GT(decoded->n_faces(), 1000u);
+    EXPECT_EQ(decoded->n_faces(), mesh->triangle_count);
+    // The full-resolution mesh has more detail than the coarse snapshot.
+    EXPECT_GT(decoded->n_faces(), snap_mesh->n_faces());
+
+    auto preview = rig.client->command("live-1", facescan_wire_CMD_GET_PREVIEW);
+    ASSERT_TRUE(preview.isOk() && preview->ok);
+    ASSERT_GT(preview->payload.size(), 8u);
+    EXPECT_EQ(preview->payload[1], 'P');  // \x89PNG
+
+    auto finish = rig.client->command("live-1", facescan_wire_CMD_FINISH);
+    ASSERT_TRUE(finish.isOk() && finish->ok) << (finish.isOk() ? finish->error : finish.status().toString());
+    EXPECT_EQ(finish->triangle_count, mesh->triangle_count);  // nothing integrated since GET_MESH
+    expectSessionWritten(params.data_dir / "live-1", /*with_mesh=*/true);
+    // Finished sessions stay answerable.
+    auto again = rig.client->command("live-1", facescan_wire_CMD_GET_MESH);
+    ASSERT_TRUE(again.isOk() && again->ok);
+    EXPECT_EQ(again->triangle_count, finish->triangle_count);
+    auto final_status = rig.client->waitForStatus(
+        "live-1", [](const StatusCopy& s) { return s.state == facescan_wire_STATE_FINISHED; }, 5s);
+    EXPECT_TRUE(final_status);
+}
+
+TEST(ServerSession, UnknownSessionsAndBadRequestsGetErrorReplies) {
+    const uint32_t domain = privateDomain(12);
+    Rig rig = makeRig(testParams(domain, "errors"));
+    ASSERT_TRUE(rig.server && rig.client);
+    auto unknown = rig.client->command("nobody", facescan_wire_CMD_GET_MESH, 5s);
+    ASSERT_TRUE(unknown.isOk()) << "silence instead of an error reply";
+    EXPECT_FALSE(unknown->ok);
+    EXPECT_EQ(unknown->error, "unknown session 'nobody'");
+    // An enum value outside CommandKind cannot even be serialised by DDS; an empty request id can be sent.
+    const std::string empty;
+    auto bad = rig.client->command("nobody", facescan_wire_CMD_GET_STATUS, 5s, &empty);
+    ASSERT_TRUE(bad.isOk()) << "silence instead of an error reply";
+    EXPECT_FALSE(bad->ok);
+    EXPECT_NE(bad->error.find("bad request"), std::string::npos) << bad->error;
+}
+
+TEST(ServerSession, EveryFrameRecordingProcessesAllFramesAndFinishesAtEndOfStream) {
+    const uint32_t domain = privateDomain(13);
+    ServerParams params = testParams(domain, "every");
+    params.queue_frames = 4;  // a small queue: the agent is back-pressured most of the time
+    Rig rig = makeRig(params);
+    ASSERT_TRUE(rig.server && rig.client);
+    auto agent = makeAgent(domain, "rec-1", /*every_frame=*/true);
+    ASSERT_TRUE(agent);
+    // Damaged frames in the middle: garbage bytes, then a valid payload of the wrong image size.
+    const EncodedSequence& seq = sequence();
+    std::vector<uint8_t> garbage(5000);
+    for (size_t i = 0; i < garbage.size(); ++i) garbage[i] = static_cast<uint8_t>(i * 131 + 7);
+    wire::EncodedFrame small;
+    ASSERT_TRUE(wire::FrameEncoder().encode(cv::Mat(240, 320, CV_16UC1, cv::Scalar(700)), cv::Mat(), small).isOk());
+    constexpr uint32_t kFrames = 40;
+    for (uint32_t i = 0; i < kFrames; ++i) {
+        Status s = i == 15   ? agent->sendRawDepth(i, garbage)
+                   : i == 16 ? agent->sendRawDepth(i, small.depth)
+                             : agent->sendFrame(i, seq.frames[i]);
+        ASSERT_TRUE(s.isOk()) << s.toString();  // blocks while the server's queue is full (back-pressure)
+    }
+    ASSERT_TRUE(agent->sendEndOfStream(kFrames).isOk());
+
+    auto status = rig.client->waitForStatus(
+        "rec-1", [](const StatusCopy& s) { return s.state == facescan_wire_STATE_FINISHED; }, 30s);
+    ASSERT_TRUE(status) << "the recording never finished";
+    EXPECT_TRUE(status->every_frame);
+    EXPECT_EQ(status->received, kFrames);
+    EXPECT_EQ(status->skipped, 0u);
+    EXPECT_EQ(status->dropped, 2u) << "both damaged frames are counted";
+    EXPECT_EQ(status->integrated + status->rejected, kFrames - 2);
+    EXPECT_GE(status->integrated, 30u) << "the damaged frames must not harm the session: " << status->detail;
+    expectSessionWritten(params.data_dir / "rec-1", /*with_mesh=*/true);
+    EXPECT_NE(readFile(params.data_dir / "rec-1" / "summary.json").find("\"mode\": \"every_frame\""),
+              std::string::npos);
+}
+
+// Child process: an agent that streams a few frames and is then killed (no end of stream, no clean exit).
+[[noreturn]] void killedAgent(uint32_t domain) {
+    const EncodedSequence seq = testing::renderSequence(20);
+    auto agent = TestAgent::create(domain, "killed-1", seq.intrinsics, /*every_frame=*/false);
+    if (!agent.isOk()) _exit(10);
+    if (!(*agent)->waitForServer(20s)) _exit(11);
+    if (!(*agent)->sendCamera().isOk()) _exit(12);
+    if (!(*agent)->stream(seq, 20, 30.0f, /*end_of_stream=*/false).isOk()) _exit(13);
+    raise(SIGKILL);
+    _exit(14);
+}
+
+TEST(ServerSession, KilledAgentLeavesTheSessionFinalisable) {
+    const uint32_t domain = privateDomain(14);
+    const pid_t child = fork();  // before this process starts any DDS threads
+    ASSERT_GE(child, 0);
+    if (child == 0) killedAgent(domain);
+    const ServerParams params = testParams(domain, "killed");
+    Rig rig = makeRig(params);
+    ASSERT_TRUE(rig.server && rig.client);
+    int wstatus = 0;
+    waitpid(child, &wstatus, 0);
+    ASSERT_TRUE(WIFSIGNALED(wstatus) && WTERMSIG(wstatus) == SIGKILL) << "agent exit status " << wstatus;
+
+    auto gone = rig.client->waitForStatus(
+        "killed-1", [](const StatusCopy& s) { return s.detail == "agent gone"; }, 15s);
+    ASSERT_TRUE(gone) << "the killed agent was never noticed";
+    EXPECT_EQ(gone->state, static_cast<uint32_t>(facescan_wire_STATE_WAITING));
+    EXPECT_GT(gone->integrated, 0u);
+    auto finish = rig.client->command("killed-1", facescan_wire_CMD_FINISH);
+    ASSERT_TRUE(finish.isOk() && finish->ok) << (finish.isOk() ? finish->error : finish.status().toString());
+    EXPECT_GT(finish->triangle_count, 0u);
+    expectSessionWritten(params.data_dir / "killed-1", /*with_mesh=*/true);
+}
+
+TEST(ServerSession, SessionsBeyondMaxSessionsAreRefusedWithAReason) {
+    const uint32_t domain = privateDomain(15);
+    ServerParams params = testParams(domain, "max");
+    params.max_sessions = 1;
+    Rig rig = makeRig(params);
+    ASSERT_TRUE(rig.server && rig.client);
+    auto first = makeAgent(domain, "first", false);
+    ASSERT_TRUE(first);
+    ASSERT_TRUE(rig.client->waitForStatus(
+        "first", [](const StatusCopy&) { return true; }, 5s));
+    auto second = makeAgent(domain, "second", false);
+    ASSERT_TRUE(second);
+    auto refused = rig.client->waitForStatus(
+        "second", [](const StatusCopy& s) { return s.state == facescan_wire_STATE_REFUSED; }, 5s);
+    ASSERT_TRUE(refused) << "no refusal in the status";
+    EXPECT_NE(refused->detail.find("--max-sessions 1"), std::string::npos) << refused->detail;
+    auto reply = rig.client->command("second", facescan_wire_CMD_GET_STATUS, 5s);
+    ASSERT_TRUE(reply.isOk());
+    EXPECT_FALSE(reply->ok);
+    EXPECT_NE(reply->error.find("refused"), std::string::npos) << reply->error;
+    auto ok = rig.client->command("first", facescan_wire_CMD_GET_STATUS, 5s);
+    ASSERT_TRUE(ok.isOk());
+    EXPECT_TRUE(ok->ok) << ok->error;
+}
+
+TEST(ServerSession, ShutdownFinishesOpenSessionsToDisk) {
+    const uint32_t domain = privateDomain(16);
+    const ServerParams params = testParams(domain, "shutdown");
+    Rig rig = makeRig(params);
+    ASSERT_TRUE(rig.server && rig.client);
+    auto agent = makeAgent(domain, "open-1", false);
+    ASSERT_TRUE(agent);
+    ASSERT_TRUE(agent->stream(sequence(), 20, 30.0f, /*end_of_stream=*/false).isOk());
+    ASSERT_TRUE(rig.client->waitForStatus(
+        "open-1", [](const StatusCopy& s) { return s.integrated > 5; }, 10s));
+    rig.server->shutdown();  // what Ctrl-C does
+    EXPECT_EQ(rig.server->openSessions(), 0);
+    expectSessionWritten(params.data_dir / "open-1", /*with_mesh=*/true);
+}
+
+}  // namespace
+}  // namespace facescan::service
