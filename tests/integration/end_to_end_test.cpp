@@ -1,0 +1,216 @@
+// The whole product over real DDS, no mocks: facescan-server and facescan-agent (synthetic Kinect filming the
+// built-in head) run as child processes on the loopback profile in a private domain; the facescan client watches
+// the scan, finishes it, fetches the mesh in every format, the preview and the trajectory; the mesh is measured
+// against the subject's ground truth; and the server-side error path (unknown session) gives exit code 1.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <array>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "eval/accuracy.hpp"
+#include "synth/kinect_simulator.hpp"
+#include "wire/mesh_codec.hpp"
+
+namespace {
+
+using namespace facescan;
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+struct CliRun {
+    int exit_code = -1;
+    std::string out;  // stdout and stderr together
+};
+
+CliRun runCli(const std::string& args) {
+    const std::string command = std::string(FACESCAN_CLI) + " " + args + " 2>&1";
+    CliRun run;
+    FILE* pipe = ::popen(command.c_str(), "r");
+    if (!pipe) return run;
+    std::array<char, 4096> buf{};
+    size_t n = 0;
+    while ((n = std::fread(buf.data(), 1, buf.size(), pipe)) > 0) run.out.append(buf.data(), n);
+    const int status = ::pclose(pipe);
+    run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return run;
+}
+
+// A child program with its output in a log file; SIGTERM and reaped on destruction.
+class ChildProcess {
+ public:
+    ChildProcess(std::vector<std::string> args, const fs::path& log) {
+        pid_ = ::fork();
+        if (pid_ == 0) {
+            const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+            if (fd >= 0) {
+                ::dup2(fd, 1);
+                ::dup2(fd, 2);
+            }
+            std::vector<char*> argv;
+            for (std::string& a : args) argv.push_back(a.data());
+            argv.push_back(nullptr);
+            ::execv(argv[0], argv.data());
+            ::_exit(127);
+        }
+    }
+    ~ChildProcess() { stop(); }
+    // Waits for the program to end by itself; its exit code, or -1 on timeout.
+    int wait(std::chrono::seconds timeout) {
+        const auto deadline = std::chrono::steady_clock::now() + timeout;
+        while (pid_ > 0 && std::chrono::steady_clock::now() < deadline) {
+            int status = 0;
+            if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+                pid_ = 0;
+                return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+            }
+            std::this_thread::sleep_for(50ms);
+        }
+        return -1;
+    }
+    void stop() {
+        if (pid_ <= 0) return;
+        ::kill(pid_, SIGTERM);
+        if (wait(10s) < 0) {
+            ::kill(pid_, SIGKILL);
+            ::waitpid(pid_, nullptr, 0);
+        }
+        pid_ = 0;
+    }
+
+ private:
+    pid_t pid_ = 0;
+};
+
+std::string readText(const fs::path& path) {
+    std::ifstream in(path);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+bool contains(const std::string& text, const std::string& needle) { return text.find(needle) != std::string::npos; }
+
+TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
+    const std::string domain = std::to_string(100 + (::getpid() * 11 + 5) % 120);
+    const std::string session = "e2e-" + std::to_string(::getpid());
+    const std::string dds = " --profile loopback --domain " + domain;
+    const fs::path dir = fs::temp_directory_path() / ("facescan_e2e_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    constexpr int kFrames = 40;
+
+    ChildProcess server({FACESCAN_SERVER_BIN, "--profile", "loopback", "--domain", domain, "--data-dir",
+                         (dir / "data").string(), "--snapshot-hz", "2"},
+                        dir / "server.log");
+    // A recording (--rate max): every frame is processed, so the result does not depend on the machine's speed.
+    ChildProcess agent({FACESCAN_AGENT_BIN, "--profile", "loopback", "--domain", domain, "--session", session,
+                        "--source", "synthetic:frames=" + std::to_string(kFrames) + ",subject=builtin,seed=1", "--rate",
+                        "max", "--wait-for-server", "30"},
+                       dir / "agent.log");
+
+    // watch follows the scan until the server has processed the agent's end of stream.
+    const CliRun watch = runCli("watch " + session + " --save " + (dir / "snaps").string() + dds + " --timeout 30");
+    ASSERT_EQ(watch.exit_code, 0) << watch.out << "\nserver:\n"
+                                  << readText(dir / "server.log") << "\nagent:\n"
+                                  << readText(dir / "agent.log");
+    EXPECT_TRUE(contains(watch.out, "scan " + session + " finished")) << watch.out;
+    EXPECT_TRUE(contains(watch.out, "integrated")) << watch.out;
+    EXPECT_EQ(agent.wait(30s), 0) << readText(dir / "agent.log");
+
+    const CliRun sessions = runCli("sessions" + dds);
+    EXPECT_EQ(sessions.exit_code, 0) << sessions.out;
+    EXPECT_TRUE(contains(sessions.out, session)) << sessions.out;
+    EXPECT_TRUE(contains(sessions.out, "FINISHED")) << sessions.out;
+
+    const CliRun status = runCli("status " + session + dds);
+    EXPECT_EQ(status.exit_code, 0) << status.out;
+    EXPECT_TRUE(contains(status.out, "FINISHED")) << status.out;
+
+    const CliRun ply = runCli("mesh " + session + " -o " + (dir / "face.ply").string() + " --finish" + dds);
+    ASSERT_EQ(ply.exit_code, 0) << ply.out << "\nserver:\n" << readText(dir / "server.log");
+    recon::Mesh mesh;
+    OpenMesh::IO::Options opts = OpenMesh::IO::Options::VertexColor;
+    ASSERT_TRUE(OpenMesh::IO::read_mesh(mesh, (dir / "face.ply").string(), opts));
+    ASSERT_GT(mesh.n_faces(), 1000u);
+    EXPECT_TRUE(opts.check(OpenMesh::IO::Options::VertexColor)) << "the agent sends colour: the mesh has colours";
+
+    // Every other format: the same vertex and face counts read back through OpenMesh (Draco: the codec).
+    for (const char* ext : {"obj", "stl", "off"}) {
+        const fs::path path = dir / (std::string("face.") + ext);
+        const CliRun run = runCli("mesh " + session + " -o " + path.string() + dds);
+        ASSERT_EQ(run.exit_code, 0) << run.out;
+        recon::Mesh back;
+        ASSERT_TRUE(OpenMesh::IO::read_mesh(back, path.string())) << ext;
+        EXPECT_EQ(back.n_faces(), mesh.n_faces()) << ext;
+        // STL stores triangles only; OpenMesh merges equal corners again, which can also join two marching-cubes
+        // vertices that landed on the same point. Other formats keep the vertex list as it is.
+        if (std::string(ext) == "stl") {
+            EXPECT_NEAR(static_cast<double>(back.n_vertices()), static_cast<double>(mesh.n_vertices()),
+                        0.001 * static_cast<double>(mesh.n_vertices()));
+        } else {
+            EXPECT_EQ(back.n_vertices(), mesh.n_vertices()) << ext;
+        }
+    }
+    const CliRun drc = runCli("mesh " + session + " -o " + (dir / "face.drc").string() + dds);
+    ASSERT_EQ(drc.exit_code, 0) << drc.out;
+    const std::string drc_bytes = readText(dir / "face.drc");
+    auto decoded = wire::decodeMeshDraco(reinterpret_cast<const uint8_t*>(drc_bytes.data()), drc_bytes.size());
+    ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
+    EXPECT_EQ(decoded->n_vertices(), mesh.n_vertices());
+    EXPECT_EQ(decoded->n_faces(), mesh.n_faces());
+
+    const CliRun preview = runCli("preview " + session + " -o " + (dir / "preview.png").string() + dds);
+    EXPECT_EQ(preview.exit_code, 0) << preview.out;
+    EXPECT_TRUE(readText(dir / "preview.png").starts_with("\x89PNG")) << preview.out;
+
+    const CliRun trajectory = runCli("trajectory " + session + " -o " + (dir / "traj.txt").string() + dds);
+    EXPECT_EQ(trajectory.exit_code, 0) << trajectory.out;
+    int poses = 0;
+    std::ifstream traj(dir / "traj.txt");
+    for (std::string line; std::getline(traj, line);) {
+        if (!line.empty() && line[0] != '#') ++poses;
+    }
+    EXPECT_GT(poses, kFrames / 2) << readText(dir / "traj.txt");
+    EXPECT_LE(poses, kFrames);
+
+    // Snapshots saved by watch --save: at least one, readable.
+    int snaps = 0;
+    for (const auto& entry : fs::directory_iterator(dir / "snaps")) {
+        recon::Mesh snap;
+        EXPECT_TRUE(OpenMesh::IO::read_mesh(snap, entry.path().string())) << entry.path();
+        ++snaps;
+    }
+    EXPECT_GE(snaps, 1);
+
+    // The server-side error path: a session nobody owns.
+    const CliRun unknown = runCli("status no-such-session" + dds + " --timeout 5");
+    EXPECT_EQ(unknown.exit_code, 1) << unknown.out;
+    EXPECT_TRUE(contains(unknown.out, "facescan: error: unknown session 'no-such-session'")) << unknown.out;
+    const CliRun unknown_mesh = runCli("mesh no-such-session -o " + (dir / "x.ply").string() + dds);
+    EXPECT_EQ(unknown_mesh.exit_code, 1) << unknown_mesh.out;
+    EXPECT_FALSE(fs::exists(dir / "x.ply"));
+
+    // Accuracy against the ground truth: a loose bound for 40 frames (the real target is measured by the bench).
+    const synth::KinectSimulator sim(synth::builtinHead(), [] {
+        synth::SequenceParams p;
+        p.seed = 1;
+        return p;
+    }());
+    const recon::Mesh& gt = sim.head().mesh;
+    auto report = eval::measureAccuracy(mesh, gt, eval::findNoseTip(gt), {}, sim.poseAt(0).inverse());
+    ASSERT_TRUE(report.isOk()) << report.status().toString();
+    std::printf("end-to-end accuracy (%d frames): mean %.2f mm, median %.2f mm, p90 %.2f mm, completeness %.2f\n",
+                kFrames, report->mean_mm, report->median_mm, report->p90_mm, report->completeness);
+    EXPECT_LT(report->median_mm, 2.0);
+    EXPECT_GT(report->completeness, 0.3);
+
+    server.stop();
+    fs::remove_all(dir);
+}
+
+}  // namespace
