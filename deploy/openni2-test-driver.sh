@@ -16,6 +16,9 @@ die() {
 action=$1
 build_dir=$2
 name=libFacescanSynth.so
+# Debian's libOpenNI2 loads only files named lib*.so.0 from the folder (its packaging patch), so that is the
+# installed name.
+installed_name=$name.0
 
 # OpenNI2's driver folder, found from where the dynamic loader finds libOpenNI2.
 lib=$(ldconfig -p 2>/dev/null | awk '$1 ~ /^libOpenNI2\.so/ {print $NF; exit}')
@@ -25,7 +28,7 @@ fi
 [ -n "$lib" ] || die "libOpenNI2 not found (apt-get install libopenni2-0)"
 driver_dir="$(dirname "$(readlink -f "$lib")")/OpenNI2/Drivers"
 [ -d "$driver_dir" ] || die "OpenNI2 driver folder '$driver_dir' does not exist"
-installed="$driver_dir/$name"
+installed="$driver_dir/$installed_name"
 
 case "$action" in
     install)
@@ -39,11 +42,13 @@ case "$action" in
         echo "openni2-test-driver: installed $installed"
         ;;
     remove)
-        if [ -e "$installed" ]; then
-            [ -w "$driver_dir" ] || die "cannot write to $driver_dir (run as root)"
-            rm -f "$installed"
-            echo "openni2-test-driver: removed $installed"
-        fi
+        for f in "$installed" "$driver_dir/$name"; do  # $name: what an earlier version installed
+            if [ -e "$f" ]; then
+                [ -w "$driver_dir" ] || die "cannot write to $driver_dir (run as root)"
+                rm -f "$f"
+                echo "openni2-test-driver: removed $f"
+            fi
+        done
         ;;
     status)
         if [ -e "$installed" ]; then echo "installed: $installed"; else echo "not installed (in $driver_dir)"; fi
