@@ -37,6 +37,23 @@ float medianDepth(const cv::Mat& depth_m, cv::Rect box, float min_m, float max_m
     return *mid;
 }
 
+// Isolated dropouts (Kinect speckle, single-pixel cracks) would each be a depth "boundary" of eq. 3.2 and put a
+// boundary next to every pixel. An invalid pixel with at least 4 valid 8-neighbours takes the farthest of them;
+// real no-data regions (shadow bands, background) are wider than that and stay invalid.
+void fillSpeckles(cv::Mat& depth_m, cv::Mat& valid_count, cv::Mat& farthest) {
+    cv::Mat valid = depth_m > 0;
+    cv::boxFilter(valid / 255, valid_count, CV_8U, cv::Size(3, 3), cv::Point(-1, -1), false);
+    cv::dilate(depth_m, farthest, cv::Mat());
+    for (int v = 0; v < depth_m.rows; ++v) {
+        float* z = depth_m.ptr<float>(v);
+        const uchar* n = valid_count.ptr<uchar>(v);
+        const float* f = farthest.ptr<float>(v);
+        for (int u = 0; u < depth_m.cols; ++u) {
+            if (z[u] <= 0 && n[u] >= 4) z[u] = f[u];
+        }
+    }
+}
+
 class FixedMask : public cv::BaseCascadeClassifier::MaskGenerator {
  public:
     explicit FixedMask(cv::Mat mask) : mask_(std::move(mask)) {}
@@ -210,11 +227,12 @@ StatusOr<FaceDetections> FaceDetector::detect(const cv::Mat& depth_m, const cv::
     const int step = 1 << level;
     const Intrinsics k_level = depth.scaled(level);
     if (level == 0) {
-        depth_level_ = depth_m;
+        depth_m.copyTo(depth_level_);
     } else {
         // Nearest neighbour keeps depth steps sharp (an average would smear them into ramps).
         cv::resize(depth_m, depth_level_, cv::Size(k_level.width_px, k_level.height_px), 0, 0, cv::INTER_NEAREST);
     }
+    fillSpeckles(depth_level_, valid_count_, filled_);
     depthBoundaryMap(depth_level_, params_.boundary_jump_m, boundary_);         // eq. 3.2
     distanceToBoundary(boundary_, distance_);                                   // eq. 3.3-3.5
     faceCandidateMask(depth_level_, distance_, k_level.fx_px, params_, mask_);  // eq. 3.1, 3.6
@@ -280,7 +298,9 @@ StatusOr<FaceDetections> FaceDetector::detect(const cv::Mat& depth_m, const cv::
                 }
                 if (colour_camera.registered) break;
             }
-            const float half = 0.5f * static_cast<float>(win) + 1.0f;
+            // Half a window so every window centred in the box fits, plus the slack a turned face's box has
+            // against the silhouette's centre.
+            const float half = (0.5f + params_.centre_slack) * static_cast<float>(win) + 1.0f;
             const cv::Rect roi =
                 cv::Rect(cv::Point(static_cast<int>(cu0 - half), static_cast<int>(cv0 - half)),
                          cv::Point(static_cast<int>(cu1 + half) + 1, static_cast<int>(cv1 + half) + 1)) &
@@ -340,7 +360,8 @@ StatusOr<FaceDetections> FaceDetector::detect(const cv::Mat& depth_m, const cv::
         if (accept) {
             const int cu = (box_depth.x + box_depth.width / 2) >> level;
             const int cv_ = (box_depth.y + box_depth.height / 2) >> level;
-            const int r = std::max(1, (box_depth.width >> level) / 4);
+            const int r =
+                std::max(1, static_cast<int>(params_.centre_slack * static_cast<float>(box_depth.width)) >> level);
             const cv::Rect probe =
                 cv::Rect(cu - r, cv_ - r, 2 * r + 1, 2 * r + 1) & cv::Rect(0, 0, mask_.cols, mask_.rows);
             accept = probe.area() > 0 && cv::countNonZero(mask_(probe)) > 0;

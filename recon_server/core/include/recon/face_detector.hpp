@@ -44,6 +44,9 @@ struct FaceDetectorParams {
     // A window is tried at a centre whose eq. 3.1 range, widened by this fraction, contains it: the cascade's
     // ladder steps 10%, and the box jitters by as much. (ratio)
     float roi_margin = 0.10f;
+    // A window is tried when its centre is within this fraction of its width of a candidate pixel: a face turned
+    // by 25 deg has its box centre ~0.1 box widths off the silhouette's centre line. (ratio)
+    float centre_slack = 0.15f;
     double scale_factor = 1.1;  // cascade pyramid step, identical to the stock baseline (ratio)
     int min_neighbours = 3;     // cascade grouping, identical to the stock baseline (count)
     std::string cascade_path = FACESCAN_HAAR_FRONTAL_DEFAULT;  // haarcascade_frontalface_default.xml
@@ -126,7 +129,7 @@ class FaceDetector {
     FaceDetectorParams params_;
     cv::CascadeClassifier cascade_;
     // Scratch reused between frames: no allocation after the first frame of a given size.
-    cv::Mat depth_level_, boundary_, distance_, mask_, labels_, stats_, centroids_, grey_;
+    cv::Mat depth_level_, valid_count_, filled_, boundary_, distance_, mask_, labels_, stats_, centroids_, grey_;
 };
 
 }  // namespace facescan::recon
