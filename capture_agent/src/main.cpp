@@ -115,7 +115,7 @@ int main(int argc, char** argv) {
     auto agent = capture::Agent::create(options);
     if (!agent.isOk()) {
         std::fprintf(stderr, "facescan-agent: %s\n", agent.status().toString().c_str());
-        return 1;
+        return agent.status().code() == StatusCode::kInvalidArgument ? 2 : 1;
     }
     const capture::SourceInfo& info = (*agent)->sourceInfo();
     std::printf("facescan-agent: session %s\n", (*agent)->sessionId().c_str());

@@ -158,8 +158,10 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
         while (!s.frame_writer.waitForReaders(1, 200ms)) {
             if (stop) return Status::ok();
             if (options_.wait_for_server_s > 0 && Clock::now() > deadline) {
-                return deadlineExceeded("no facescan-server appeared on " + where + " within " +
-                                        std::to_string(options_.wait_for_server_s) + " s");
+                char seconds[32];
+                std::snprintf(seconds, sizeof(seconds), "%g", options_.wait_for_server_s);
+                return deadlineExceeded("no facescan-server appeared on " + where + " within " + seconds +
+                                        " s: start one with the same --profile and --domain");
             }
         }
     }
