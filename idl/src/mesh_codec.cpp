@@ -214,17 +214,19 @@ Status decodeMeshDraco(const uint8_t* data, size_t size, recon::Mesh& mesh, size
     const draco::PointAttribute* pos = dm->GetNamedAttribute(draco::GeometryAttribute::POSITION);
     const draco::PointAttribute* nrm = dm->GetNamedAttribute(draco::GeometryAttribute::NORMAL);
     const draco::PointAttribute* col = dm->GetNamedAttribute(draco::GeometryAttribute::COLOR);
-    // Draco does not bound-check a point's value index on access: check every attribute's mapping here.
-    auto usable = [nv](const draco::PointAttribute* a) {
-        if (a == nullptr || a->num_components() != 3 || a->buffer() == nullptr) return false;
+    // Draco does not bound-check a point's value index on access: check every attribute's mapping here. The data
+    // type must be what our encoder writes (float positions/normals, uint8 colours): Draco's ConvertValue reads a
+    // hostile DT_BOOL attribute's bytes as bool, which is undefined behaviour (found by fuzz_mesh_draco).
+    auto usable = [nv](const draco::PointAttribute* a, draco::DataType type) {
+        if (a == nullptr || a->num_components() != 3 || a->buffer() == nullptr || a->data_type() != type) return false;
         for (size_t i = 0; i < nv; ++i) {
             if (a->mapped_index(draco::PointIndex(static_cast<uint32_t>(i))).value() >= a->size()) return false;
         }
         return true;
     };
-    if (!usable(pos)) return dataLoss("Draco mesh has no usable 3D position attribute");
-    if (nrm && !usable(nrm)) nrm = nullptr;
-    if (col && !usable(col)) col = nullptr;
+    if (!usable(pos, draco::DT_FLOAT32)) return dataLoss("Draco mesh has no usable 3D position attribute");
+    if (nrm && !usable(nrm, draco::DT_FLOAT32)) nrm = nullptr;
+    if (col && !usable(col, draco::DT_UINT8)) col = nullptr;
 
     mesh.clear();
     mesh.reserve(nv, 3 * nf / 2 + 3, nf);

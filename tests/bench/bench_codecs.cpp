@@ -5,8 +5,6 @@
 // colours). JSON keys (DESIGN.md s6): depth{codec,ratio,encode_ms,decode_ms} colour{...}
 // mesh{bytes,encode_ms,decode_ms}; per-codec detail under depth_sets{set:{codec:{ratio,encode_ms,decode_ms}}}.
 #include <OpenMesh/Core/IO/MeshIO.hh>
-#include <OpenMesh/Tools/Subdivider/Uniform/LoopT.hh>
-#include <OpenMesh/Tools/Subdivider/Uniform/Sqrt3T.hh>
 #include <algorithm>
 #include <cstdio>
 #include <ctime>
@@ -19,6 +17,11 @@
 #include "bench_command.hpp"
 #include "test_data.hpp"
 #include "wire/codecs.hpp"
+// clang-format off
+// OpenMesh's subdividers only compile after the mesh kernel headers (pulled in by wire/codecs.hpp) are seen.
+#include <OpenMesh/Tools/Subdivider/Uniform/LoopT.hh>
+#include <OpenMesh/Tools/Subdivider/Uniform/Sqrt3T.hh>
+// clang-format on
 
 #if __has_include(<synth/kinect_simulator.hpp>)
 #include "synth/kinect_simulator.hpp"

@@ -141,7 +141,9 @@ TEST_P(DepthCodecTest, CorruptBytesNeverCrashAndHeaderDamageIsCaught) {
             if (i < kDepthHeaderBytes) {
                 EXPECT_FALSE(st.isOk()) << "header byte " << i;
             }
-            if (st.isOk()) EXPECT_EQ(out.size(), cv::Size(24, 18));
+            if (st.isOk()) {
+                EXPECT_EQ(out.size(), cv::Size(24, 18));
+            }
         }
     }
 }
