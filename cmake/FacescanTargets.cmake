@@ -3,10 +3,15 @@ include_guard(GLOBAL)
 
 function(facescan_warnings target)
     # C++ only: idlc-generated C sources compile inside the wire library and are not ours to warn about.
-    target_compile_options(${target} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:-Wall -Wextra -Wpedantic -Wshadow=local -Wnon-virtual-dtor>)
-    # GCC 12 reports maybe-uninitialized inside OpenMesh's and Eigen's templates at -O2 (false positives in
-    # code we do not own, e.g. OpenMesh::PropertyT<Vec3uc>::push_back); -Wuninitialized stays on.
-    target_compile_options(${target} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:-Wno-maybe-uninitialized>)
+    target_compile_options(${target} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:-Wall -Wextra -Wpedantic -Wnon-virtual-dtor>)
+    if(CMAKE_CXX_COMPILER_ID STREQUAL "GNU")
+        # GCC 12 reports maybe-uninitialized inside OpenMesh's and Eigen's templates at -O2 (false positives in
+        # code we do not own, e.g. OpenMesh::PropertyT<Vec3uc>::push_back); -Wuninitialized stays on.
+        target_compile_options(${target} PRIVATE
+            $<$<COMPILE_LANGUAGE:CXX>:-Wshadow=local -Wno-maybe-uninitialized>)
+    else()
+        target_compile_options(${target} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:-Wshadow-uncaptured-local>)
+    endif()
     if(FACESCAN_WERROR)
         target_compile_options(${target} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:-Werror>)
     endif()

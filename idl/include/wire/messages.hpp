@@ -40,7 +40,7 @@ struct EncodedFrame {
     uint32_t seq = 0;
     int64_t capture_time_ns = 0;  // agent's CLOCK_REALTIME at capture (latency)
     int64_t source_time_ns = 0;   // the source's timestamp (trajectories)
-    DepthCodecId depth_codec = DepthCodecId::kRvlZstd;
+    DepthCodecId depth_codec = DepthCodecParams{}.codec;
     std::vector<uint8_t> depth;
     ColourCodecId colour_codec = ColourCodecId::kNone;
     std::vector<uint8_t> colour;
