@@ -38,12 +38,12 @@ struct Tally {
     dd::Score ours, stock;
     int rejected = 0;
     // Segmentation (where a head label exists).
-    int segmented = 0;
+    int segmented = 0, iou_frames = 0;
     double segment_ms = 0, iou_sum = 0, iou_min = 1;
     void add(const Tally& t) {
         frames += t.frames, ours_ms += t.ours_ms, stock_ms += t.stock_ms, candidates_ms += t.candidates_ms;
         ours.add(t.ours), stock.add(t.stock), rejected += t.rejected;
-        segmented += t.segmented, segment_ms += t.segment_ms, iou_sum += t.iou_sum;
+        segmented += t.segmented, segment_ms += t.segment_ms, iou_sum += t.iou_sum, iou_frames += t.iou_frames;
         iou_min = std::min(iou_min, t.iou_min);
     }
 };
@@ -89,6 +89,7 @@ Tally runSynthetic(recon::FaceDetector& detector, int frames_per_distance) {
     Tally t;
     t.name = "synthetic";
     const synth::HeadModel head = synth::defaultHead();
+    std::printf("synthetic subject: %s\n", head.name.c_str());
     recon::HeadSegmenter segmenter;
     for (float distance : {0.5f, 0.8f, 1.1f, 1.5f}) {
         synth::SequenceParams p;
@@ -114,8 +115,11 @@ Tally runSynthetic(recon::FaceDetector& detector, int frames_per_distance) {
             const auto t0 = Clock::now();
             segmenter.segment(frame.depth_m, sim.intrinsics(), found.faces.front().box_depth_px, seg);
             t.segment_ms += msSince(t0);
-            const double iou = maskIou(seg.mask, truth.label == static_cast<int>(synth::PixelLabel::kHead));
+            // Against the head label where the sensor measured depth: nothing else can be segmented.
+            const cv::Mat head = (truth.label == static_cast<int>(synth::PixelLabel::kHead)) & (frame.depth_m > 0);
+            const double iou = maskIou(seg.mask, head);
             ++t.segmented;
+            ++t.iou_frames;
             t.iou_sum += iou;
             t.iou_min = std::min(t.iou_min, iou);
         }
@@ -187,7 +191,7 @@ void printRow(const Tally& t) {
                 t.stock_ms / n, t.ours_ms > 0 ? t.stock_ms / t.ours_ms : 0.0, t.ours.recall(), t.stock.recall(),
                 t.ours.false_positives, t.stock.false_positives, t.rejected);
     if (t.segmented > 0) std::printf("   seg %.2f ms", t.segment_ms / t.segmented);
-    if (t.iou_sum > 0) std::printf(" IoU mean %.3f min %.3f", t.iou_sum / t.segmented, t.iou_min);
+    if (t.iou_frames > 0) std::printf(" head IoU mean %.3f min %.3f", t.iou_sum / t.iou_frames, t.iou_min);
     std::printf("\n");
 }
 
@@ -285,7 +289,7 @@ int runDetect(const std::vector<std::string>& args) {
             all.frames, all.ours_ms / n, all.stock_ms / n, all.ours_ms > 0 ? all.stock_ms / all.ours_ms : 0.0,
             all.ours.recall(), all.stock.recall(), all.ours.false_positives, all.stock.false_positives,
             all.segmented ? all.segment_ms / all.segmented : 0.0,
-            all.iou_sum > 0 ? all.iou_sum / std::max(1, all.segmented) : 0.0, all.iou_sum > 0 ? all.iou_min : 0.0);
+            all.iou_frames > 0 ? all.iou_sum / all.iou_frames : 0.0, all.iou_frames > 0 ? all.iou_min : 0.0);
         bool first = true;
         for (const Tally& t : rows) {
             const double m = std::max(1, t.frames);

@@ -21,6 +21,7 @@ Status HeadSegmenterParams::validate() const {
     if (!(search_half_width_m > 0 && search_above_m > 0 && search_below_m > 0)) {
         return invalidArgument("search extents must be > 0");
     }
+    if (!(bridge_gap_m >= 0 && chin_margin_m >= 0)) return invalidArgument("bridge_gap_m, chin_margin_m must be >= 0");
     if (!(torso_width_ratio >= 1)) return invalidArgument("torso_width_ratio must be >= 1");
     if (!(neck_shift_max_m >= 0)) return invalidArgument("neck_shift_max_m must be >= 0");
     if (!(head_width_min_m > 0 && head_width_max_m > head_width_min_m && head_height_min_m > 0 &&
@@ -138,22 +139,33 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
         }
     }
     const float zmin = params_.min_depth_m, zmax = params_.max_depth_m, jump = params_.grow_jump_m;
+    const int gap_px = static_cast<int>(params_.bridge_gap_m * px_per_m);
     for (size_t head = 0; head < queue_.size(); ++head) {
         const int idx = queue_[head];
         const int y = idx / w, x = idx - y * w;
         const float z = depth_m.at<float>(y + roi.y, x + roi.x);
-        auto visit = [&](int nx, int ny) {
-            const int nidx = ny * w + nx;
-            if (visited_.data[nidx]) return;
-            const float nz = depth_m.at<float>(ny + roi.y, nx + roi.x);
-            if (nz < zmin || nz > zmax || std::fabs(nz - z) >= jump) return;
-            visited_.data[nidx] = 1;
-            queue_.push_back(nidx);
+        // A neighbour without depth may be a thin no-data band (grazing angle at the ears and jaw): look up to
+        // gap_px further in the same direction for depth that continues the surface, and jump the gap.
+        auto visit = [&](int dx, int dy) {
+            for (int step = 1; step <= gap_px + 1; ++step) {
+                const int nx = x + dx * step, ny = y + dy * step;
+                if (nx < 0 || ny < 0 || nx >= w || ny >= h) return;
+                const float nz = depth_m.at<float>(ny + roi.y, nx + roi.x);
+                if (nz <= 0.0f) continue;  // no data: try one further
+                const int nidx = ny * w + nx;
+                if (visited_.data[nidx] || nz < zmin || nz > zmax ||
+                    std::fabs(nz - z) >= jump * static_cast<float>(step)) {
+                    return;
+                }
+                visited_.data[nidx] = 1;
+                queue_.push_back(nidx);
+                return;
+            }
         };
-        if (x > 0) visit(x - 1, y);
-        if (x + 1 < w) visit(x + 1, y);
-        if (y > 0) visit(x, y - 1);
-        if (y + 1 < h) visit(x, y + 1);
+        visit(-1, 0);
+        visit(1, 0);
+        visit(0, -1);
+        visit(0, 1);
     }
     if (queue_.empty()) return fail("no pixel of the face box is at the face's depth");
 
@@ -186,16 +198,26 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
         }
         const double mu_h = rh ? static_cast<double>(ph) / rh : 0, mu_t = rt ? static_cast<double>(pt) / rt : 0;
         if (rt > 0 && mu_t >= params_.torso_width_ratio * mu_h) {
-            // Neck shift: the narrowest (3-row mean) row between the face centre and the shoulder line.
+            // Neck shift: the neck is the narrowest part between the face and the shoulder line, and it is about
+            // as wide all along; the head ends where it starts, under the jaw. So: the narrowest (3-row mean)
+            // width in the search band, then the highest row of the band whose width is within 15% of it.
             const int shift_px = static_cast<int>(params_.neck_shift_max_m * px_per_m);
-            const int from = std::max({top + h_min_px / 2, cv_ - roi.y, split - shift_px});
-            cut = split;
+            const int from = std::max({top + h_min_px / 2, cv_ - roi.y, split - shift_px, top + 1});
+            auto width3 = [&](int y) {
+                return (row_count_[static_cast<size_t>(y - 1)] + row_count_[static_cast<size_t>(y)] +
+                        row_count_[static_cast<size_t>(y + 1)]) /
+                       3.0;
+            };
             double narrowest = 1e30;
-            for (int y = std::max(from, top + 1); y <= split && y + 1 < h; ++y) {
-                const double width3 = row_count_[static_cast<size_t>(y - 1)] + row_count_[static_cast<size_t>(y)] +
-                                      row_count_[static_cast<size_t>(y + 1)];
-                if (width3 < narrowest) narrowest = width3, cut = y;
+            for (int y = from; y <= split && y + 1 < h; ++y) narrowest = std::min(narrowest, width3(y));
+            cut = split;
+            for (int y = from; y <= split && y + 1 < h; ++y) {
+                if (width3(y) <= 1.15 * narrowest) {
+                    cut = y;
+                    break;
+                }
             }
+            cut = std::min(split, cut + static_cast<int>(params_.chin_margin_m * px_per_m));
             out.split_row = cut + roi.y;
         }
     }
@@ -224,8 +246,27 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
     out.head_box_px = cv::Rect(cv::Point(umin, vmin), cv::Point(umax + 1, vmax + 1));
     out.centroid_m = (sum / out.pixels).cast<float>();
     const float z_c = out.centroid_m.z();
-    out.extent_m = {static_cast<float>(out.head_box_px.width) * z_c / k.fx_px,
-                    static_cast<float>(out.head_box_px.height) * z_c / k.fy_px, z_hi - z_lo};
+    // Extents between the 1st and 99th percentile of columns and rows: a few stray pixels (flying pixels at the
+    // silhouette) must not make a head look too wide.
+    col_hist_.assign(static_cast<size_t>(w), 0);
+    row_hist_.assign(static_cast<size_t>(h), 0);
+    for (int idx : queue_) {
+        const int y = idx / w;
+        if (y > cut) continue;
+        ++row_hist_[static_cast<size_t>(y)];
+        ++col_hist_[static_cast<size_t>(idx - y * w)];
+    }
+    auto span = [&](const std::vector<int>& hist) {
+        const int lo_n = out.pixels / 100, hi_n = out.pixels - out.pixels / 100;
+        int acc = 0, lo = -1, hi = -1;
+        for (int i = 0; i < static_cast<int>(hist.size()); ++i) {
+            acc += hist[static_cast<size_t>(i)];
+            if (lo < 0 && acc > lo_n) lo = i;
+            if (hi < 0 && acc >= hi_n) hi = i;
+        }
+        return static_cast<float>(hi - lo + 1);
+    };
+    out.extent_m = {span(col_hist_) * z_c / k.fx_px, span(row_hist_) * z_c / k.fy_px, z_hi - z_lo};
     const float width_m = out.extent_m.x(), height_m = out.extent_m.y();
     if (width_m < params_.head_width_min_m || width_m > params_.head_width_max_m ||
         height_m < params_.head_height_min_m || height_m > params_.head_height_max_m) {

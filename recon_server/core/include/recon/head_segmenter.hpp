@@ -14,7 +14,12 @@
 namespace facescan::recon {
 
 struct HeadSegmenterParams {
-    float grow_jump_m = 0.02f;          // delta_max of Algorithm 1: largest depth step between 4-neighbours (metres)
+    float grow_jump_m = 0.02f;  // delta_max of Algorithm 1: largest depth step between 4-neighbours (metres)
+    // Algorithm 1 steps over no-data gaps up to this wide (the grazing-angle band between cheek and ear).
+    float bridge_gap_m = 0.006f;  // metres
+    // Kept below the top of the neck so the chin's underside stays in the model (the renderer's head label
+    // also ends on a plane just under the chin).
+    float chin_margin_m = 0.015f;       // metres
     float seed_band_m = 0.06f;          // seed pixels lie within this of the face box's median depth (metres)
     float min_depth_m = 0.4f;           // Kinect v1 near limit; closer depth is "too close" (metres)
     float max_depth_m = 4.0f;           // farther depth is ignored (metres)
@@ -23,8 +28,8 @@ struct HeadSegmenterParams {
     float search_below_m = 0.45f;       // ROI extent below: enough torso for the width split (metres)
     // Eq. 3.11 applies only when the torso is "significantly" wider than the head: mu_T >= ratio * mu_H.
     float torso_width_ratio = 1.3f;  // ratio
-    // The eq. 3.11 line runs through the shoulders; the neck above it is removed by moving the line up to the
-    // narrowest row within this distance (the thesis' neck shift, made adaptive to the person).
+    // The eq. 3.11 line runs through the shoulders; the neck above it is removed by moving the line up to the top
+    // of the neck (under the jaw), searched within this distance (the thesis' neck shift, made adaptive).
     float neck_shift_max_m = 0.10f;  // metres
     // What counts as a head (DESIGN.md s1; also the depth-only fallback's blob test).
     float head_width_min_m = 0.08f;   // metres
@@ -63,7 +68,7 @@ class HeadSegmenter {
     // Scratch reused between frames.
     cv::Mat visited_;
     std::vector<int> queue_;
-    std::vector<int> row_count_, row_min_, row_max_;
+    std::vector<int> row_count_, row_min_, row_max_, col_hist_, row_hist_;
     std::vector<float> scratch_;
 };
 
