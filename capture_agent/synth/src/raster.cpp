@@ -74,7 +74,9 @@ void rasterise(const std::vector<Eigen::Vector3f>& points_camera, const std::vec
                         const float w1 = ((px - a.u) * (c.v - a.v) - (py - a.v) * (c.u - a.u)) * inv_area;
                         const float w2 = ((b.u - a.u) * (py - a.v) - (b.v - a.v) * (px - a.u)) * inv_area;
                         const float w0 = 1.0f - w1 - w2;
-                        if (w0 < 0 || w1 < 0 || w2 < 0) continue;
+                        // A hair of tolerance so that the shared edge of two triangles is never missed by both
+                        // (rounding).
+                        if (w0 < -1e-6f || w1 < -1e-6f || w2 < -1e-6f) continue;
                         const float inv_z = w0 * a.inv_z + w1 * b.inv_z + w2 * c.inv_z;
                         const float z = 1.0f / inv_z;
                         if (zrow[u] != 0 && z >= zrow[u]) continue;

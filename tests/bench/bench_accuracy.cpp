@@ -1,0 +1,156 @@
+// facescan-bench accuracy: the ruler. Rigidly aligns a mesh to the ground-truth head and reports point-to-surface
+// distances over the face region, completeness and outliers (DESIGN.md s6). --baseline-frame measures one raw
+// noisy synthetic frame, back-projected, against the truth: the baseline that fusion must beat by far.
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bench_command.hpp"
+#include "eval/accuracy.hpp"
+#include "eval/depth_mesh.hpp"
+#include "eval/mesh_io.hpp"
+#include "synth/kinect_simulator.hpp"
+
+namespace {
+
+using namespace facescan;
+
+int usage(std::FILE* out) {
+    std::fprintf(
+        out,
+        "usage: facescan-bench accuracy --mesh M --gt G [--nose X,Y,Z] [--init FILE] [--no-align] [--json]\n"
+        "       facescan-bench accuracy --baseline-frame [--distance M] [--head builtin|scan] [--frame I]"
+        " [--json]\n"
+        "  G is a head-frame mesh (y up, face along +z; e.g. head_gt.ply of a synthetic TUM folder); its nose\n"
+        "  tip is found unless --nose gives it. --init FILE: 4x4 row-major T_gt_mesh guess, or a\n"
+        "  T_camera0_head.txt (mesh in the first camera frame), whose inverse is used when --init-inverse.\n"
+        "  Face region: G within 0.11 m of the nose tip, facing forward. Distances in mm, M to G surface.\n");
+    return out == stdout ? 0 : 2;
+}
+
+std::optional<recon::Pose> readPose(const std::string& path) {
+    std::ifstream in(path);
+    Eigen::Matrix4f m;
+    for (int i = 0; i < 16; ++i) {
+        if (!(in >> m(i / 4, i % 4))) return std::nullopt;
+    }
+    recon::Pose T;
+    T.matrix() = m;
+    return T;
+}
+
+void printReport(const char* what, const eval::AccuracyReport& r, bool json) {
+    std::printf("%s\n", what);
+    std::printf("  %-26s %9.3f\n  %-26s %9.3f\n  %-26s %9.3f\n  %-26s %9.3f\n", "mean |d| (mm)", r.mean_mm, "RMS (mm)",
+                r.rms_mm, "median (mm)", r.median_mm, "p90 (mm)", r.p90_mm);
+    std::printf("  %-26s %9.4f\n  %-26s %9.4f\n  %-26s %9d\n  %-26s %9d\n", "completeness (<= 2 mm)", r.completeness,
+                "outliers (> 5 mm)", r.outliers, "mesh vertices used", r.mesh_vertices_used, "GT face vertices",
+                r.gt_face_vertices);
+    if (json) {
+        std::printf(
+            "{\"mean_mm\":%.4f,\"rms_mm\":%.4f,\"median_mm\":%.4f,\"p90_mm\":%.4f,\"completeness\":%.5f,"
+            "\"outliers\":%.5f,\"mesh_vertices_used\":%d}\n",
+            r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, r.completeness, r.outliers, r.mesh_vertices_used);
+    }
+}
+
+int runAccuracy(const std::vector<std::string>& args) {
+    std::string mesh_path, gt_path, init_path, head_arg = "default";
+    std::optional<Eigen::Vector3f> nose;
+    bool json = false, baseline = false, init_inverse = false;
+    eval::AccuracyParams params;
+    synth::SequenceParams seq;
+    int frame_index = 0;
+    for (size_t i = 0; i < args.size(); ++i) {
+        const std::string& a = args[i];
+        const bool v = i + 1 < args.size();
+        if (a == "--json") {
+            json = true;
+        } else if (a == "--baseline-frame") {
+            baseline = true;
+        } else if (a == "--no-align") {
+            params.align = false;
+        } else if (a == "--init-inverse") {
+            init_inverse = true;
+        } else if (a == "--mesh" && v) {
+            mesh_path = args[++i];
+        } else if (a == "--gt" && v) {
+            gt_path = args[++i];
+        } else if (a == "--init" && v) {
+            init_path = args[++i];
+        } else if (a == "--head" && v) {
+            head_arg = args[++i];
+        } else if (a == "--distance" && v) {
+            seq.distance_m = std::strtof(args[++i].c_str(), nullptr);
+        } else if (a == "--frame" && v) {
+            frame_index = std::atoi(args[++i].c_str());
+        } else if (a == "--nose" && v) {
+            Eigen::Vector3f p;
+            if (std::sscanf(args[++i].c_str(), "%f,%f,%f", &p.x(), &p.y(), &p.z()) != 3) return usage(stderr);
+            nose = p;
+        } else if (a == "--help" || a == "-h") {
+            return usage(stdout);
+        } else {
+            std::fprintf(stderr, "accuracy: unknown or incomplete option '%s'\n", a.c_str());
+            return usage(stderr);
+        }
+    }
+    if (baseline) {
+        if (const auto st = seq.validate(); !st.isOk()) {
+            std::fprintf(stderr, "accuracy: %s\n", st.toString().c_str());
+            return 2;
+        }
+        synth::HeadModel head = head_arg == "builtin" ? synth::builtinHead() : synth::defaultHead();
+        if (head_arg == "scan" && head.name != "leeperrysmith") {
+            std::fprintf(stderr, "accuracy: the Lee Perry-Smith scan was not found (set FACESCAN_DATA_DIR)\n");
+            return 1;
+        }
+        const synth::KinectSimulator sim(std::move(head), seq);
+        recon::RgbdFrame frame;
+        synth::FrameTruth truth;
+        sim.render(frame_index, frame, &truth);
+        const cv::Mat head_mask = truth.label == static_cast<int>(synth::PixelLabel::kHead);
+        const recon::Mesh raw = eval::meshFromDepth(frame.depth_m, sim.intrinsics(), head_mask);
+        const auto rep = eval::measureAccuracy(raw, sim.head().mesh, sim.head().nose_tip_head, params,
+                                               truth.T_camera_head.inverse());
+        if (!rep.isOk()) {
+            std::fprintf(stderr, "accuracy: %s\n", rep.status().toString().c_str());
+            return 1;
+        }
+        char title[160];
+        std::snprintf(title, sizeof title, "single raw frame %d of %s at %.2f m (noisy, back-projected, head pixels)",
+                      frame_index, sim.head().name.c_str(), seq.distance_m);
+        printReport(title, *rep, json);
+        return 0;
+    }
+    if (mesh_path.empty() || gt_path.empty()) return usage(stderr);
+    auto mesh = eval::readMesh(mesh_path);
+    auto gt = eval::readMesh(gt_path);
+    if (!mesh.isOk() || !gt.isOk()) {
+        std::fprintf(stderr, "accuracy: %s\n", (!mesh.isOk() ? mesh.status() : gt.status()).toString().c_str());
+        return 1;
+    }
+    std::optional<recon::Pose> init;
+    if (!init_path.empty()) {
+        init = readPose(init_path);
+        if (!init) {
+            std::fprintf(stderr, "accuracy: %s does not hold a 4x4 matrix\n", init_path.c_str());
+            return 1;
+        }
+        if (init_inverse) init = init->inverse();
+    }
+    const auto rep = eval::measureAccuracy(*mesh, *gt, nose.value_or(eval::findNoseTip(*gt)), params, init);
+    if (!rep.isOk()) {
+        std::fprintf(stderr, "accuracy: %s\n", rep.status().toString().c_str());
+        return 1;
+    }
+    printReport(("accuracy of " + mesh_path + " against " + gt_path).c_str(), *rep, json);
+    return 0;
+}
+
+}  // namespace
+
+FACESCAN_BENCH_COMMAND("accuracy", "mesh vs ground-truth head: mean/RMS/median/p90 mm, completeness, outliers",
+                       runAccuracy);
