@@ -84,14 +84,15 @@ double maskIou(const cv::Mat& a, const cv::Mat& b) {
 }
 
 #ifdef FACESCAN_BENCH_HAVE_SYNTH
-// Four sequences at 0.5, 0.8, 1.1, 1.5 m; the head turns +-25 deg and nods +-10 deg.
+// Four sequences with the face (nose tip) at 0.5, 0.8, 1.1 and 1.5 m: SequenceParams::distance_m places the
+// head-frame origin, 0.10 m behind the nose tip. The head turns +-25 deg and nods +-10 deg.
 Tally runSynthetic(recon::FaceDetector& detector, int frames_per_distance) {
     Tally t;
     t.name = "synthetic";
     const synth::HeadModel head = synth::defaultHead();
     std::printf("synthetic subject: %s\n", head.name.c_str());
     recon::HeadSegmenter segmenter;
-    for (float distance : {0.5f, 0.8f, 1.1f, 1.5f}) {
+    for (float distance : {0.6f, 0.9f, 1.2f, 1.6f}) {
         synth::SequenceParams p;
         p.frames = frames_per_distance;
         p.distance_m = distance;
@@ -207,7 +208,7 @@ int runDetect(const std::vector<std::string>& args) {
         } else if (args[i] == "--help" || args[i] == "-h") {
             std::printf(
                 "usage: facescan-bench detect [--input SRC]... [--json]\n"
-                "  SRC: synthetic[:frames=N] (N per distance, 4 distances 0.5-1.5 m; default 30), biwi:DIR, dlib:DIR.\n"
+                "  SRC: synthetic[:frames=N] (N per distance, faces at 0.5-1.5 m; default 30), biwi:DIR, dlib:DIR.\n"
                 "  Without --input: all three, from the shared data folder when present.\n");
             return 0;
         } else {
