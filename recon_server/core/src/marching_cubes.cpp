@@ -1,9 +1,3 @@
-// OpenMesh's VectorT default constructor leaves its elements uninitialised by design, and GCC 12 flags every
-// property push_back instantiated here; OpenMesh's headers are not marked SYSTEM by the build, so silence the two
-// diagnostics in this file only.
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-
 #include "recon/marching_cubes.hpp"
 
 #include <algorithm>
@@ -48,7 +42,9 @@ EdgeTable buildTable() {
         }
         return -1;
     };
-    auto mid = [&](int e) { return 0.5f * (cornerPos(t.corners[e][0]) + cornerPos(t.corners[e][1])); };
+    auto mid = [&](int e) -> Eigen::Vector3f {
+        return 0.5f * (cornerPos(t.corners[e][0]) + cornerPos(t.corners[e][1]));
+    };
     for (int config = 0; config < 256; ++config) {
         std::array<int, 12> next;
         next.fill(-1);

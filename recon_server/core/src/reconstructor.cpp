@@ -86,7 +86,6 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         result.tracking.T_world_camera = T_world_camera_;
         result.reason = why;
         ++consecutive_failures_;
-        velocity_ = Pose::Identity();  // the motion since the last good frame is unknown
         result.consecutive_failures = consecutive_failures_;
         result.reacquiring = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
         return result;
@@ -107,7 +106,10 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     } else {
         // Registration against the ray-cast model (thesis 4.1.3, frame-to-model).
         const bool reacquiring = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
-        Pose guess = T_world_camera_ * velocity_;  // constant-velocity prediction
+        // The prediction is the last pose, as in the thesis. A constant-velocity prediction was tried and made
+        // tracking unstable on the synthetic head: it re-applies the error along the head's weakly constrained
+        // (sliding) direction every frame, and the error grew twofold per frame.
+        Pose guess = T_world_camera_;
         if (reacquiring || frames_integrated_ == 1) {
             // Eq. 4.11 for the first frame pair and for re-acquisition after a loss: align the centroids.
             guess = T_world_camera_;
@@ -129,7 +131,6 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
             result.ms.icp = watch.elapsedMs();
             return result;
         }
-        velocity_ = T_world_camera_.inverse() * estimate;
         T_world_camera_ = estimate;
     }
 
@@ -168,7 +169,7 @@ void Reconstructor::raycastModel(const cv::Rect& roi) {
 void Reconstructor::reset() {
     std::lock_guard<std::mutex> lock(volume_mutex_);
     volume_.reset();
-    T_world_camera_ = T_world_model_ = velocity_ = Pose::Identity();
+    T_world_camera_ = T_world_model_ = Pose::Identity();
     have_model_ = false;
     frames_integrated_ = 0;
     consecutive_failures_ = 0;

@@ -110,7 +110,6 @@ class Reconstructor {
     cv::Mat depth_clean_;   // CV_32F: the input with NaN/inf replaced by 0
     Pose T_world_camera_ = Pose::Identity();
     Pose T_world_model_ = Pose::Identity();
-    Pose velocity_ = Pose::Identity();  // last inter-frame motion, for the constant-velocity prediction
     bool have_model_ = false;
     int frames_integrated_ = 0;
     int consecutive_failures_ = 0;
