@@ -55,6 +55,8 @@ struct SurfaceDistance::Impl {
     std::vector<Vec3> tri_normals;
     std::vector<int> face_ids;          // mesh face index of each triangle
     std::vector<int> ring_start, ring;  // CSR: triangles incident to each vertex
+    Cloud tree_cloud;                   // the vertices that carry triangles, indexed by the k-d tree
+    std::vector<int> surface_vertex;    // tree index -> vertex index
     std::unique_ptr<KdTree> tree;
 };
 
@@ -87,8 +89,15 @@ SurfaceDistance::SurfaceDistance(const recon::Mesh& mesh) : impl_(std::make_uniq
     for (int f = 0; f < static_cast<int>(m.tris.size()); ++f) {
         for (int c = 0; c < 3; ++c) m.ring[fill[m.tris[f][c]]++] = f;
     }
-    m.tree = std::make_unique<KdTree>(3, m.cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-    if (!m.cloud.pts.empty()) m.tree->buildIndex();
+    // Only vertices that carry triangles are surface: an isolated vertex is not (a cut hole stays a hole).
+    for (int v = 0; v < static_cast<int>(m.cloud.pts.size()); ++v) {
+        if (m.ring_start[v + 1] > m.ring_start[v]) {
+            m.surface_vertex.push_back(v);
+            m.tree_cloud.pts.push_back(m.cloud.pts[v]);
+        }
+    }
+    m.tree = std::make_unique<KdTree>(3, m.tree_cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    if (!m.tree_cloud.pts.empty()) m.tree->buildIndex();
 }
 
 SurfaceDistance::~SurfaceDistance() = default;
@@ -97,14 +106,13 @@ SurfaceDistance::Hit SurfaceDistance::query(const Vec3& p) const {
     const Impl& m = *impl_;
     Hit hit;
     hit.distance_m = std::numeric_limits<float>::infinity();
-    if (m.cloud.pts.empty()) return hit;
+    if (m.tree_cloud.pts.empty()) return hit;
     uint32_t idx[kNeighbours];
     float d2[kNeighbours];
     const size_t found = m.tree->knnSearch(p.data(), kNeighbours, idx, d2);
     if (found == 0) return hit;
+    for (size_t i = 0; i < found; ++i) idx[i] = static_cast<uint32_t>(m.surface_vertex[idx[i]]);
     hit.nearest_vertex = static_cast<int>(idx[0]);
-    hit.closest = m.cloud.pts[idx[0]];
-    hit.distance_m = std::sqrt(d2[0]);  // an isolated vertex (no triangles) still has a distance
     // Every vertex lies on its incident triangles, so the best triangle is never worse than the vertex.
     float best = std::numeric_limits<float>::infinity();
     for (size_t i = 0; i < found; ++i) {
