@@ -116,7 +116,8 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
             centroidAlignment(frame_.levels[0], model_.levels[0], guess);
         }
         Pose estimate = guess;
-        result.tracking = icp_.align(frame_, model_, T_world_model_, guess, estimate);
+        // Motion limits are measured from the last good pose, not from the centroid-shifted start.
+        result.tracking = icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate);
         result.ms.icp = watch.lapMs();
         if (!result.tracking.ok()) {
             const char* why = "registration failed";
