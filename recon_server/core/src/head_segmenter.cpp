@@ -171,13 +171,9 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
 
     // Per-row widths of R (eq. 3.9-3.10 count pixels per row).
     row_count_.assign(static_cast<size_t>(h), 0);
-    row_min_.assign(static_cast<size_t>(h), w);
-    row_max_.assign(static_cast<size_t>(h), -1);
     for (int idx : queue_) {
-        const int y = idx / w, x = idx - y * w;
+        const int y = idx / w;
         ++row_count_[static_cast<size_t>(y)];
-        row_min_[static_cast<size_t>(y)] = std::min(row_min_[static_cast<size_t>(y)], x);
-        row_max_[static_cast<size_t>(y)] = std::max(row_max_[static_cast<size_t>(y)], x);
     }
     int top = 0, bottom = h - 1;
     while (top < h && row_count_[static_cast<size_t>(top)] == 0) ++top;

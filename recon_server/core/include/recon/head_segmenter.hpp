@@ -68,7 +68,7 @@ class HeadSegmenter {
     // Scratch reused between frames.
     cv::Mat visited_;
     std::vector<int> queue_;
-    std::vector<int> row_count_, row_min_, row_max_, col_hist_, row_hist_;
+    std::vector<int> row_count_, col_hist_, row_hist_;
     std::vector<float> scratch_;
 };
 
