@@ -117,8 +117,9 @@ Tally runSynthetic(recon::FaceDetector& detector, int frames_per_distance) {
             segmenter.segment(frame.depth_m, sim.intrinsics(), found.faces.front().box_depth_px, seg);
             t.segment_ms += msSince(t0);
             // Against the head label where the sensor measured depth: nothing else can be segmented.
-            const cv::Mat head = (truth.label == static_cast<int>(synth::PixelLabel::kHead)) & (frame.depth_m > 0);
-            const double iou = maskIou(seg.mask, head);
+            const cv::Mat head_label =
+                (truth.label == static_cast<int>(synth::PixelLabel::kHead)) & (frame.depth_m > 0);
+            const double iou = maskIou(seg.mask, head_label);
             ++t.segmented;
             ++t.iou_frames;
             t.iou_sum += iou;
