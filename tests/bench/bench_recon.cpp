@@ -61,6 +61,7 @@ struct Options {
     bool verbose = false;
     float volume_m = 0;  // 0 = preset
     float trunc_m = 0;
+    std::string misses_out;  // --gt-misses: GT face vertices coloured by why they are not covered
 };
 
 struct Sequence {
@@ -321,6 +322,64 @@ void printAccuracy(const char* what, const eval::AccuracyReport& r) {
         r.mesh_vertices_used);
 }
 
+// Why GT face vertices are not covered (same region as the ruler: within 0.11 m of the nose tip, normal . +z >= 0).
+// Per vertex, over the whole sequence: was it seen in a depth pixel (within 10 mm of its true depth), inside the
+// head mask, at a usable angle (cos >= min_cos)? Writes a PLY point cloud coloured by class and prints the counts.
+void writeMisses(const Sequence& seq, const recon::Mesh& mesh, const eval::AccuracyReport& acc,
+                 const Eigen::Vector3f& nose, float min_cos, const std::string& path) {
+    const recon::Mesh& gt = seq.sim->head().mesh;
+    const eval::SurfaceDistance dist(mesh);
+    const Pose T_mesh_gt = acc.T_gt_mesh.inverse();
+    struct Row {
+        Eigen::Vector3f p;
+        float d_mm;
+        int cls;
+    };
+    std::vector<Row> rows;
+    const char* names[] = {"covered", "never in a depth pixel", "seen, never in the head mask",
+                           "in mask only at grazing angles", "seen well, not covered (ours)"};
+    int count[5] = {0, 0, 0, 0, 0};
+    int below_chin[5] = {0, 0, 0, 0, 0}, sides[5] = {0, 0, 0, 0, 0};
+    for (const auto vh : gt.vertices()) {
+        const auto& q = gt.point(vh);
+        const auto& nn = gt.normal(vh);
+        const Eigen::Vector3f p(q[0], q[1], q[2]), n(nn[0], nn[1], nn[2]);
+        if ((p - nose).norm() > 0.11f || n.z() < 0.0f) continue;
+        const float d = dist.query(T_mesh_gt * p).distance_m;
+        int seen = 0, in_mask = 0, good = 0;
+        for (int i = 0; i < static_cast<int>(seq.frames.size()); ++i) {
+            const Pose T = seq.sim->poseAt(i);
+            const Eigen::Vector3f c = T * p, nc = T.linear() * n;
+            const Eigen::Vector2f px = seq.k.project(c);
+            const int u = static_cast<int>(px.x() + 0.5f), v = static_cast<int>(px.y() + 0.5f);
+            if (u < 0 || v < 0 || u >= seq.k.width_px || v >= seq.k.height_px) continue;
+            const float z = seq.frames[i].depth_m.at<float>(v, u);
+            if (!(z > 0.0f) || std::fabs(z - c.z()) > 0.01f) continue;
+            ++seen;
+            if (seq.masks[i].empty() || seq.masks[i].at<uint8_t>(v, u) == 0) continue;
+            ++in_mask;
+            if (-nc.dot(c.normalized()) >= min_cos) ++good;
+        }
+        const int cls = d <= 0.002f ? 0 : seen == 0 ? 1 : in_mask == 0 ? 2 : good < 3 ? 3 : 4;
+        ++count[cls];
+        below_chin[cls] += p.y() < nose.y() - 0.06f;
+        sides[cls] += std::fabs(p.x() - nose.x()) > 0.06f;
+        rows.push_back({p, 1000.0f * d, cls});
+    }
+    std::printf("GT face vertices: %zu\n", rows.size());
+    for (int c = 0; c < 5; ++c)
+        std::printf("  %-32s %6d (%5.1f %%)  of which >6 cm below the nose tip %d, >6 cm to the side %d\n", names[c],
+                    count[c], 100.0 * count[c] / std::max<size_t>(rows.size(), 1), below_chin[c], sides[c]);
+    std::ofstream out(path);
+    out << "ply\nformat ascii 1.0\nelement vertex " << rows.size()
+        << "\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
+           "property uchar blue\nproperty float distance_mm\nproperty uchar miss_class\nend_header\n";
+    const int rgb[5][3] = {{0, 200, 0}, {0, 0, 255}, {255, 255, 0}, {255, 0, 255}, {255, 0, 0}};
+    for (const Row& r : rows)
+        out << r.p.x() << ' ' << r.p.y() << ' ' << r.p.z() << ' ' << rgb[r.cls][0] << ' ' << rgb[r.cls][1] << ' '
+            << rgb[r.cls][2] << ' ' << r.d_mm << ' ' << r.cls << '\n';
+}
+
 int runRecon(const std::vector<std::string>& args) {
     Options o;
     for (size_t i = 0; i < args.size(); ++i) {
@@ -338,6 +397,8 @@ int runRecon(const std::vector<std::string>& args) {
             o.trajectory_out = next();
         else if (a == "--gt-accuracy")
             o.gt_accuracy = true;
+        else if (a == "--gt-misses")
+            o.misses_out = next(), o.gt_accuracy = true;
         else if (a == "--json")
             o.json = true;
         else if (a == "--verbose")
@@ -349,7 +410,8 @@ int runRecon(const std::vector<std::string>& args) {
         else {
             std::printf(
                 "usage: facescan-bench recon [--input SRC] [--frames N] [--preset face|fast] [--mesh OUT.ply]\n"
-                "       [--trajectory OUT.txt] [--gt-accuracy] [--volume-m M] [--trunc-m M] [--verbose] [--json]\n"
+                "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply]\n"
+                "       [--volume-m M] [--trunc-m M] [--verbose] [--json]\n"
                 "SRC: synthetic[:distance=0.7,yaw=35,pitch=12,yaw_period=300,pitch_period=150,frames=300,seed=1,\n"
                 "     noise=1,head=lps|builtin] | tum:DIR | 7scenes:DIR\n");
             return a == "--help" ? 0 : 2;
@@ -466,6 +528,7 @@ int runRecon(const std::vector<std::string>& args) {
         if (acc.isOk()) {
             printAccuracy("accuracy (all frames)", *acc);
             acc_json = accuracyJson(*acc);
+            if (!o.misses_out.empty()) writeMisses(seq, mesh, *acc, nose, params.tsdf.min_cos_angle, o.misses_out);
         } else {
             std::printf("accuracy: %s\n", acc.status().toString().c_str());
         }

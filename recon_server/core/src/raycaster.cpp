@@ -71,13 +71,23 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
     return -1.0f;
 }
 
+// Depth of the nearest pixel of a hint row with a measurement, within `radius` pixels of u; 0 when none.
+float nearestHint(const float* hint, int u, int u_begin, int u_end, int radius) {
+    for (int r = 1; r <= radius; ++r) {
+        if (u - r >= u_begin && hint[u - r] > 0.0f) return hint[u - r];
+        if (u + r < u_end && hint[u + r] > 0.0f) return hint[u + r];
+    }
+    return 0.0f;
+}
+
 }  // namespace
 
 Status RaycastParams::validate() const {
     if (!(step_trunc_fraction > 0.0f && step_trunc_fraction <= 1.0f))
         return invalidArgument("raycast step_trunc_fraction must be in (0, 1] (a step over mu misses surfaces)");
-    if (!(start_before_hint_m >= 0.0f) || !(search_after_hint_m >= 0.0f))
+    if (!(start_before_hint_m >= 0.0f) || !(search_after_hint_m >= 0.0f) || !(hint_widen_m >= 0.0f))
         return invalidArgument("raycast hint margins must be >= 0");
+    if (hint_search_px < 0) return invalidArgument("raycast hint_search_px must be >= 0");
     return Status::ok();
 }
 
@@ -108,12 +118,20 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
                 const Eigen::Vector3f dir_vox = r * ray_cam / ray_len;  // unit direction; voxel units per vs
                 float s0, s1;                                           // voxel units along dir_vox
                 if (!clipToCube(o_vox, dir_vox, n_max, s0, s1)) continue;
-                const float z_hint = hint ? hint[u] : 0.0f;
+                float z_hint = hint ? hint[u] : 0.0f;
+                float widen_m = 0.0f;
+                if (hint && !(z_hint > 0.0f)) {
+                    // No measurement here (ROI margin, dropout, background inside the head box): the nearest
+                    // measured pixel of the row, with a wider window, says where the head can be. Without one the
+                    // ray is skipped: marching the whole cube for background pixels cost most of the ray cast.
+                    z_hint = nearestHint(hint, u, roi.x, roi.x + roi.width, params_.hint_search_px);
+                    widen_m = params_.hint_widen_m;
+                    if (!(z_hint > 0.0f) && !params_.march_without_hint) continue;
+                }
                 if (z_hint > 0.0f) {
-                    s0 = std::max(s0, (z_hint - params_.start_before_hint_m) * ray_len / vs);
-                    s1 = std::min(s1, (z_hint + params_.search_after_hint_m) * ray_len / vs);
-                } else if (!params_.march_without_hint) {
-                    continue;
+                    s0 = std::max(s0, (z_hint - params_.start_before_hint_m - widen_m) * ray_len / vs);
+                    s1 = std::min(s1, (z_hint + params_.search_after_hint_m + widen_m) * ray_len / vs);
+                    if (!(s0 < s1)) continue;
                 }
                 const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
                 if (s_hit < 0.0f) continue;

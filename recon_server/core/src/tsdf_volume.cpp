@@ -28,10 +28,23 @@ bool VoxelBlockGrid::interpolate(const Eigen::Vector3f& p_vox, float& tsdf) cons
     const float fy = p_vox.y() - static_cast<float>(y0);
     const float fz = p_vox.z() - static_cast<float>(z0);
     float c[8];
-    for (int i = 0; i < 8; ++i) {
-        const Voxel* vx = voxel(x0 + (i & 1), y0 + ((i >> 1) & 1), z0 + (i >> 2));
-        if (vx == nullptr || vx->weight <= 0.0f) return false;
-        c[i] = vx->tsdf;
+    const int lx = x0 & 7, ly = y0 & 7, lz = z0 & 7;
+    if (lx < 7 && ly < 7 && lz < 7) {
+        // All 8 neighbours lie in one block (343 of 512 cells): one index lookup instead of eight.
+        const Voxel* base = voxel(x0, y0, z0);
+        if (base == nullptr || x0 + 1 >= resolution_vox || y0 + 1 >= resolution_vox || z0 + 1 >= resolution_vox)
+            return false;
+        for (int i = 0; i < 8; ++i) {
+            const Voxel& vx = base[(i >> 2) * 64 + ((i >> 1) & 1) * 8 + (i & 1)];
+            if (vx.weight <= 0.0f) return false;
+            c[i] = vx.tsdf;
+        }
+    } else {
+        for (int i = 0; i < 8; ++i) {
+            const Voxel* vx = voxel(x0 + (i & 1), y0 + ((i >> 1) & 1), z0 + (i >> 2));
+            if (vx == nullptr || vx->weight <= 0.0f) return false;
+            c[i] = vx->tsdf;
+        }
     }
     const float c00 = c[0] + fx * (c[1] - c[0]), c10 = c[2] + fx * (c[3] - c[2]);
     const float c01 = c[4] + fx * (c[5] - c[4]), c11 = c[6] + fx * (c[7] - c[6]);
@@ -173,16 +186,43 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
     }
     stats.blocks_touched = static_cast<int>(touched_.size());
 
-    // 2. Algorithm 3 over the voxels of those blocks.
+    // 2. Per pixel, once: the distance to the surface along the ray (z |K^-1 [u v 1]|, eq. 4.24) and the
+    //    measurement's weight (Algorithm 3), 0 where there is no usable measurement (no depth, no normal, grazing).
+    //    The voxel loop below then reads two floats per voxel instead of computing a norm and an exp each time.
+    const float inv_angle_sigma = 1.0f / params_.weight_angle_sigma;
+    const float inv_two_depth_var = 1.0f / (2.0f * params_.weight_depth_sigma_m * params_.weight_depth_sigma_m);
+    const float min_cos = params_.min_cos_angle;
+    pixel_range_m_.create(frame.depth_m.size(), CV_32FC1);  // allocates on the first frame only
+    pixel_weight_.create(frame.depth_m.size(), CV_32FC1);
+    cv::parallel_for_(cv::Range(roi.y, roi.y + roi.height), [&](const cv::Range& rows) {
+        for (int v = rows.start; v < rows.end; ++v) {
+            const float* z = frame.depth_m.ptr<float>(v);
+            const auto* nrm = frame.normal.ptr<cv::Vec3f>(v);
+            float* range_m = pixel_range_m_.ptr<float>(v);
+            float* weight = pixel_weight_.ptr<float>(v);
+            for (int u = roi.x; u < roi.x + roi.width; ++u) {
+                range_m[u] = weight[u] = 0.0f;
+                if (!(z[u] > 0.0f) || std::isnan(nrm[u][0])) continue;
+                const Eigen::Vector3f ray = k.ray(static_cast<float>(u), static_cast<float>(v));
+                const float ray_len = ray.norm();
+                // Viewing angle between the normal and the ray towards the camera.
+                const float cos_angle = -(nrm[u][0] * ray.x() + nrm[u][1] * ray.y() + nrm[u][2] * ray.z()) / ray_len;
+                if (cos_angle < min_cos) continue;
+                range_m[u] = z[u] * ray_len;
+                weight[u] = std::exp(-(1.0f - cos_angle) * inv_angle_sigma - z[u] * z[u] * inv_two_depth_var);
+            }
+        }
+    });
+
+    // 3. Algorithm 3 over the voxels of those blocks.
     const Pose T_camera_world = T_world_camera.inverse();
     const Eigen::Matrix3f r_cw = T_camera_world.linear();
     const float vs = grid_.voxel_size_m;
     const float max_w = params_.max_weight;
-    const float inv_angle_sigma = 1.0f / params_.weight_angle_sigma;
-    const float inv_two_depth_var = 1.0f / (2.0f * params_.weight_depth_sigma_m * params_.weight_depth_sigma_m);
-    const float min_cos = params_.min_cos_angle;
+    const float inv_mu = 1.0f / mu;
     const bool have_colour = !colour_bgr.empty();
     const Eigen::Vector3f step_x = r_cw.col(0) * vs, step_y = r_cw.col(1) * vs, step_z = r_cw.col(2) * vs;
+    const int u0 = roi.x, v0 = roi.y, u1 = roi.x + roi.width, v1 = roi.y + roi.height;
     cv::parallel_for_(cv::Range(0, static_cast<int>(touched_.size())), [&](const cv::Range& range) {
         for (int t = range.start; t < range.end; ++t) {
             const int slot = touched_[t];
@@ -199,22 +239,13 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
                         // Eq. 4.25-4.26: the voxel in the camera, projected to its pixel.
                         const Eigen::Vector2f px = k.project(p);
                         const int u = static_cast<int>(px.x() + 0.5f), v = static_cast<int>(px.y() + 0.5f);
-                        if (!roi.contains({u, v})) continue;
-                        const float z = frame.depth_m.at<float>(v, u);
-                        if (!(z > 0.0f)) continue;
-                        const cv::Vec3f& n = frame.normal.at<cv::Vec3f>(v, u);
-                        if (std::isnan(n[0])) continue;
+                        if (u < u0 || v < v0 || u >= u1 || v >= v1) continue;
+                        const float w = pixel_weight_.ptr<float>(v)[u];
+                        if (!(w > 0.0f)) continue;
                         // Eq. 4.24: distance to the surface along the ray minus the distance to the voxel.
-                        const Eigen::Vector3f ray = k.ray(static_cast<float>(u), static_cast<float>(v));
-                        const float ray_len = ray.norm();
-                        const float p_len = p.norm();
-                        const float d = z * ray_len - p_len;
+                        const float d = pixel_range_m_.ptr<float>(v)[u] - p.norm();
                         if (d < -mu) continue;  // far behind the surface: zero weight (Algorithm 3)
-                        // Viewing angle between the normal and the ray towards the camera.
-                        const float cos_angle = -(n[0] * p.x() + n[1] * p.y() + n[2] * p.z()) / p_len;
-                        if (cos_angle < min_cos) continue;
-                        const float w = std::exp(-(1.0f - cos_angle) * inv_angle_sigma - z * z * inv_two_depth_var);
-                        const float sdf = std::min(1.0f, d / mu);  // truncated, in units of mu
+                        const float sdf = std::min(1.0f, d * inv_mu);  // truncated, in units of mu
                         Voxel& vx = vrow[ix];
                         const float w_old = vx.weight;
                         const float w_sum = w_old + w;

@@ -17,8 +17,12 @@ struct RaycastParams {
                                         // miss the zero crossing)
     float start_before_hint_m = 0.02f;  // metres; with a depth hint, rays start this far in front of it...
     float search_after_hint_m = 0.03f;  // metres; ...and give up this far behind it
-    bool march_without_hint = true;     // rays of ROI pixels without a hint march the whole cube (empty blocks
-                                        // are skipped a block at a time)
+    int hint_search_px = 12;            // pixels; a ROI pixel without a hint borrows the nearest one of its row
+                                        // within this distance (covers the ROI margin and dropouts)...
+    float hint_widen_m = 0.03f;         // metres; ...with the search window widened by this on both sides
+    bool march_without_hint = false;    // rays with no hint even then march the whole cube (empty blocks are
+                                        // skipped half a block at a time); false = no surface there. Without
+                                        // any hint image (empty depth_hint_m) rays always march the whole cube.
     Status validate() const;
 };
 
