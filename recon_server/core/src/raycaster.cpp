@@ -58,15 +58,25 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
             continue;
         }
         if (have_prev && prev_d > 0.0f && d <= 0.0f) {
-            return prev_s + (s - prev_s) * prev_d / (prev_d - d);  // eq. 4.28
+            float s_hit = prev_s + (s - prev_s) * prev_d / (prev_d - d);  // eq. 4.28
+            // One regula falsi step: with steps of up to mu, D is not linear over the whole bracket.
+            float d_hit;
+            if (g.interpolate(o_vox + dir_vox * s_hit, d_hit)) {
+                if (d_hit > 0.0f) {
+                    s_hit += (s - s_hit) * d_hit / (d_hit - d);
+                } else if (d_hit < 0.0f) {
+                    s_hit = prev_s + (s_hit - prev_s) * prev_d / (prev_d - d_hit);
+                }
+            }
+            return s_hit;
         }
         if (have_prev && prev_d < 0.0f && d > 0.0f) return -1.0f;  // leaving a back face: not a visible surface
-        // Close to the surface the step shrinks to the distance itself (D is in units of mu), never below a voxel/2.
-        const float next = std::max(0.5f, std::min(step_vox, std::fabs(d) * g.trunc_dist_m / g.voxel_size_m));
         prev_d = d;
         prev_s = s;
         have_prev = true;
-        s += d > 0.0f ? std::max(next, 0.5f) : step_vox;
+        // In front of the surface the step is the distance D says is free (D is in units of mu), at least one
+        // voxel and at most step_vox; the sign change is then bracketed within one step and refined above.
+        s += d > 0.0f ? std::max(1.0f, std::min(step_vox, d * g.trunc_dist_m / g.voxel_size_m)) : step_vox;
     }
     return -1.0f;
 }

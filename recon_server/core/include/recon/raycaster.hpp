@@ -15,7 +15,9 @@ namespace facescan::recon {
 struct RaycastParams {
     float step_trunc_fraction = 0.8f;   // ratio; ray step as a share of mu (thesis: smaller than mu, or it may
                                         // miss the zero crossing)
-    float start_before_hint_m = 0.02f;  // metres; with a depth hint, rays start this far in front of it...
+    float start_before_hint_m = 0.01f;  // metres; with a depth hint (the frame just integrated at the pose just
+                                        // estimated: the model is within noise of it), rays start this far in
+                                        // front of it...
     float search_after_hint_m = 0.03f;  // metres; ...and give up this far behind it
     int hint_search_px = 12;            // pixels; a ROI pixel without a hint borrows the nearest one of its row
                                         // within this distance (covers the ROI margin and dropouts)...
