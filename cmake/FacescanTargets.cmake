@@ -17,12 +17,12 @@ function(facescan_warnings target)
     endif()
 endfunction()
 
-# facescan_add_test(NAME name SOURCES a.cpp ... LIBS lib ... [LABELS l ...] [TIMEOUT s])
+# facescan_add_test(NAME name SOURCES a.cpp ... LIBS lib ... [LABELS l ...] [TIMEOUT s] [RUN_SERIAL])
 # One gtest executable, discovered test by test so ctest reports each case.
 function(facescan_add_test)
-    cmake_parse_arguments(T "" "NAME;TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
+    cmake_parse_arguments(T "RUN_SERIAL" "NAME;TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
     add_executable(${T_NAME} ${T_SOURCES})
-    target_link_libraries(${T_NAME} PRIVATE ${T_LIBS} GTest::gtest GTest::gtest_main)
+    target_link_libraries(${T_NAME} PRIVATE ${T_LIBS} facescan_test_common GTest::gtest GTest::gtest_main)
     target_compile_definitions(${T_NAME} PRIVATE
         FACESCAN_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
         FACESCAN_BINARY_DIR="${PROJECT_BINARY_DIR}")
@@ -31,6 +31,10 @@ function(facescan_add_test)
         set(T_TIMEOUT 300)
     endif()
     include(GoogleTest)
+    set(serial FALSE)
+    if(T_RUN_SERIAL)
+        set(serial TRUE)
+    endif()
     gtest_discover_tests(${T_NAME} DISCOVERY_TIMEOUT 60
-        PROPERTIES TIMEOUT ${T_TIMEOUT} LABELS "${T_LABELS}")
+        PROPERTIES TIMEOUT ${T_TIMEOUT} LABELS "${T_LABELS}" RUN_SERIAL ${serial})
 endfunction()

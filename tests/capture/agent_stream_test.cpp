@@ -15,6 +15,7 @@
 
 #include "capture/frame_source.hpp"
 #include "synth/kinect_simulator.hpp"
+#include "test_domain.hpp"
 #include "wire/messages.hpp"
 
 extern char** environ;
@@ -25,7 +26,7 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
-uint32_t privateDomain(uint32_t salt) { return 100 + (static_cast<uint32_t>(getpid()) * 7 + salt) % 120; }
+using facescan::testing::privateDomain;
 
 pid_t spawnAgent(const std::vector<std::string>& args) {
     std::vector<char*> argv;

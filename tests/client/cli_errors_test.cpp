@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "test_domain.hpp"
 namespace {
 
 struct CliRun {
@@ -29,7 +30,7 @@ CliRun runCli(const std::string& args) {
     return run;
 }
 
-std::string privateDomain() { return std::to_string(100 + (::getpid() * 17) % 120); }
+std::string privateDomain() { return std::to_string(facescan::testing::privateDomain()); }
 
 bool contains(const std::string& text, const std::string& needle) { return text.find(needle) != std::string::npos; }
 

@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "client/scan_client.hpp"
+#include "test_domain.hpp"
 
 namespace facescan::client {
 namespace {
@@ -16,7 +17,7 @@ namespace {
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
-uint32_t privateDomain(uint32_t salt) { return 100 + (static_cast<uint32_t>(::getpid()) * 13 + salt) % 120; }
+uint32_t privateDomain(uint32_t salt) { return facescan::testing::privateDomain(salt); }
 
 // One server's side of the command protocol: owns `owned_session`; answers after `delay`.
 class ProtocolPeer {

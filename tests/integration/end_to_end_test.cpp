@@ -17,6 +17,7 @@
 
 #include "eval/accuracy.hpp"
 #include "synth/kinect_simulator.hpp"
+#include "test_domain.hpp"
 #include "wire/mesh_codec.hpp"
 
 namespace {
@@ -97,7 +98,7 @@ std::string readText(const fs::path& path) {
 bool contains(const std::string& text, const std::string& needle) { return text.find(needle) != std::string::npos; }
 
 TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
-    const std::string domain = std::to_string(100 + (::getpid() * 11 + 5) % 120);
+    const std::string domain = std::to_string(facescan::testing::privateDomain(5));
     const std::string session = "e2e-" + std::to_string(::getpid());
     const std::string dds = " --profile loopback --domain " + domain;
     const fs::path dir = fs::temp_directory_path() / ("facescan_e2e_" + std::to_string(::getpid()));

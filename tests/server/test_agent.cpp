@@ -19,8 +19,6 @@ int64_t wallNowNs() {
 
 }  // namespace
 
-uint32_t privateDomain(uint32_t salt) { return 100 + (static_cast<uint32_t>(getpid()) * 7 + salt) % 120; }
-
 EncodedSequence renderSequence(int frames, uint64_t seed) {
     synth::SequenceParams sp;
     sp.frames = frames;

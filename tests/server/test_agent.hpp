@@ -12,11 +12,10 @@
 
 #include "recon/status.hpp"
 #include "synth/kinect_simulator.hpp"
+#include "test_domain.hpp"
 #include "wire/messages.hpp"
 
 namespace facescan::testing {
-
-uint32_t privateDomain(uint32_t salt);
 
 // Frames of the synthetic Kinect, rendered and encoded once (rendering at 30 Hz would time the renderer).
 struct EncodedSequence {

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <vector>
 
+#include "test_domain.hpp"
 #include "wire/topics.hpp"
 
 namespace facescan::wire {
@@ -16,7 +17,7 @@ namespace {
 
 using namespace std::chrono_literals;
 
-uint32_t privateDomain(uint32_t salt) { return 100 + (static_cast<uint32_t>(getpid()) * 7 + salt) % 120; }
+using facescan::testing::privateDomain;
 
 // Deterministic payload for frame `seq`, so the receiver can check every byte.
 std::vector<uint8_t> payloadFor(uint32_t seq, size_t size) {
