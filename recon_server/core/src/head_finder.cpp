@@ -16,21 +16,9 @@ Status HeadFinderParams::validate() const {
 
 void HeadFinder::find(const cv::Mat& depth_m, const Intrinsics& k, HeadSegmentation& out) {
     out.found = false;
-    auto fail = [&](std::string why) {
-        out.found = false;
-        out.reason = std::move(why);
-        if (!depth_m.empty()) {
-            out.mask.create(depth_m.size(), CV_8UC1);
-            out.mask.setTo(0);
-            out.depth_m.create(depth_m.size(), CV_32FC1);
-            out.depth_m.setTo(0);
-        }
-    };
+    auto fail = [&](std::string why) { out.markNotFound(depth_m, std::move(why)); };
     if (const Status s = params_.validate(); !s.isOk()) return fail("bad head finder params: " + s.message());
-    if (depth_m.empty()) return fail("depth image is empty");
-    if (depth_m.type() != CV_32FC1) return fail("depth must be CV_32FC1 metres");
-    if (depth_m.cols != k.width_px || depth_m.rows != k.height_px)
-        return fail("depth size differs from the intrinsics");
+    if (const char* problem = depthInputProblem(depth_m, k)) return fail(problem);
 
     const HeadSegmenterParams& sp = segmenter_.params();
     const Intrinsics ks = k.scaled(params_.level);

@@ -63,6 +63,23 @@ int widthCriterionSplit(const std::vector<int>& row_count, int first, int last) 
     return best;
 }
 
+void HeadSegmentation::markNotFound(const cv::Mat& depth, std::string why) {
+    found = false;
+    reason = std::move(why);
+    if (depth.empty()) return;
+    mask.create(depth.size(), CV_8UC1);
+    mask.setTo(0);
+    depth_m.create(depth.size(), CV_32FC1);
+    depth_m.setTo(0);
+}
+
+const char* depthInputProblem(const cv::Mat& depth_m, const Intrinsics& k) {
+    if (depth_m.empty()) return "depth image is empty";
+    if (depth_m.type() != CV_32FC1) return "depth must be CV_32FC1 metres";
+    if (depth_m.cols != k.width_px || depth_m.rows != k.height_px) return "depth size differs from the intrinsics";
+    return nullptr;
+}
+
 void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const cv::Rect& seed_box_px,
                             HeadSegmentation& out) {
     out.found = false;
@@ -70,21 +87,9 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
     out.pixels = 0;
     out.split_row = -1;
     out.head_box_px = {};
-    auto fail = [&](std::string why) {
-        out.reason = std::move(why);
-        if (!depth_m.empty()) {
-            out.mask.create(depth_m.size(), CV_8UC1);
-            out.mask.setTo(0);
-            out.depth_m.create(depth_m.size(), CV_32FC1);
-            out.depth_m.setTo(0);
-        }
-    };
+    auto fail = [&](std::string why) { out.markNotFound(depth_m, std::move(why)); };
     if (const Status s = params_.validate(); !s.isOk()) return fail("bad segmenter params: " + s.message());
-    if (depth_m.empty()) return fail("depth image is empty");
-    if (depth_m.type() != CV_32FC1) return fail("depth must be CV_32FC1 metres");
-    if (depth_m.cols != k.width_px || depth_m.rows != k.height_px) {
-        return fail("depth size differs from the intrinsics");
-    }
+    if (const char* problem = depthInputProblem(depth_m, k)) return fail(problem);
     const cv::Rect bounds(0, 0, depth_m.cols, depth_m.rows);
     const cv::Rect seed = seed_box_px & bounds;
     if (seed.area() == 0) return fail("face box lies outside the image");

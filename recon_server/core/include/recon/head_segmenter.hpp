@@ -51,7 +51,14 @@ struct HeadSegmentation {
     float depth_median_m = 0;                              // median depth of the seed (metres)
     int pixels = 0;                                        // head pixels
     int split_row = -1;  // image row of the head/torso cut, -1 when no torso was attached
+
+    // Not found, because `why`: mask and depth become all-zero images of depth_m's size (when it has one), so
+    // callers can use them without checking.
+    void markNotFound(const cv::Mat& depth_m, std::string why);
 };
+
+// Why depth_m cannot be segmented (empty, not CV_32FC1 metres, not the camera's size), or nullptr when it can.
+const char* depthInputProblem(const cv::Mat& depth_m, const Intrinsics& intrinsics);
 
 class HeadSegmenter {
  public:
