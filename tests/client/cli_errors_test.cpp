@@ -9,26 +9,14 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "run_command.hpp"
 #include "test_domain.hpp"
 namespace {
 
-struct CliRun {
-    int exit_code = -1;
-    std::string out;  // stdout and stderr together
-};
+using CliRun = facescan::testing::CommandRun;
 
-CliRun runCli(const std::string& args) {
-    const std::string command = std::string(FACESCAN_CLI) + " " + args + " 2>&1";
-    CliRun run;
-    FILE* pipe = ::popen(command.c_str(), "r");
-    if (!pipe) return run;
-    std::array<char, 4096> buf{};
-    size_t n = 0;
-    while ((n = std::fread(buf.data(), 1, buf.size(), pipe)) > 0) run.out.append(buf.data(), n);
-    const int status = ::pclose(pipe);
-    run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    return run;
-}
+// The real `facescan` binary with these arguments.
+CliRun runCli(const std::string& args) { return facescan::testing::runCommand(std::string(FACESCAN_CLI) + " " + args); }
 
 std::string privateDomain() { return std::to_string(facescan::testing::privateDomain()); }
 
