@@ -123,8 +123,8 @@ Status FrameDecoder::decode(const facescan_wire_RgbdFrame& msg, const CameraInfo
         return Status::ok();
     }
     if (msg.colour._buffer == nullptr) return dataLoss("colour payload has no bytes");
-    // Colour that is not registered to depth cannot be used per depth pixel; it is dropped here and the
-    // depth-only paths take over (the Biwi-style extrinsic mapping lives in the detector's offline tools).
+    // Colour that is not registered to depth cannot be used per depth pixel, and CameraInfo carries no
+    // extrinsics to register it (recon::ColourCamera could); it is dropped and the depth-only paths take over.
     if (!camera.colour_registered) {
         out.colour_bgr.release();
         return Status::ok();
