@@ -26,6 +26,7 @@ CC=clang CXX=clang++ cmake -S "$repo" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebI
 cmake --build "$build" --target facescan_fuzzers -j "$jobs"
 
 fuzzers=(fuzz_depth_raw16 fuzz_depth_rvl fuzz_depth_zstd fuzz_depth_rvl_zstd fuzz_depth_delta_zstd fuzz_depth_png
+         fuzz_depth_packed_delta_zstd
          fuzz_colour_jpeg fuzz_mesh_draco)
 seeds="$work/seeds"
 rm -rf "$seeds"

@@ -33,7 +33,8 @@ options:
                         frame lost (recordings); HZ: a fixed rate
   --jpeg-quality Q      colour JPEG quality 1-100 (default 90)
   --no-colour           send depth only
-  --depth-codec NAME    rvl-zstd (default), rvl, zstd, delta-zstd, raw16, png
+  --depth-codec NAME    lossless depth codec: packed-delta-zstd (default), delta-zstd, rvl-zstd, rvl, zstd,
+                        raw16, png (`facescan-bench codecs` compares them on your frames)
   --tum-depth-scale S   raw depth units per metre of tum: sources (default 5000; Kinect millimetres: 1000)
   --wait-for-server S   give up when no server appears within S seconds (default: wait forever)
   --profile P           DDS network profile: loopback, lan (default) or FILE.xml

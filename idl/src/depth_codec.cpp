@@ -1,6 +1,8 @@
 // Lossless depth codecs: header, dispatch, and the zstd / delta / PNG bodies (RVL is in rvl_codec.cpp).
 #include "wire/depth_codec.hpp"
 
+// For ZSTD_c_literalCompressionMode (zstd's "experimental" parameters; see zstdFastLiterals below).
+#define ZSTD_STATIC_LINKING_ONLY
 #include <zstd.h>
 
 #include <algorithm>
@@ -9,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <string>
 
+#include "wire/packed_delta_codec.hpp"
 #include "wire/rvl_codec.hpp"
 
 #if __has_include("facescan.h")
@@ -20,6 +23,8 @@ static_assert(static_cast<int>(facescan::wire::DepthCodecId::kZstd) == facescan_
 static_assert(static_cast<int>(facescan::wire::DepthCodecId::kRvlZstd) == facescan_wire_DEPTH_RVL_ZSTD);
 static_assert(static_cast<int>(facescan::wire::DepthCodecId::kDeltaZstd) == facescan_wire_DEPTH_DELTA_ZSTD);
 static_assert(static_cast<int>(facescan::wire::DepthCodecId::kPng) == facescan_wire_DEPTH_PNG);
+static_assert(static_cast<int>(facescan::wire::DepthCodecId::kPackedDeltaZstd) ==
+              facescan_wire_DEPTH_PACKED_DELTA_ZSTD);
 #endif
 
 namespace facescan::wire {
@@ -29,7 +34,8 @@ static_assert(std::endian::native == std::endian::little, "payloads are little-e
 
 constexpr uint8_t kMagic[3] = {'F', 'S', 'D'};
 constexpr uint8_t kVersion = 1;
-constexpr const char* kNames[kDepthCodecCount] = {"raw16", "rvl", "zstd", "rvl-zstd", "delta-zstd", "png"};
+constexpr const char* kNames[kDepthCodecCount] = {
+    "raw16", "rvl", "zstd", "rvl-zstd", "delta-zstd", "png", "packed-delta-zstd"};
 
 void putU16(uint8_t* p, uint32_t v) {
     p[0] = static_cast<uint8_t>(v);
@@ -129,6 +135,9 @@ StatusOr<DepthCodecId> depthCodecFromTag(uint32_t tag) {
 Status DepthCodecParams::validate() const {
     if (static_cast<int>(codec) >= kDepthCodecCount) return invalidArgument("DepthCodecParams: unknown codec");
     if (zstd_level < -7 || zstd_level > 19) return invalidArgument("DepthCodecParams: zstd_level outside [-7, 19]");
+    if (zstd_fast_step < 0 || zstd_fast_step > 1024) {
+        return invalidArgument("DepthCodecParams: zstd_fast_step outside [0, 1024]");
+    }
     if (png_compression < 0 || png_compression > 9) {
         return invalidArgument("DepthCodecParams: png_compression outside [0, 9]");
     }
@@ -163,6 +172,7 @@ struct DepthEncoder::State {
     std::vector<uint16_t> pixels;  // contiguous copy when the input Mat has a stride
     std::vector<uint8_t> scratch;  // pre-pass output (RVL words or delta planes)
     std::vector<uint8_t> png;
+    std::vector<uint16_t> rank_of = std::vector<uint16_t>(65536);  // kPackedDeltaZstd's value -> rank table
     ~State() { ZSTD_freeCCtx(cctx); }
 };
 
@@ -186,10 +196,22 @@ Status DepthEncoder::encode(const cv::Mat& depth_u16, std::vector<uint8_t>& out)
         px = state_->pixels.data();
     }
 
-    auto zstdInto = [&](const void* src, size_t src_bytes) -> Status {
+    // fast_literals: kPackedDeltaZstd's tuning (DepthCodecParams::zstd_fast_step). The parameters are set per
+    // call because one context serves every codec.
+    auto zstdInto = [&](const void* src, size_t src_bytes, bool fast_literals = false) -> Status {
+        ZSTD_CCtx* cctx = state_->cctx;
+        ZSTD_CCtx_reset(cctx, ZSTD_reset_session_and_parameters);
+        size_t r = ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, params_.zstd_level);
+        if (ZSTD_isError(r)) return internalError(std::string("zstd level rejected: ") + ZSTD_getErrorName(r));
+        if (fast_literals && params_.zstd_level <= 1 && params_.zstd_fast_step > 0) {
+            // A step > 0 makes zstd store literals raw unless Huffman is forced; forcing it is an experimental
+            // parameter, so a libzstd that refuses it still yields a valid (larger) frame: its error is ignored.
+            (void)ZSTD_CCtx_setParameter(cctx, ZSTD_c_strategy, ZSTD_fast);
+            (void)ZSTD_CCtx_setParameter(cctx, ZSTD_c_targetLength, params_.zstd_fast_step);
+            (void)ZSTD_CCtx_setParameter(cctx, ZSTD_c_literalCompressionMode, ZSTD_ps_enable);
+        }
         out.resize(kDepthHeaderBytes + ZSTD_compressBound(src_bytes));
-        const size_t r = ZSTD_compressCCtx(state_->cctx, out.data() + kDepthHeaderBytes, out.size() - kDepthHeaderBytes,
-                                           src, src_bytes, params_.zstd_level);
+        r = ZSTD_compress2(cctx, out.data() + kDepthHeaderBytes, out.size() - kDepthHeaderBytes, src, src_bytes);
         if (ZSTD_isError(r)) return internalError(std::string("zstd compression failed: ") + ZSTD_getErrorName(r));
         out.resize(kDepthHeaderBytes + r);
         return Status::ok();
@@ -218,6 +240,12 @@ Status DepthEncoder::encode(const cv::Mat& depth_u16, std::vector<uint8_t>& out)
             deltaPlanes(px, w, h, state_->scratch.data());
             RETURN_IF_ERROR(zstdInto(state_->scratch.data(), 2 * n));
             break;
+        case DepthCodecId::kPackedDeltaZstd: {
+            state_->scratch.resize(packed::maxTokenBytes(n));
+            const size_t bytes = packed::encode(px, w, h, state_->rank_of.data(), state_->scratch.data());
+            RETURN_IF_ERROR(zstdInto(state_->scratch.data(), bytes, true));
+            break;
+        }
         case DepthCodecId::kPng: {
             const cv::Mat contiguous(h, w, CV_16UC1, const_cast<uint16_t*>(px));
             try {
@@ -242,6 +270,7 @@ Status DepthEncoder::encode(const cv::Mat& depth_u16, std::vector<uint8_t>& out)
 struct DepthDecoder::State {
     ZSTD_DCtx* dctx = ZSTD_createDCtx();
     std::vector<uint8_t> scratch;
+    std::vector<uint16_t> value_of = std::vector<uint16_t>(65536);  // kPackedDeltaZstd's rank -> value table
     ~State() { ZSTD_freeDCtx(dctx); }
 
     // Decompresses exactly `want` bytes (or, when !exact, at most `want`) into dst; returns the size.
@@ -329,6 +358,12 @@ Status DepthDecoder::decode(DepthCodecId codec, const uint8_t* data, size_t size
             RETURN_IF_ERROR(state_->unzstd(body, body_bytes, state_->scratch.data(), 2 * n, true).status());
             undeltaPlanes(state_->scratch.data(), w, h, px);
             return Status::ok();
+        }
+        case DepthCodecId::kPackedDeltaZstd: {
+            state_->scratch.resize(packed::maxTokenBytes(n));
+            ASSIGN_OR_RETURN(const size_t token_bytes,
+                             state_->unzstd(body, body_bytes, state_->scratch.data(), state_->scratch.size(), false));
+            return packed::decode(state_->scratch.data(), token_bytes, w, h, state_->value_of.data(), px);
         }
         case DepthCodecId::kPng: {
             RETURN_IF_ERROR(checkPngHeader(body, body_bytes, w, h));

@@ -150,6 +150,12 @@ std::vector<DepthVariant> depthVariants() {
             v.push_back({std::string(wire::depthCodecName(codec)) + "@" + std::to_string(level), p});
         }
     }
+    for (const int step : {0, 8, 128}) {  // the match-finder step of the packed codec (default 32)
+        wire::DepthCodecParams p;
+        p.codec = wire::DepthCodecId::kPackedDeltaZstd;
+        p.zstd_fast_step = step;
+        v.push_back({"packed-delta-zstd/step" + std::to_string(step), p});
+    }
     return v;
 }
 
@@ -386,7 +392,7 @@ int runCodecs(const std::vector<std::string>& args) {
     for (const auto& set : sets) {
         std::printf("\ndepth: %s (%zu frames %dx%d, raw %.0f KB/frame)\n", set.name.c_str(), set.depth.size(),
                     set.depth[0].cols, set.depth[0].rows, 2.0 * double(set.depth[0].total()) / 1024.0);
-        std::printf("  %-16s %8s %10s %10s %10s\n", "codec", "ratio", "KB/frame", "encode_ms", "decode_ms");
+        std::printf("  %-26s %8s %10s %10s %10s\n", "codec", "ratio", "KB/frame", "encode_ms", "decode_ms");
         std::string json_codecs;
         for (const auto& v : depthVariants()) {
             Figures f;
@@ -395,8 +401,9 @@ int runCodecs(const std::vector<std::string>& args) {
                              set.name.c_str());
                 return 1;
             }
-            const bool is_default = v.params.codec == shipped.codec && v.params.zstd_level == shipped.zstd_level;
-            std::printf("  %-16s %8.2f %10.1f %10.3f %10.3f%s\n", v.label.c_str(), f.ratio, double(f.bytes) / 1024.0,
+            const bool is_default = v.params.codec == shipped.codec && v.params.zstd_level == shipped.zstd_level &&
+                                    v.params.zstd_fast_step == shipped.zstd_fast_step;
+            std::printf("  %-26s %8.2f %10.1f %10.3f %10.3f%s\n", v.label.c_str(), f.ratio, double(f.bytes) / 1024.0,
                         f.encode_ms, f.decode_ms, is_default ? "  (default)" : "");
             json_codecs += (json_codecs.empty() ? "" : ",") + ("\"" + v.label + "\":{" + jsonFigures(f) + "}");
             if (is_default && default_set.empty()) default_depth = f, default_set = set.name;  // first set = face range

@@ -11,13 +11,16 @@
 
 #include "test_data.hpp"
 #include "wire/codecs.hpp"
+#include "wire/packed_delta_codec.hpp"
 #include "wire/rvl_codec.hpp"
 
 namespace facescan::wire {
 namespace {
 
-constexpr DepthCodecId kAllCodecs[] = {DepthCodecId::kRaw16,   DepthCodecId::kRvl,       DepthCodecId::kZstd,
-                                       DepthCodecId::kRvlZstd, DepthCodecId::kDeltaZstd, DepthCodecId::kPng};
+constexpr DepthCodecId kAllCodecs[] = {DepthCodecId::kRaw16,          DepthCodecId::kRvl,       DepthCodecId::kZstd,
+                                       DepthCodecId::kRvlZstd,        DepthCodecId::kDeltaZstd, DepthCodecId::kPng,
+                                       DepthCodecId::kPackedDeltaZstd};
+static_assert(std::size(kAllCodecs) == kDepthCodecCount, "every codec is tested");
 
 // A test pattern with the structure of a Kinect v1 face frame: an ellipsoidal head at 0.7 m before a wall at
 // 1.8 m, depth quantised the way the sensor's 1/8-pixel disparity is (f 575.8 px, baseline 0.075 m), holes.
@@ -228,6 +231,50 @@ TEST(RvlCodec, MatchesWilsonsNibbleLayout) {
     EXPECT_EQ(rvl::decode(out, 4, back, 1).code(), StatusCode::kDataLoss);
 }
 
+TEST(PackedDeltaCodec, TokensAreRanksOfUsedValues) {
+    // Values {1000, 1007, 0, 60000}: used set {0, 1000, 1007, 60000} -> ranks {1, 2, 0, 3}; deltas from the left
+    // (pixel 0 from rank 0): 1, 1, -2, 3 -> zigzag 2, 2, 3, 6: one byte each after the 8 KB value map.
+    const uint16_t pixels[] = {1000, 1007, 0, 60000};
+    std::vector<uint16_t> table(65536);
+    std::vector<uint8_t> tokens(packed::maxTokenBytes(4));
+    ASSERT_EQ(packed::encode(pixels, 4, 1, table.data(), tokens.data()), packed::kValueMapBytes + 4);
+    EXPECT_EQ(tokens[0], 1);                      // value 0
+    EXPECT_EQ(tokens[125], (1 << 0) | (1 << 7));  // values 1000 and 1007 share byte 125
+    const uint8_t* t = tokens.data() + packed::kValueMapBytes;
+    EXPECT_EQ(std::vector<int>(t, t + 4), (std::vector<int>{2, 2, 3, 6}));
+    uint16_t back[4] = {};
+    ASSERT_TRUE(packed::decode(tokens.data(), packed::kValueMapBytes + 4, 4, 1, table.data(), back).isOk());
+    EXPECT_TRUE(std::equal(back, back + 4, pixels));
+    // A rank past the value map, bytes left over, a short map, an empty map, a cut escape: all DATA_LOSS.
+    std::vector<uint8_t> bad = tokens;
+    bad[packed::kValueMapBytes + 3] = 8;  // rank 0 + 4 past the 4 values
+    EXPECT_EQ(packed::decode(bad.data(), packed::kValueMapBytes + 4, 4, 1, table.data(), back).code(),
+              StatusCode::kDataLoss);
+    EXPECT_EQ(packed::decode(tokens.data(), packed::kValueMapBytes + 4, 3, 1, table.data(), back).code(),
+              StatusCode::kDataLoss);
+    EXPECT_EQ(packed::decode(tokens.data(), 100, 1, 1, table.data(), back).code(), StatusCode::kDataLoss);
+    std::vector<uint8_t> empty(packed::kValueMapBytes + 1, 0);
+    EXPECT_EQ(packed::decode(empty.data(), empty.size(), 1, 1, table.data(), back).code(), StatusCode::kDataLoss);
+    bad = tokens;
+    bad[packed::kValueMapBytes] = 0xff;  // escape with one byte left
+    EXPECT_EQ(packed::decode(bad.data(), packed::kValueMapBytes + 2, 1, 1, table.data(), back).code(),
+              StatusCode::kDataLoss);
+}
+
+TEST(PackedDeltaCodec, BeatsPlainDeltasOnDisparityQuantisedDepth) {
+    // The reason the codec exists: Kinect depth uses a sparse subset of millimetre values. On the Kinect-like
+    // pattern the packed codec must be smaller than plain deltas (measured on real frames: 8.8:1 vs 6.8:1).
+    const cv::Mat depth = facePattern(640, 480, 7);
+    std::vector<uint8_t> packed_bytes, delta_bytes;
+    DepthCodecParams params;
+    params.codec = DepthCodecId::kPackedDeltaZstd;
+    ASSERT_TRUE(encodeDepth(depth, params, packed_bytes).isOk());
+    params.codec = DepthCodecId::kDeltaZstd;
+    ASSERT_TRUE(encodeDepth(depth, params, delta_bytes).isOk());
+    EXPECT_LT(double(packed_bytes.size()), 0.9 * double(delta_bytes.size()))
+        << packed_bytes.size() << " vs " << delta_bytes.size();
+}
+
 TEST(DepthCodecNames, TagsAndNamesRoundTrip) {
     for (const DepthCodecId codec : kAllCodecs) {
         EXPECT_EQ(depthCodecFromName(depthCodecName(codec)), codec);
@@ -235,7 +282,7 @@ TEST(DepthCodecNames, TagsAndNamesRoundTrip) {
         ASSERT_TRUE(from_tag.isOk());
         EXPECT_EQ(*from_tag, codec);
     }
-    EXPECT_FALSE(depthCodecFromTag(6).isOk());
+    EXPECT_FALSE(depthCodecFromTag(kDepthCodecCount).isOk());
     EXPECT_FALSE(depthCodecFromName("lzma").has_value());
 }
 
@@ -244,6 +291,10 @@ TEST(DepthCodecParams, ValidateRejectsBadLevels) {
     EXPECT_TRUE(params.validate().isOk());
     params.zstd_level = 40;
     EXPECT_FALSE(params.validate().isOk());
+    params = {};
+    params.zstd_fast_step = -1;
+    EXPECT_FALSE(params.validate().isOk());
+    params.zstd_level = 40;
     std::vector<uint8_t> out;
     EXPECT_EQ(DepthEncoder(params).encode(facePattern(8, 8, 1), out).code(), StatusCode::kInvalidArgument);
     EXPECT_EQ(DepthEncoder().encode(cv::Mat(8, 8, CV_32FC1), out).code(), StatusCode::kInvalidArgument);

@@ -21,14 +21,15 @@ namespace facescan::wire {
 
 // Same numbering as the IDL enum facescan::wire::DepthCodec (static_assert in depth_codec.cpp).
 enum class DepthCodecId : uint8_t {
-    kRaw16 = 0,      // little-endian uint16 pixels, no compression
-    kRvl = 1,        // Wilson 2017 "Fast lossless depth image compression" (run length + variable-length deltas)
-    kZstd = 2,       // zstd over the raw little-endian pixels
-    kRvlZstd = 3,    // RVL, then zstd over the RVL words
-    kDeltaZstd = 4,  // left-neighbour delta, zigzag, split into low/high byte planes, then zstd
-    kPng = 5,        // 16-bit greyscale PNG (OpenCV imencode): the baseline
+    kRaw16 = 0,            // little-endian uint16 pixels, no compression
+    kRvl = 1,              // Wilson 2017 "Fast lossless depth image compression" (run length + variable-length deltas)
+    kZstd = 2,             // zstd over the raw little-endian pixels
+    kRvlZstd = 3,          // RVL, then zstd over the RVL words
+    kDeltaZstd = 4,        // left-neighbour delta, zigzag, split into low/high byte planes, then zstd
+    kPng = 5,              // 16-bit greyscale PNG (OpenCV imencode): the baseline
+    kPackedDeltaZstd = 6,  // histogram packing + left delta, byte tokens, then zstd (wire/packed_delta_codec.hpp)
 };
-inline constexpr int kDepthCodecCount = 6;
+inline constexpr int kDepthCodecCount = 7;
 
 const char* depthCodecName(DepthCodecId codec);  // "rvl", "rvl-zstd", ...
 std::optional<DepthCodecId> depthCodecFromName(std::string_view name);
@@ -41,12 +42,15 @@ inline constexpr int kMaxDepthHeightPx = 4096;
 inline constexpr size_t kDepthHeaderBytes = 16;
 
 struct DepthCodecParams {
-    // Shipped default: delta + zstd level 1. Measured (`facescan-bench codecs`, 640x480 real Kinect frames with
-    // the room behind: 7scenes, pcl person) it has the highest ratio of all codecs (6.6-7.1:1 vs RVL 3.3-3.5,
-    // zstd 6.3-6.5, RVL+zstd 5.7-5.8, PNG 5.2-5.4) and the fastest decode (~0.5 ms); on background-removed
-    // frames (Biwi) RVL+zstd compresses better (36:1 vs 30:1), both far beyond the 6:1 target there.
-    DepthCodecId codec = DepthCodecId::kDeltaZstd;
-    int zstd_level = 1;       // zstd compression level [-7, 19]; 1 is the fastest positive level
+    // Shipped default: histogram-packed deltas + zstd level 1 with a fast match step. Measured
+    // (`facescan-bench codecs`, 640x480 frames) it has the best ratio of the codecs at under 1 ms encode on every
+    // Kinect-like set; the per-set table is in the issue note and the bench prints it.
+    DepthCodecId codec = DepthCodecId::kPackedDeltaZstd;
+    int zstd_level = 1;  // zstd compression level [-7, 19]; 1 is the fastest positive level
+    // kPackedDeltaZstd only, at zstd levels <= 1 (zstd's "fast" strategy): the match finder's step
+    // (ZSTD_c_targetLength). Depth residuals are nearly all literals, so searching every position for matches
+    // costs time and finds little; literals stay Huffman-coded. 0 = zstd's own default.
+    int zstd_fast_step = 32;  // [0, 1024]
     int png_compression = 1;  // zlib level for the PNG baseline [0, 9]
 
     Status validate() const;
