@@ -1,0 +1,284 @@
+#include "recon/parallel.hpp"
+
+#include <pthread.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <new>
+#include <system_error>
+#include <thread>
+#include <vector>
+
+namespace facescan::recon {
+namespace {
+
+constexpr int kSlots = 16;  // jobs open at once (concurrent sessions plus nesting); beyond that a call runs alone
+constexpr int kMaxWorkers = 63;
+// Chunks per thread: rows of the head region cost unevenly (ray casting, ICP pairs), so more chunks than threads
+// let whoever finishes early take another; each claim is one atomic operation.
+constexpr int kChunksPerThread = 8;
+constexpr uint64_t kIndexMask = 0xffffffffu;
+
+// Workers plus the caller. A function, not a namespace-scope constant: a static initialiser elsewhere may call
+// parallelFor before this file's constants are initialised.
+int plannedThreads() {
+    static const int threads =
+        std::clamp(static_cast<int>(std::thread::hardware_concurrency()), 1, kMaxWorkers + 1);  // 0 when unknown
+    return threads;
+}
+
+// What a thread needs to run chunks of one job; workers copy it under the pool mutex.
+struct JobView {
+    detail::ChunkFn fn = nullptr;
+    void* body = nullptr;
+    int begin = 0;
+    int64_t n = 0;  // end - begin does not fit an int for every pair of ints
+    int n_chunks = 0;
+    uint32_t generation = 0;
+};
+
+// One open job. Slots belong to the pool and live as long as it, so a worker may touch a slot's atomics after the
+// job's owner has returned; it touches the owner's stack (the body) only while it holds a claimed, unfinished
+// chunk, which the owner waits for.
+struct alignas(64) Slot {
+    JobView job;        // written by the owner and read by workers, both under the pool mutex
+    bool open = false;  // a job is published here and its owner has not taken it back (under the mutex)
+    // (generation << 32) | next chunk index. The generation makes the claim of a worker that copied an earlier
+    // job of this slot fail instead of taking a chunk of the new one.
+    std::atomic<uint64_t> claim{0};
+    std::atomic<int> remaining{0};  // chunks not finished yet; the owner waits for 0
+};
+
+void runChunk(const JobView& j, int c) {
+    // 64-bit: n * c overflows int for large ranges. Chunk sizes differ by at most one.
+    const int lo = static_cast<int>(j.begin + j.n * c / j.n_chunks);
+    const int hi = static_cast<int>(j.begin + j.n * (c + 1) / j.n_chunks);
+    j.fn(j.body, lo, hi);
+}
+
+void finishChunk(Slot& s) {
+    if (s.remaining.fetch_sub(1, std::memory_order_acq_rel) == 1) s.remaining.notify_all();
+}
+
+class Pool {
+ public:
+    Pool() = default;
+    Pool(const Pool&) = delete;
+    Pool& operator=(const Pool&) = delete;
+    ~Pool();
+
+    // Publishes a job and wakes workers for it; nullptr when every slot is taken or the pool is stopping (the
+    // caller then runs the job alone).
+    Slot* open(detail::ChunkFn fn, void* body, int begin, int64_t n, int n_chunks);
+    // Runs the unclaimed chunks of the caller's own job, waits for those workers took, frees the slot.
+    void runAndClose(Slot& s);
+
+    void lockForFork() { mu_.lock(); }
+    void unlockAfterFork() { mu_.unlock(); }
+    void resetInChild();
+
+ private:
+    void startLocked();
+    void workerLoop(int id);
+    Slot* findOpenLocked(int from);
+
+    std::mutex mu_;
+    std::condition_variable wake_;
+    std::array<Slot, kSlots> slots_;
+    std::vector<std::thread> workers_;  // allocated once, on the first job
+    int sleeping_ = 0;                  // workers waiting on wake_
+    bool started_ = false;
+    bool stop_ = false;
+};
+
+// Set while the pool has workers: the fork handlers act only then.
+constinit std::atomic<Pool*> g_pool{nullptr};
+// Set once the pool is destroyed at exit: a parallelFor from a later static destructor runs on its caller.
+constinit std::atomic<bool> g_pool_gone{false};
+
+Pool& pool() {
+    static Pool p;  // constructed on first use; holds no thread until the first job
+    return p;
+}
+
+void prepareFork() {
+    if (Pool* p = g_pool.load()) p->lockForFork();
+}
+void parentAfterFork() {
+    if (Pool* p = g_pool.load()) p->unlockAfterFork();
+}
+void childAfterFork() {
+    if (Pool* p = g_pool.load()) p->resetInChild();
+}
+
+void Pool::startLocked() {
+    started_ = true;
+    static std::once_flag fork_handlers;
+    // A forked child has only the forking thread: without these it would inherit a pool whose workers do not
+    // exist (and a mutex one of them may have held), and its exit would wait for them forever.
+    std::call_once(fork_handlers, [] { pthread_atfork(prepareFork, parentAfterFork, childAfterFork); });
+    const int n = plannedThreads() - 1;
+    workers_.reserve(static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i) {
+        try {
+            workers_.emplace_back([this, i] { workerLoop(i); });
+        } catch (const std::system_error&) {
+            break;  // no more threads to be had: the callers run what the workers cannot
+        }
+    }
+    g_pool.store(this);
+}
+
+Slot* Pool::open(detail::ChunkFn fn, void* body, int begin, int64_t n, int n_chunks) {
+    Slot* slot = nullptr;
+    bool wake_all = false;
+    int wake = 0;
+    {
+        std::lock_guard lock(mu_);
+        if (stop_) return nullptr;
+        if (!started_) startLocked();
+        for (Slot& s : slots_) {
+            if (!s.open) {
+                slot = &s;
+                break;
+            }
+        }
+        if (slot == nullptr) return nullptr;
+        const uint32_t generation = slot->job.generation + 1;
+        slot->job = JobView{fn, body, begin, n, n_chunks, generation};
+        slot->open = true;
+        slot->remaining.store(n_chunks, std::memory_order_relaxed);
+        slot->claim.store(static_cast<uint64_t>(generation) << 32, std::memory_order_release);
+        // The caller takes one chunk itself; wake no more sleepers than there are chunks left for them.
+        wake = std::min(sleeping_, n_chunks - 1);
+        wake_all = wake == sleeping_;
+    }
+    if (wake == 0) return slot;
+    if (wake_all) {
+        wake_.notify_all();
+    } else {
+        for (int i = 0; i < wake; ++i) wake_.notify_one();
+    }
+    return slot;
+}
+
+void Pool::runAndClose(Slot& s) {
+    const JobView& j = s.job;  // only this thread writes it while the slot is open
+    for (;;) {
+        // The owner's claims need no generation check: the slot cannot be reused before it closes it.
+        const int c = static_cast<int>(s.claim.fetch_add(1, std::memory_order_acq_rel) & kIndexMask);
+        if (c >= j.n_chunks) break;
+        runChunk(j, c);
+        finishChunk(s);
+    }
+    // Chunks claimed by workers: their writes happen-before this acquire of the count reaching 0.
+    for (int left = s.remaining.load(std::memory_order_acquire); left != 0;
+         left = s.remaining.load(std::memory_order_acquire)) {
+        s.remaining.wait(left, std::memory_order_acquire);
+    }
+    std::lock_guard lock(mu_);
+    s.open = false;
+}
+
+Slot* Pool::findOpenLocked(int from) {
+    for (int k = 0; k < kSlots; ++k) {
+        Slot& s = slots_[static_cast<size_t>((from + k) % kSlots)];
+        if (s.open && static_cast<int>(s.claim.load(std::memory_order_relaxed) & kIndexMask) < s.job.n_chunks) {
+            return &s;
+        }
+    }
+    return nullptr;
+}
+
+void Pool::workerLoop(int id) {
+    std::unique_lock lock(mu_);
+    for (;;) {
+        if (stop_) return;
+        Slot* s = findOpenLocked(id);
+        if (s == nullptr) {
+            ++sleeping_;
+            wake_.wait(lock);
+            --sleeping_;
+            continue;
+        }
+        const JobView j = s->job;
+        lock.unlock();
+        uint64_t v = s->claim.load(std::memory_order_acquire);
+        for (;;) {
+            if ((v >> 32) != j.generation) break;  // the job closed and the slot holds another one
+            const int c = static_cast<int>(v & kIndexMask);
+            if (c >= j.n_chunks) break;
+            if (!s->claim.compare_exchange_weak(v, v + 1, std::memory_order_acq_rel, std::memory_order_acquire)) {
+                continue;  // v now holds the current value
+            }
+            runChunk(j, c);
+            finishChunk(*s);
+            v = s->claim.load(std::memory_order_acquire);
+        }
+        lock.lock();
+    }
+}
+
+void Pool::resetInChild() {
+    // The forking thread locked mu_ in prepareFork and is the child's only thread. The workers are gone: forget
+    // their handles without joining (no such threads here) or destroying them (a joinable std::thread terminates),
+    // and start afresh on the child's next job. The condition variable may record the parent's sleeping workers.
+    for (std::thread& t : workers_) new (&t) std::thread();
+    workers_.clear();
+    new (&wake_) std::condition_variable();
+    for (Slot& s : slots_) {
+        s.open = false;
+        s.remaining.store(0, std::memory_order_relaxed);
+    }
+    sleeping_ = 0;
+    started_ = false;
+    g_pool.store(nullptr);
+    mu_.unlock();
+}
+
+Pool::~Pool() {
+    g_pool_gone.store(true);
+    {
+        std::lock_guard lock(mu_);
+        stop_ = true;
+        g_pool.store(nullptr);
+    }
+    wake_.notify_all();
+    for (std::thread& t : workers_) {
+        // exit() called from inside a body on a worker: that worker cannot join itself.
+        if (t.get_id() == std::this_thread::get_id()) {
+            t.detach();
+        } else {
+            t.join();
+        }
+    }
+}
+
+}  // namespace
+
+namespace detail {
+
+void parallelForErased(int begin, int end, ChunkFn fn, void* body) {
+    const int64_t n = static_cast<int64_t>(end) - begin;
+    if (n <= 0) return;
+    const int n_chunks = static_cast<int>(std::min<int64_t>(n, plannedThreads() * kChunksPerThread));
+    Slot* slot = nullptr;
+    if (plannedThreads() > 1 && n > 1 && !g_pool_gone.load(std::memory_order_relaxed)) {
+        slot = pool().open(fn, body, begin, n, n_chunks);
+    }
+    if (slot == nullptr) {
+        fn(body, begin, end);  // one core, one index, every slot taken, or the process is exiting
+        return;
+    }
+    pool().runAndClose(*slot);
+}
+
+}  // namespace detail
+
+int parallelThreadCount() { return plannedThreads(); }
+
+}  // namespace facescan::recon
