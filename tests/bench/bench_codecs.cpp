@@ -4,6 +4,8 @@
 // quality. Mesh: Draco on a ~200k-triangle head (Lee Perry-Smith scan, metres, Loop + sqrt(3) subdivision, texture
 // colours). JSON keys (DESIGN.md s6): depth{codec,ratio,encode_ms,decode_ms} colour{...}
 // mesh{bytes,encode_ms,decode_ms}; per-codec detail under depth_sets{set:{codec:{ratio,encode_ms,decode_ms}}}.
+#include <draco/compression/decode.h>
+
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <algorithm>
 #include <cstdio>
@@ -344,6 +346,46 @@ bool measureMesh(const recon::Mesh& mesh, int repeat, MeshFigures& f) {
     return true;
 }
 
+// What each attribute costs, at Draco's best compression (speed 0), the shipped speed and its fastest (10): the
+// evidence for which of the mesh targets (150 KB, 30 ms, 15 ms for ~200k triangles) Draco can reach at all at
+// the required position error. "draco" decode is Draco's own decoder alone, without building the OpenMesh mesh.
+void printMeshBreakdown(const recon::Mesh& mesh) {
+    std::printf("  per attribute (positions at the error bound; normals %d bits; colours 8-bit):\n",
+                wire::MeshCodecParams{}.normal_bits);
+    std::printf("  %-26s %6s %10s %10s %10s %12s\n", "attributes", "speed", "KB", "encode_ms", "decode_ms",
+                "draco_dec_ms");
+    struct Row {
+        const char* name;
+        bool normals;
+        bool colours;
+    };
+    for (const Row row : {Row{"positions", false, false}, Row{"positions+colours", false, true},
+                          Row{"positions+colours+normals", true, true}}) {
+        for (const int speed : {0, wire::MeshCodecParams{}.speed, 10}) {
+            wire::MeshCodecParams p;
+            p.speed = speed;
+            p.colours = row.colours;
+            if (!row.normals) p.normal_bits = 0;
+            std::vector<uint8_t> bytes;
+            auto t0 = Clock::now();
+            if (!wire::encodeMeshDraco(mesh, p, bytes).isOk()) continue;
+            const double encode_ms = msSince(t0);
+            recon::Mesh decoded;
+            t0 = Clock::now();
+            if (!wire::decodeMeshDraco(bytes.data(), bytes.size(), decoded).isOk()) continue;
+            const double decode_ms = msSince(t0);
+            draco::DecoderBuffer buffer;
+            buffer.Init(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+            draco::Decoder decoder;
+            t0 = Clock::now();
+            const bool ok = decoder.DecodeMeshFromBuffer(&buffer).ok();
+            const double draco_ms = msSince(t0);
+            std::printf("  %-26s %6d %10.1f %10.2f %10.2f %12.2f%s\n", row.name, speed, double(bytes.size()) / 1024.0,
+                        encode_ms, decode_ms, draco_ms, ok ? "" : " (draco failed)");
+        }
+    }
+}
+
 std::string jsonFigures(const Figures& f) {
     char buf[160];
     std::snprintf(buf, sizeof buf, "\"ratio\":%.3f,\"encode_ms\":%.4f,\"decode_ms\":%.4f,\"bytes\":%zu", f.ratio,
@@ -357,6 +399,7 @@ int runCodecs(const std::vector<std::string>& args) {
     int frames = 20;
     int repeat = 5;
     int quality = wire::ColourJpegParams{}.quality;
+    bool mesh_breakdown = false;
     for (size_t i = 0; i < args.size(); ++i) {
         const std::string& a = args[i];
         const bool has_value = i + 1 < args.size();
@@ -368,14 +411,17 @@ int runCodecs(const std::vector<std::string>& args) {
             frames = std::max(1, std::stoi(args[++i]));
         else if (a == "--repeat" && has_value)
             repeat = std::max(1, std::stoi(args[++i]));
+        else if (a == "--mesh-breakdown")
+            mesh_breakdown = true;
         else if (a == "--quality" && has_value)
             quality = std::clamp(std::stoi(args[++i]), 1, 100);
         else {
             std::printf(
                 "usage: facescan-bench codecs [--input all|synthetic|biwi|7scenes|pcl|DIR] [--frames N] [--repeat R]\n"
-                "                             [--quality Q] [--json]\n"
+                "                             [--quality Q] [--mesh-breakdown] [--json]\n"
                 "Depth codecs (ratio, encode/decode ms per frame, bit-exact checked), JPEG colour (TurboJPEG vs\n"
-                "OpenCV), Draco on a ~200k-triangle head. Means over R passes after a warm-up pass.\n");
+                "OpenCV), Draco on a ~200k-triangle head. Means over R passes after a warm-up pass.\n"
+                "--mesh-breakdown: Draco size and time per attribute set at speeds 0, 7 and 10.\n");
             return a == "--help" ? 0 : 2;
         }
     }
@@ -438,6 +484,7 @@ int runCodecs(const std::vector<std::string>& args) {
         std::printf("  %10s %10s %10s %14s\n", "KB", "encode_ms", "decode_ms", "max_error_mm");
         std::printf("  %10.1f %10.2f %10.2f %14.4f\n", double(mesh_f.bytes) / 1024.0, mesh_f.encode_ms,
                     mesh_f.decode_ms, mesh_f.max_error_mm);
+        if (mesh_breakdown) printMeshBreakdown(head);
     } else {
         std::printf("\nmesh: skipped (shared data leeperrysmith missing)\n");
     }
