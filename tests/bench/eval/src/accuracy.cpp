@@ -1,5 +1,5 @@
 // The accuracy ruler (DESIGN.md s6): rigid point-to-plane ICP of M onto G from several starting poses, then
-// point-to-surface distances over G's face region, completeness and outliers.
+// point-to-surface distances over G's face region, completeness (whole region and observed part) and outliers.
 #include "eval/accuracy.hpp"
 
 #include <Eigen/Cholesky>
@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 #include <opencv2/core/utility.hpp>
+#include <string>
 #include <vector>
 
 namespace facescan::eval {
@@ -166,6 +167,15 @@ StatusOr<AccuracyReport> measureAccuracy(const recon::Mesh& mesh, const recon::M
     const Vec3 face_dir = face_direction.normalized();
     const FaceRegion region = faceRegion(gt, gt_nose_tip, face_dir, params);
     if (region.vertex_count == 0) return invalidArgument("accuracy: no GT vertex in the face region");
+    if (!params.observed.empty() && params.observed.size() != gt.n_vertices())
+        return invalidArgument("accuracy: the observed mask has " + std::to_string(params.observed.size()) +
+                               " entries for " + std::to_string(gt.n_vertices()) + " GT vertices");
+    int observed_face = region.vertex_count;
+    if (!params.observed.empty()) {
+        observed_face = 0;
+        for (size_t i = 0; i < params.observed.size(); ++i) observed_face += region.vertex[i] && params.observed[i];
+        if (observed_face == 0) return invalidArgument("accuracy: the observed mask marks no GT face vertex");
+    }
     const SurfaceDistance gt_dist(gt);
     const std::vector<Vec3> pts = pointsOf(mesh);
 
@@ -245,6 +255,13 @@ StatusOr<AccuracyReport> measureAccuracy(const recon::Mesh& mesh, const recon::M
     });
     rep.completeness =
         static_cast<double>(std::count(covered.begin(), covered.end(), 1)) / static_cast<double>(gt_face_ids.size());
+    // The same test over the observed part of the region only (all of it when no mask was given).
+    int covered_observed = 0;
+    for (size_t i = 0; i < gt_face_ids.size(); ++i) {
+        covered_observed += covered[i] && (params.observed.empty() || params.observed[gt_face_ids[i]]);
+    }
+    rep.gt_observed_vertices = observed_face;
+    rep.completeness_observed = static_cast<double>(covered_observed) / static_cast<double>(observed_face);
     return rep;
 }
 

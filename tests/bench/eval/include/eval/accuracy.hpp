@@ -4,11 +4,18 @@
 // (normal . face_direction >= min_facing_cos). M is rigidly aligned to G (point-to-plane ICP from several
 // starting poses, or from a given initial guess), then every vertex of M whose nearest point on G lies in the
 // face region is a sample; distances are point-to-SURFACE (nearest triangle), never point-to-vertex.
+//
+// Completeness is reported twice: over the whole face region, and over its OBSERVABLE part (the face vertices
+// that the sensor measured in at least one frame, given by the caller as a per-vertex mask). Eye sockets, nostril
+// interiors and the mouth slit are never seen by any camera pose of a sequence, so no scanner can cover them;
+// the second figure is what a scanner can be held to, the first says how much of the face the scan holds.
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <memory>
 #include <optional>
+#include <vector>
 
 #include "recon/camera.hpp"
 #include "recon/mesh.hpp"
@@ -24,6 +31,9 @@ struct AccuracyParams {
     bool align = true;                 // run ICP; false = measure as given (after the initial guess)
     int icp_iterations = 40;           // per starting pose
     int max_icp_samples = 6000;        // M vertices used by ICP (uniform subsample)
+    // Per G vertex (indexed by vertex idx, size = G's vertex count): 1 = observed (the sensor measured it in at
+    // least one frame), 0 = never. Empty = unknown: completeness_observed is then the plain completeness.
+    std::vector<uint8_t> observed;
 
     Status validate() const;
 };
@@ -37,6 +47,10 @@ struct AccuracyReport {
     double outliers = 0;         // share of M's face samples farther than outlier_m from G, [0, 1]
     int mesh_vertices_used = 0;  // M samples in the face region
     int gt_face_vertices = 0;    // G vertices in the face region
+    // Share of G's OBSERVED face vertices (AccuracyParams::observed) within complete_within_m of M, [0, 1], and
+    // how many there are. Without a mask: equal to completeness and gt_face_vertices (the whole region).
+    double completeness_observed = 0;
+    int gt_observed_vertices = 0;
     recon::Pose T_gt_mesh = recon::Pose::Identity();  // the alignment found: maps M into G's frame
 };
 
@@ -45,7 +59,8 @@ Eigen::Vector3f findNoseTip(const recon::Mesh& gt_head_frame);
 
 // Measures M against G. `gt_nose_tip` is in G's frame and `face_direction` the way G's face looks (head frame:
 // +z). `T_gt_mesh_guess`, when given, is tried first (e.g. inverse of T_camera0_head for a mesh in the first
-// camera frame). InvalidArgument for empty meshes or bad params; NotFound when M never meets G's face.
+// camera frame). InvalidArgument for empty meshes or bad params, for an `observed` mask whose size is not G's
+// vertex count or that marks no face vertex; NotFound when M never meets G's face.
 StatusOr<AccuracyReport> measureAccuracy(const recon::Mesh& mesh, const recon::Mesh& gt,
                                          const Eigen::Vector3f& gt_nose_tip, const AccuracyParams& params = {},
                                          const std::optional<recon::Pose>& T_gt_mesh_guess = std::nullopt,
