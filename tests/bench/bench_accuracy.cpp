@@ -1,6 +1,8 @@
 // facescan-bench accuracy: the ruler. Rigidly aligns a mesh to the ground-truth head and reports point-to-surface
 // distances over the face region, completeness and outliers (DESIGN.md s6). --baseline-frame measures one raw
-// noisy synthetic frame, back-projected, against the truth: the baseline that fusion must beat by far.
+// noisy synthetic frame, back-projected, against the truth: the baseline that fusion must beat by far; its
+// completeness_observed is taken over what that frame measured (eval/observed_region.hpp). A mesh measured with
+// --mesh comes without sensor views, so its completeness_observed is the whole-region completeness.
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -11,6 +13,7 @@
 #include "eval/accuracy.hpp"
 #include "eval/depth_mesh.hpp"
 #include "eval/mesh_io.hpp"
+#include "eval/observed_region.hpp"
 #include "synth/kinect_simulator.hpp"
 
 namespace {
@@ -43,16 +46,18 @@ std::optional<recon::Pose> readPose(const std::string& path) {
 
 void printReport(const char* what, const eval::AccuracyReport& r, bool json) {
     std::printf("%s\n", what);
-    std::printf("  %-26s %9.3f\n  %-26s %9.3f\n  %-26s %9.3f\n  %-26s %9.3f\n", "mean |d| (mm)", r.mean_mm, "RMS (mm)",
+    std::printf("  %-30s %9.3f\n  %-30s %9.3f\n  %-30s %9.3f\n  %-30s %9.3f\n", "mean |d| (mm)", r.mean_mm, "RMS (mm)",
                 r.rms_mm, "median (mm)", r.median_mm, "p90 (mm)", r.p90_mm);
-    std::printf("  %-26s %9.4f\n  %-26s %9.4f\n  %-26s %9d\n  %-26s %9d\n", "completeness (<= 2 mm)", r.completeness,
+    std::printf("  %-30s %9.4f\n  %-30s %9.4f\n  %-30s %9.4f\n  %-30s %9d\n  %-30s %9d\n  %-30s %9d\n",
+                "completeness (<= 2 mm)", r.completeness, "completeness, observed part", r.completeness_observed,
                 "outliers (> 5 mm)", r.outliers, "mesh vertices used", r.mesh_vertices_used, "GT face vertices",
-                r.gt_face_vertices);
+                r.gt_face_vertices, "GT face vertices observed", r.gt_observed_vertices);
     if (json) {
         std::printf(
             "{\"mean_mm\":%.4f,\"rms_mm\":%.4f,\"median_mm\":%.4f,\"p90_mm\":%.4f,\"completeness\":%.5f,"
-            "\"outliers\":%.5f,\"mesh_vertices_used\":%d}\n",
-            r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, r.completeness, r.outliers, r.mesh_vertices_used);
+            "\"completeness_observed\":%.5f,\"observable_share\":%.5f,\"outliers\":%.5f,\"mesh_vertices_used\":%d}\n",
+            r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, r.completeness, r.completeness_observed,
+            static_cast<double>(r.gt_observed_vertices) / r.gt_face_vertices, r.outliers, r.mesh_vertices_used);
     }
 }
 
@@ -113,6 +118,13 @@ int runAccuracy(const std::vector<std::string>& args) {
         sim.render(frame_index, frame, &truth);
         const cv::Mat head_mask = truth.label == static_cast<int>(synth::PixelLabel::kHead);
         const recon::Mesh raw = eval::meshFromDepth(frame.depth_m, sim.intrinsics(), head_mask);
+        const auto sightings =
+            eval::countSightings(sim.head().mesh, sim.intrinsics(), {{truth.T_camera_head, frame.depth_m, head_mask}});
+        if (!sightings.isOk()) {
+            std::fprintf(stderr, "accuracy: %s\n", sightings.status().toString().c_str());
+            return 1;
+        }
+        params.observed = eval::observedMask(*sightings);
         const auto rep = eval::measureAccuracy(raw, sim.head().mesh, sim.head().nose_tip_head, params,
                                                truth.T_camera_head.inverse());
         if (!rep.isOk()) {

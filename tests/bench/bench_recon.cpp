@@ -1,7 +1,8 @@
 // facescan-bench recon: the reconstruction core on every frame of a sequence, as fast as it runs (DESIGN.md s6).
 // Frames are loaded (or rendered) before timing, so only recon_core is on the clock: filter, ICP, integration and
 // ray casting together, wall clock over the whole loop. With --gt-accuracy on synthetic input the final mesh is
-// measured against the ground-truth head with the accuracy ruler, next to a single-frame baseline.
+// measured against the ground-truth head with the accuracy ruler, next to a single-frame baseline; completeness
+// is reported over the whole face region and over its observable part (eval/observed_region.hpp).
 // Replacing operator new with malloc/free is deliberate (allocation counting); GCC flags the pairing.
 #pragma GCC diagnostic ignored "-Wmismatched-new-delete"
 
@@ -27,6 +28,7 @@
 #include "bench_command.hpp"
 #include "eval/accuracy.hpp"
 #include "eval/mesh_io.hpp"
+#include "eval/observed_region.hpp"
 #include "recon/reconstructor.hpp"
 #include "synth/kinect_simulator.hpp"
 
@@ -62,6 +64,7 @@ struct Options {
     float volume_m = 0;  // 0 = preset
     float trunc_m = 0;
     std::string misses_out;  // --gt-misses: GT face vertices coloured by why they are not covered
+    float observed_tol_m = eval::ObservedRegionParams().surface_tolerance_m;  // metres, see observed_region.hpp
 };
 
 struct Sequence {
@@ -306,90 +309,21 @@ PoseErrors poseErrors(const Sequence& seq, const std::vector<std::optional<Pose>
 }
 
 std::string accuracyJson(const eval::AccuracyReport& r) {
-    char buf[256];
+    char buf[320];
     std::snprintf(buf, sizeof(buf),
                   "{\"mean_mm\":%.4f,\"rms_mm\":%.4f,\"median_mm\":%.4f,\"p90_mm\":%.4f,\"completeness\":%.4f,"
-                  "\"outliers\":%.4f}",
-                  r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, r.completeness, r.outliers);
+                  "\"completeness_observed\":%.4f,\"observable_share\":%.4f,\"outliers\":%.4f}",
+                  r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, r.completeness, r.completeness_observed,
+                  static_cast<double>(r.gt_observed_vertices) / r.gt_face_vertices, r.outliers);
     return buf;
 }
 
 void printAccuracy(const char* what, const eval::AccuracyReport& r) {
     std::printf(
-        "%-22s mean %.3f mm  rms %.3f mm  median %.3f mm  p90 %.3f mm  completeness(2 mm) %.1f %%  "
-        "outliers(5 mm) %.2f %%  (%d samples)\n",
-        what, r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, 100.0 * r.completeness, 100.0 * r.outliers,
-        r.mesh_vertices_used);
-}
-
-// Why GT face vertices are not covered (same region as the ruler: within 0.11 m of the nose tip, normal . +z >= 0).
-// Per vertex, over every 10th frame: was it visible (the noise-free render shows it, not a surface in front) with
-// a measured depth, inside the head mask, at a usable angle (cos >= min_cos)? Writes a PLY point cloud coloured by
-// class and prints the counts.
-void writeMisses(const Sequence& seq, const recon::Mesh& mesh, const eval::AccuracyReport& acc,
-                 const Eigen::Vector3f& nose, float min_cos, const std::string& path) {
-    const recon::Mesh& gt = seq.sim->head().mesh;
-    const eval::SurfaceDistance dist(mesh);
-    const Pose T_mesh_gt = acc.T_gt_mesh.inverse();
-    struct Row {
-        Eigen::Vector3f p;
-        float d_mm;
-        int cls;
-    };
-    std::vector<Row> rows;
-    const char* names[] = {"covered", "never visible with a depth", "seen, never in the head mask",
-                           "in mask only at grazing angles", "seen well, not covered (ours)"};
-    int count[5] = {0, 0, 0, 0, 0};
-    int below_chin[5] = {0, 0, 0, 0, 0}, sides[5] = {0, 0, 0, 0, 0};
-    constexpr int kEvery = 10;  // frames; every 10th frame is rendered again for its noise-free depth
-    std::vector<synth::FrameTruth> truths((seq.frames.size() + kEvery - 1) / kEvery);
-    cv::parallel_for_(cv::Range(0, static_cast<int>(truths.size())), [&](const cv::Range& r) {
-        for (int j = r.start; j < r.end; ++j) {
-            recon::RgbdFrame unused;
-            seq.sim->render(j * kEvery, unused, &truths[static_cast<size_t>(j)]);
-        }
-    });
-    for (const auto vh : gt.vertices()) {
-        const auto& q = gt.point(vh);
-        const auto& nn = gt.normal(vh);
-        const Eigen::Vector3f p(q[0], q[1], q[2]), n(nn[0], nn[1], nn[2]);
-        if ((p - nose).norm() > 0.11f || n.z() < 0.0f) continue;
-        const float d = dist.query(T_mesh_gt * p).distance_m;
-        int seen = 0, in_mask = 0, good = 0;
-        for (size_t j = 0; j < truths.size(); ++j) {
-            const int i = static_cast<int>(j) * kEvery;
-            const Pose T = seq.sim->poseAt(i);
-            const Eigen::Vector3f c = T * p, nc = T.linear() * n;
-            const Eigen::Vector2f px = seq.k.project(c);
-            const int u = static_cast<int>(px.x() + 0.5f), v = static_cast<int>(px.y() + 0.5f);
-            if (u < 0 || v < 0 || u >= seq.k.width_px || v >= seq.k.height_px) continue;
-            // Visible: the noise-free render shows this very point (not a surface in front of it), and the
-            // simulated sensor returned a depth there (no shadow, dropout or incidence cut-off).
-            if (std::fabs(truths[j].depth_true_m.at<float>(v, u) - c.z()) > 0.0015f) continue;
-            if (!(seq.frames[i].depth_m.at<float>(v, u) > 0.0f)) continue;
-            ++seen;
-            if (seq.masks[i].empty() || seq.masks[i].at<uint8_t>(v, u) == 0) continue;
-            ++in_mask;
-            if (-nc.dot(c.normalized()) >= min_cos) ++good;
-        }
-        const int cls = d <= 0.002f ? 0 : seen == 0 ? 1 : in_mask == 0 ? 2 : good < 1 ? 3 : 4;
-        ++count[cls];
-        below_chin[cls] += p.y() < nose.y() - 0.06f;
-        sides[cls] += std::fabs(p.x() - nose.x()) > 0.06f;
-        rows.push_back({p, 1000.0f * d, cls});
-    }
-    std::printf("GT face vertices: %zu\n", rows.size());
-    for (int c = 0; c < 5; ++c)
-        std::printf("  %-32s %6d (%5.1f %%)  of which >6 cm below the nose tip %d, >6 cm to the side %d\n", names[c],
-                    count[c], 100.0 * count[c] / std::max<size_t>(rows.size(), 1), below_chin[c], sides[c]);
-    std::ofstream out(path);
-    out << "ply\nformat ascii 1.0\nelement vertex " << rows.size()
-        << "\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
-           "property uchar blue\nproperty float distance_mm\nproperty uchar miss_class\nend_header\n";
-    const int rgb[5][3] = {{0, 200, 0}, {0, 0, 255}, {255, 255, 0}, {255, 0, 255}, {255, 0, 0}};
-    for (const Row& r : rows)
-        out << r.p.x() << ' ' << r.p.y() << ' ' << r.p.z() << ' ' << rgb[r.cls][0] << ' ' << rgb[r.cls][1] << ' '
-            << rgb[r.cls][2] << ' ' << r.d_mm << ' ' << r.cls << '\n';
+        "%-22s mean %.3f mm  rms %.3f mm  median %.3f mm  p90 %.3f mm  completeness(2 mm) %.1f %% of the face, "
+        "%.1f %% of its observable part  outliers(5 mm) %.2f %%  (%d samples)\n",
+        what, r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, 100.0 * r.completeness, 100.0 * r.completeness_observed,
+        100.0 * r.outliers, r.mesh_vertices_used);
 }
 
 int runRecon(const std::vector<std::string>& args) {
@@ -411,6 +345,8 @@ int runRecon(const std::vector<std::string>& args) {
             o.gt_accuracy = true;
         else if (a == "--gt-misses")
             o.misses_out = next(), o.gt_accuracy = true;
+        else if (a == "--observed-tol-m")
+            o.observed_tol_m = std::strtof(next().c_str(), nullptr);  // junk reads 0, which validate() refuses
         else if (a == "--json")
             o.json = true;
         else if (a == "--verbose")
@@ -422,12 +358,18 @@ int runRecon(const std::vector<std::string>& args) {
         else {
             std::printf(
                 "usage: facescan-bench recon [--input SRC] [--frames N] [--preset face|fast] [--mesh OUT.ply]\n"
-                "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply]\n"
+                "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply] [--observed-tol-m M]\n"
                 "       [--volume-m M] [--trunc-m M] [--verbose] [--json]\n"
                 "SRC: synthetic[:distance=0.7,yaw=35,pitch=12,yaw_period=300,pitch_period=150,frames=300,seed=1,\n"
                 "     noise=1,head=lps|builtin] | tum:DIR | 7scenes:DIR\n");
             return a == "--help" ? 0 : 2;
         }
+    }
+    eval::ObservedRegionParams observed_params;
+    observed_params.surface_tolerance_m = o.observed_tol_m;
+    if (const Status s = observed_params.validate(); !s.isOk()) {
+        std::fprintf(stderr, "recon: --observed-tol-m: %s\n", s.toString().c_str());
+        return 2;
     }
     const double rss_start_mb = currentRssMb();
     Sequence seq;
@@ -532,15 +474,42 @@ int runRecon(const std::vector<std::string>& args) {
         const recon::Mesh& gt = seq.sim->head().mesh;
         const Eigen::Vector3f nose = eval::findNoseTip(gt);
         const Pose guess = seq.sim->poseAt(0).inverse();  // mesh is in the first camera: T_head_camera0
-        const auto acc = eval::measureAccuracy(mesh, gt, nose, {}, guess);
+        // The observable face region: GT vertices the sensor measured in at least one frame of the sequence
+        // (eval/observed_region.hpp: facing the camera, no surface of G more than --observed-tol-m in front of it
+        // on its ray, a depth in the noisy frame at its pixel). Every frame counts. The baseline is measured over
+        // the same region, so both share one denominator.
+        observed_params.min_cos_angle = params.tsdf.min_cos_angle;
+        std::vector<eval::SensorView> views(seq.frames.size());
+        for (size_t i = 0; i < views.size(); ++i)
+            views[i] = {seq.sim->poseAt(static_cast<int>(i)), seq.frames[i].depth_m, seq.masks[i]};
+        const auto ts = std::chrono::steady_clock::now();
+        const auto sightings = eval::countSightings(gt, seq.k, views, observed_params);
+        const double sight_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+        eval::AccuracyParams acc_params;
+        if (sightings.isOk()) {
+            acc_params.observed = eval::observedMask(*sightings);
+        } else {
+            std::printf("observable region: %s (completeness_observed = completeness)\n",
+                        sightings.status().toString().c_str());
+        }
+        const auto acc = eval::measureAccuracy(mesh, gt, nose, acc_params, guess);
         // Single-frame baseline: the first frame alone, through the same filter and integration.
         recon::Reconstructor single(seq.k, params);
         (void)single.processFrame(seq.frames[0], seq.masks[0]);
-        const auto base = eval::measureAccuracy(single.extractMesh(), gt, nose, {}, guess);
+        const auto base = eval::measureAccuracy(single.extractMesh(), gt, nose, acc_params, guess);
         if (acc.isOk()) {
+            std::printf(
+                "observable face region: %d of %d GT face vertices (%.1f %%) measured by the sensor in at least one "
+                "of %zu frames (%.1f s to find)\n",
+                acc->gt_observed_vertices, acc->gt_face_vertices,
+                100.0 * acc->gt_observed_vertices / acc->gt_face_vertices, seq.frames.size(), sight_s);
             printAccuracy("accuracy (all frames)", *acc);
             acc_json = accuracyJson(*acc);
-            if (!o.misses_out.empty()) writeMisses(seq, mesh, *acc, nose, params.tsdf.min_cos_angle, o.misses_out);
+            if (!o.misses_out.empty() && sightings.isOk()) {
+                if (const Status s = eval::writeMisses(gt, *sightings, mesh, *acc, nose, acc_params, o.misses_out);
+                    !s.isOk())
+                    std::fprintf(stderr, "recon: %s\n", s.toString().c_str());
+            }
         } else {
             std::printf("accuracy: %s\n", acc.status().toString().c_str());
         }
