@@ -29,6 +29,7 @@
 #include "eval/accuracy.hpp"
 #include "eval/mesh_io.hpp"
 #include "eval/observed_region.hpp"
+#include "recon/face_pipeline.hpp"
 #include "recon/reconstructor.hpp"
 #include "synth/kinect_simulator.hpp"
 
@@ -65,6 +66,9 @@ struct Options {
     float trunc_m = 0;
     std::string misses_out;  // --gt-misses: GT face vertices coloured by why they are not covered
     float observed_tol_m = eval::ObservedRegionParams().surface_tolerance_m;  // metres, see observed_region.hpp
+    // --mask pipeline: the head mask comes from the server's own FacePipeline (Viola-Jones + depth, segmentation,
+    // tracked-box seeding), run inside the timed loop as facescan-server does; default: the input's own mask.
+    bool pipeline_mask = false;
 };
 
 struct Sequence {
@@ -347,6 +351,8 @@ int runRecon(const std::vector<std::string>& args) {
             o.misses_out = next(), o.gt_accuracy = true;
         else if (a == "--observed-tol-m")
             o.observed_tol_m = std::strtof(next().c_str(), nullptr);  // junk reads 0, which validate() refuses
+        else if (a == "--mask" && i + 1 < args.size() && (args[i + 1] == "pipeline" || args[i + 1] == "input"))
+            o.pipeline_mask = next() == "pipeline";
         else if (a == "--json")
             o.json = true;
         else if (a == "--verbose")
@@ -359,9 +365,12 @@ int runRecon(const std::vector<std::string>& args) {
             std::printf(
                 "usage: facescan-bench recon [--input SRC] [--frames N] [--preset face|fast] [--mesh OUT.ply]\n"
                 "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply] [--observed-tol-m M]\n"
-                "       [--volume-m M] [--trunc-m M] [--verbose] [--json]\n"
+                "       [--volume-m M] [--trunc-m M] [--mask input|pipeline] [--verbose] [--json]\n"
                 "SRC: synthetic[:distance=0.7,yaw=35,pitch=12,yaw_period=300,pitch_period=150,frames=300,seed=1,\n"
-                "     noise=1,head=lps|builtin] | tum:DIR | 7scenes:DIR\n");
+                "     noise=1,head=lps|builtin] | tum:DIR | 7scenes:DIR\n"
+                "--mask pipeline: find the head per frame with the server's FacePipeline (timed in the loop) instead "
+                "of\n"
+                "     the input's mask (synthetic: the renderer's head label; tum/7scenes: none).\n");
             return a == "--help" ? 0 : 2;
         }
     }
@@ -396,6 +405,17 @@ int runRecon(const std::vector<std::string>& args) {
         return 1;
     }
 
+    std::optional<recon::FacePipeline> pipeline;
+    if (o.pipeline_mask) {
+        auto created = recon::FacePipeline::create({}, seq.k, recon::ColourCamera::registeredTo(seq.k));
+        if (!created.isOk()) {
+            std::fprintf(stderr, "recon: %s\n", created.status().toString().c_str());
+            return 1;
+        }
+        pipeline.emplace(std::move(created).value());
+        seq.mask_source = "facescan-server's FacePipeline (detection + segmentation, in the loop)";
+    }
+
     const int n = static_cast<int>(seq.frames.size());
     std::vector<std::optional<Pose>> estimate(static_cast<size_t>(n));
     recon::StageTimesMs sum;
@@ -406,7 +426,24 @@ int runRecon(const std::vector<std::string>& args) {
     const auto t0 = std::chrono::steady_clock::now();
     for (int i = 0; i < n; ++i) {
         if (i == warmup) allocations_after_warmup = g_allocations.load();
-        const recon::FrameResult r = rec.processFrame(seq.frames[i], seq.masks[i]);
+        recon::FrameResult r;
+        std::string head_reason;  // outlives r.reason's use below
+        if (pipeline) {
+            // As the server's session worker does: the tracked pose seeds the segmenter; detection otherwise.
+            cv::Rect box;
+            const bool tracked = rec.predictedHeadBox(box);
+            const recon::HeadObservation head = pipeline->process(seq.frames[i], tracked ? &box : nullptr);
+            sum.detect += head.detect_ms;
+            sum.segment += head.segment_ms;
+            if (head.found) {
+                r = rec.processFrame(seq.frames[i], head.mask);
+            } else {
+                head_reason = head.reason;
+                r.reason = head_reason.c_str();
+            }
+        } else {
+            r = rec.processFrame(seq.frames[i], seq.masks[i]);
+        }
         sum.filter += r.ms.filter;
         sum.icp += r.ms.icp;
         sum.integrate += r.ms.integrate;
@@ -442,6 +479,9 @@ int runRecon(const std::vector<std::string>& args) {
                 1000.0 * params.tsdf.voxelSizeM(), rec.volume().grid().allocated_blocks,
                 rec.volume().grid().allocated_blocks * recon::kBlockVoxels * sizeof(recon::Voxel) / 1048576.0);
     std::printf("%-10s %10s\n", "stage", "ms/frame");
+    if (pipeline) {
+        std::printf("%-10s %10.3f\n%-10s %10.3f\n", "detect", sum.detect / n, "segment", sum.segment / n);
+    }
     std::printf("%-10s %10.3f\n%-10s %10.3f\n%-10s %10.3f\n%-10s %10.3f\n", "filter", sum.filter / n, "icp",
                 sum.icp / n, "integrate", sum.integrate / n, "raycast", sum.raycast / n);
     std::printf("%-10s %10.3f   (wall clock over the whole loop)\n", "total", 1000.0 * loop_s / n);
@@ -520,11 +560,11 @@ int runRecon(const std::vector<std::string>& args) {
     }
     if (o.json) {
         std::printf(
-            "{\"frames\":%d,\"fps\":%.2f,\"ms\":{\"detect\":0,\"segment\":0,\"filter\":%.3f,\"icp\":%.3f,"
+            "{\"frames\":%d,\"fps\":%.2f,\"ms\":{\"detect\":%.3f,\"segment\":%.3f,\"filter\":%.3f,\"icp\":%.3f,"
             "\"integrate\":%.3f,\"raycast\":%.3f,\"mesh\":%.1f},\"rejected\":%d,\"peak_rss_mb\":%.1f,"
             "\"recon_rss_mb\":%.1f,\"allocations_after_warmup\":%ld,\"mask\":\"%s\"",
-            n, fps, sum.filter / n, sum.icp / n, sum.integrate / n, sum.raycast / n, mesh_ms, rejected, peakRssMb(),
-            rss_recon_mb, allocations_after_warmup, seq.mask_source.c_str());
+            n, fps, sum.detect / n, sum.segment / n, sum.filter / n, sum.icp / n, sum.integrate / n, sum.raycast / n,
+            mesh_ms, rejected, peakRssMb(), rss_recon_mb, allocations_after_warmup, seq.mask_source.c_str());
         if (pe.frames > 0)
             std::printf(",\"ate_rmse_mm\":%.3f,\"rpe_mm\":%.4f,\"rpe_deg\":%.5f", pe.ate_rmse_mm, pe.rpe_mm,
                         pe.rpe_deg);
