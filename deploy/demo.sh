@@ -49,16 +49,9 @@ for bin in "$SERVER" "$AGENT" "$CLIENT" "$ACCURACY"; do
 done
 
 # --- 3. a private world: own DDS domain, own session, own temporary folder -----------------------------------------
-# A private DDS domain: claim one of 100..219 with an exclusive lock (the tests claim theirs the same way, see
-# tests/common/test_domain.hpp), held on descriptor 9 until this script and everything it started exit.
-domain=""
-for i in $(seq 0 119); do
-    candidate=$((100 + ($$ + i) % 120))
-    exec 9>"/tmp/facescan-test-domain-$candidate.lock"
-    if flock -n 9; then domain=$candidate; break; fi
-    exec 9>&-
-done
-[ -n "$domain" ] || { echo "demo: no free DDS domain in 100..219" >&2; exit 1; }
+# A private DDS domain, held until this script and everything it started exit.
+source "$root/deploy/claim-domain.sh"
+claim_private_domain || { echo "demo: no free DDS domain in 100..219" >&2; exit 1; }
 session="demo-$$"
 dds=(--profile loopback --domain "$domain")
 if [ -n "${FACESCAN_DATA_DIR:-}" ] && [ -d "$FACESCAN_DATA_DIR/leeperrysmith" ] ||

@@ -20,15 +20,8 @@ for bin in "$server_bin" "$agent_bin"; do
     [ -x "$bin" ] || { echo "server_realtime: $bin missing: cmake --build $BUILD_DIR --target facescan-server facescan-agent" >&2; exit 1; }
 done
 
-# A private DDS domain, claimed like the tests and the demo do (tests/common/test_domain.hpp).
-domain=""
-for i in $(seq 0 119); do
-    candidate=$((100 + ($$ + i) % 120))
-    exec 9>"/tmp/facescan-test-domain-$candidate.lock"
-    if flock -n 9; then domain=$candidate; break; fi
-    exec 9>&-
-done
-[ -n "$domain" ] || { echo "server_realtime: no free DDS domain in 100..219" >&2; exit 1; }
+source "$root/deploy/claim-domain.sh"
+claim_private_domain || { echo "server_realtime: no free DDS domain in 100..219" >&2; exit 1; }
 
 work=$(mktemp -d /tmp/facescan-rt.XXXXXX)
 pids=()
