@@ -290,6 +290,7 @@ void Session::workerLoop() {
             return;
         }
         processFrame(working_);
+        copySnapshotIfAsked();
         lk.lock();
         spare_.push_back(std::move(working_));
         working_ = PendingFrame();
@@ -430,19 +431,51 @@ StatusOr<std::vector<uint8_t>> Session::previewPng() {
     return png;
 }
 
+void Session::copySnapshotIfAsked() {
+    {
+        std::lock_guard lk(mutex_);
+        if (snapshot_copy_ != SnapshotCopy::kAsked || !recon_) return;
+        snapshot_copy_ = SnapshotCopy::kCopying;
+    }
+    const int64_t t0 = steadyNowNs();
+    recon_->copyVolume(snapshot_grid_);
+    const float copy_ms = msSince(t0);
+    {
+        std::lock_guard lk(mutex_);
+        snapshot_copy_ms_ = copy_ms;
+        snapshot_copy_ = SnapshotCopy::kDone;
+    }
+    snapshot_copy_cv_.notify_all();
+}
+
 std::optional<SnapshotResult> Session::makeSnapshot() {
     std::shared_ptr<recon::Reconstructor> rec;
     int integrated = 0;
+    float copy_ms = 0;
     {
-        std::lock_guard lk(mutex_);
+        std::unique_lock lk(mutex_);
         if (stats_.state == SessionState::kFinished || !recon_) return std::nullopt;
         integrated = static_cast<int>(stats_.frames_integrated);
         if (integrated == 0 || integrated == snapshot_frames_) return std::nullopt;
         rec = recon_;
+        // Ask the worker to copy after its current frame; if no frame comes within a few frame periods (paused
+        // agent, end of a recording), copy here: the frame path is idle then, so nothing waits on the lock.
+        snapshot_copy_ = SnapshotCopy::kAsked;
+        const bool copied = snapshot_copy_cv_.wait_for(lk, std::chrono::milliseconds(150),
+                                                       [&] { return snapshot_copy_ == SnapshotCopy::kDone; });
+        if (!copied && snapshot_copy_ == SnapshotCopy::kCopying) {  // the worker took it just now: let it finish
+            snapshot_copy_cv_.wait(lk, [&] { return snapshot_copy_ == SnapshotCopy::kDone; });
+        } else if (!copied) {
+            snapshot_copy_ = SnapshotCopy::kIdle;  // withdrawn under the lock: the worker will not start it now
+            lk.unlock();
+            const int64_t t0 = steadyNowNs();
+            rec->copyVolume(snapshot_grid_);
+            snapshot_copy_ms_ = msSince(t0);
+            lk.lock();
+        }
+        snapshot_copy_ = SnapshotCopy::kIdle;
+        copy_ms = snapshot_copy_ms_;
     }
-    const int64_t t0 = steadyNowNs();
-    rec->copyVolume(snapshot_grid_);  // the only step that holds the frame path's lock
-    const float copy_ms = msSince(t0);
     recon::MeshParams mp = params_.recon.mesh;
     mp.stride_vox = params_.snapshot_stride_vox;
     const int64_t t1 = steadyNowNs();

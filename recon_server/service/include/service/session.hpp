@@ -58,7 +58,7 @@ struct SessionStats {
     recon::StageTimesMs ms_mean;  // session mean per stage
     float latency_p50_ms = 0;     // capture (agent clock) to pose known, last 512 tracked frames
     float latency_p95_ms = 0;
-    float snapshot_copy_ms = 0;    // last snapshot: volume copy (the only part under the frame-path lock)
+    float snapshot_copy_ms = 0;    // last snapshot: volume copy (by the worker between frames, see SnapshotCopy)
     float snapshot_mesh_ms = 0;    // last snapshot: coarse marching cubes
     float snapshot_encode_ms = 0;  // last snapshot: Draco encode
     uint32_t snapshot_seq = 0;
@@ -127,6 +127,7 @@ class Session {
     };
     void workerLoop();
     void processFrame(PendingFrame& pending);
+    void copySnapshotIfAsked();
     void finalize(const std::string& why, const FinishCallback& done);
     void recordLatency(float ms);
     std::string summaryJson(const SessionStats& s, const MeshResult& m) const;
@@ -165,8 +166,17 @@ class Session {
     wire::FrameDecoder decoder_;
     recon::RgbdFrame frame_;
     PendingFrame working_;
-    // Snapshot-thread-only state (no lock).
+    // The snapshot's volume copy is made by the WORKER between two frames when the snapshot thread asks for it
+    // (guarded by mutex_): the snapshot thread runs at nice 10, and a copy made there while holding the volume
+    // lock was preempted under load (82 ms lock hold measured) and stalled the frame path behind it (priority
+    // inversion). On the worker the copy runs at frame priority, takes a few ms, and never waits on a lock.
+    enum class SnapshotCopy { kIdle, kAsked, kCopying, kDone };
+    SnapshotCopy snapshot_copy_ = SnapshotCopy::kIdle;
+    std::condition_variable snapshot_copy_cv_;
+    // Written by whoever holds the copy (snapshot_copy_ protocol), read by the snapshot thread after kDone.
     recon::TsdfSnapshot snapshot_grid_;
+    float snapshot_copy_ms_ = 0;
+    // Snapshot-thread-only state (no lock).
     int snapshot_frames_ = -1;
 
     std::thread worker_;
