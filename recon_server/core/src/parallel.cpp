@@ -22,7 +22,7 @@ constexpr int kMaxWorkers = 63;
 // Chunks per thread: rows of the head region cost unevenly (ray casting, ICP pairs), so more chunks than threads
 // let whoever finishes early take another; each claim is one atomic operation.
 constexpr int kChunksPerThread = 8;
-constexpr uint64_t kIndexMask = 0xffffffffu;
+static_assert((kMaxWorkers + 1) * kChunksPerThread < (1 << 16), "chunk indices are 16 bits in a claim word");
 // How long a thread that ran out of work polls (yielding the core) before it sleeps. The frame loop's calls follow
 // each other within microseconds (ICP's 19 per frame), and waking a sleeping thread on this VM often took longer
 // than a whole call, so workers that slept at once took few chunks (~25 % of them with 2 threads, against ~45 %
@@ -53,11 +53,21 @@ struct JobView {
 struct alignas(64) Slot {
     JobView job;        // written by the owner and read by workers, both under the pool mutex
     bool open = false;  // a job is published here and its owner has not taken it back (under the mutex)
-    // (generation << 32) | next chunk index. The generation makes the claim of a worker that copied an earlier
-    // job of this slot fail instead of taking a chunk of the new one.
+    // Unclaimed chunks [front, back) and the job's generation, in one word (packClaim). The owner takes chunks
+    // from the front and workers from the back, so with two threads each runs one contiguous run of rows (cache
+    // locality, and no two threads writing next to each other as with interleaved chunks: ICP's per-stripe sums
+    // shared cache lines that way). The generation makes the claim of a worker that copied an earlier job of this
+    // slot fail instead of taking a chunk of the new one.
     std::atomic<uint64_t> claim{0};
     std::atomic<int> remaining{0};  // chunks not finished yet; the owner waits for 0
 };
+
+constexpr uint64_t packClaim(uint32_t generation, int front, int back) {
+    return static_cast<uint64_t>(generation) << 32 | static_cast<uint64_t>(front) << 16 | static_cast<uint64_t>(back);
+}
+constexpr uint32_t claimGeneration(uint64_t v) { return static_cast<uint32_t>(v >> 32); }
+constexpr int claimFront(uint64_t v) { return static_cast<int>((v >> 16) & 0xffffu); }
+constexpr int claimBack(uint64_t v) { return static_cast<int>(v & 0xffffu); }
 
 void runChunk(const JobView& j, int c) {
     // 64-bit: n * c overflows int for large ranges. Chunk sizes differ by at most one.
@@ -171,7 +181,7 @@ Slot* Pool::open(detail::ChunkFn fn, void* body, int begin, int64_t n, int n_chu
         slot->open = true;
         published_.fetch_add(1, std::memory_order_relaxed);
         slot->remaining.store(n_chunks, std::memory_order_relaxed);
-        slot->claim.store(static_cast<uint64_t>(generation) << 32, std::memory_order_release);
+        slot->claim.store(packClaim(generation, 0, n_chunks), std::memory_order_release);
         // The caller takes one chunk itself; wake no more sleepers than there are chunks left for them.
         wake = std::min(sleeping_, n_chunks - 1);
         wake_all = wake == sleeping_;
@@ -187,12 +197,15 @@ Slot* Pool::open(detail::ChunkFn fn, void* body, int begin, int64_t n, int n_chu
 
 void Pool::runAndClose(Slot& s) {
     const JobView& j = s.job;  // only this thread writes it while the slot is open
-    for (;;) {
-        // The owner's claims need no generation check: the slot cannot be reused before it closes it.
-        const int c = static_cast<int>(s.claim.fetch_add(1, std::memory_order_acq_rel) & kIndexMask);
-        if (c >= j.n_chunks) break;
-        runChunk(j, c);
+    // The owner's claims need no generation check: the slot cannot be reused before it closes it.
+    uint64_t v = s.claim.load(std::memory_order_acquire);
+    while (claimFront(v) < claimBack(v)) {
+        if (!s.claim.compare_exchange_weak(v, v + (1u << 16), std::memory_order_acq_rel, std::memory_order_acquire)) {
+            continue;  // v now holds the current value
+        }
+        runChunk(j, claimFront(v));
         finishChunk(s);
+        v = s.claim.load(std::memory_order_acquire);
     }
     // Chunks claimed by workers: their writes happen-before this acquire of the count reaching 0. Workers are
     // mid-chunk, so poll first: a sleeping caller would pay the wake-up on the frame's critical path.
@@ -208,9 +221,9 @@ void Pool::runAndClose(Slot& s) {
 Slot* Pool::findOpenLocked(int from) {
     for (int k = 0; k < kSlots; ++k) {
         Slot& s = slots_[static_cast<size_t>((from + k) % kSlots)];
-        if (s.open && static_cast<int>(s.claim.load(std::memory_order_relaxed) & kIndexMask) < s.job.n_chunks) {
-            return &s;
-        }
+        if (!s.open) continue;
+        const uint64_t v = s.claim.load(std::memory_order_relaxed);
+        if (claimFront(v) < claimBack(v)) return &s;
     }
     return nullptr;
 }
@@ -240,14 +253,12 @@ void Pool::workerLoop(int id) {
         const JobView j = s->job;
         lock.unlock();
         uint64_t v = s->claim.load(std::memory_order_acquire);
-        for (;;) {
-            if ((v >> 32) != j.generation) break;  // the job closed and the slot holds another one
-            const int c = static_cast<int>(v & kIndexMask);
-            if (c >= j.n_chunks) break;
-            if (!s->claim.compare_exchange_weak(v, v + 1, std::memory_order_acq_rel, std::memory_order_acquire)) {
+        // Stop when the job closed and the slot holds another one, or nothing is left to claim.
+        while (claimGeneration(v) == j.generation && claimFront(v) < claimBack(v)) {
+            if (!s->claim.compare_exchange_weak(v, v - 1, std::memory_order_acq_rel, std::memory_order_acquire)) {
                 continue;  // v now holds the current value
             }
-            runChunk(j, c);
+            runChunk(j, claimBack(v) - 1);
             finishChunk(*s);
             v = s->claim.load(std::memory_order_acquire);
         }
