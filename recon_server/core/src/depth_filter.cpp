@@ -3,7 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <opencv2/core/utility.hpp>
+
+#include "recon/parallel.hpp"
 
 namespace facescan::recon {
 namespace {
@@ -93,8 +94,8 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
     const int radius = p.radius_px;
     const float inv_step = 1.0f / range_step_m_;
     const int lut_last = static_cast<int>(range_lut_.size()) - 1;
-    cv::parallel_for_(cv::Range(roi.y, roi.y + roi.height), [&](const cv::Range& rows) {
-        for (int v = rows.start; v < rows.end; ++v) {
+    parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
+        for (int v = v_lo; v < v_hi; ++v) {
             float* dst = l0.depth_m.ptr<float>(v);
             const float* centre_row = masked_.ptr<float>(v);
             for (int u = roi.x; u < roi.x + roi.width; ++u) {
@@ -169,8 +170,8 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
 }
 
 void computeVertexMap(const Intrinsics& k, const cv::Mat& depth_m, const cv::Rect& roi, cv::Mat& vertex) {
-    cv::parallel_for_(cv::Range(roi.y, roi.y + roi.height), [&](const cv::Range& rows) {
-        for (int v = rows.start; v < rows.end; ++v) {
+    parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
+        for (int v = v_lo; v < v_hi; ++v) {
             const float* z = depth_m.ptr<float>(v);
             auto* dst = vertex.ptr<cv::Vec3f>(v);
             for (int u = roi.x; u < roi.x + roi.width; ++u) {
@@ -187,8 +188,8 @@ void computeVertexMap(const Intrinsics& k, const cv::Mat& depth_m, const cv::Rec
 
 void computeNormalMap(const cv::Mat& vertex, const cv::Rect& roi, float max_step_m, cv::Mat& normal) {
     const float max_step2 = max_step_m * max_step_m;
-    cv::parallel_for_(cv::Range(roi.y, roi.y + roi.height), [&](const cv::Range& rows) {
-        for (int v = rows.start; v < rows.end; ++v) {
+    parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
+        for (int v = v_lo; v < v_hi; ++v) {
             const auto* row = vertex.ptr<cv::Vec3f>(v);
             const bool has_next_row = v + 1 < roi.y + roi.height;
             const auto* next = has_next_row ? vertex.ptr<cv::Vec3f>(v + 1) : nullptr;

@@ -6,6 +6,8 @@
 #include <limits>
 #include <opencv2/imgproc.hpp>
 
+#include "recon/parallel.hpp"
+
 namespace facescan::recon {
 namespace {
 
@@ -130,8 +132,8 @@ void faceCandidateMask(const cv::Mat& depth_m, const cv::Mat& distance_px, float
     mask_u8.create(depth_m.size(), CV_8UC1);
     const int cols = depth_m.cols;
     const int rows = depth_m.rows;
-    cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range) {
-        for (int v = range.start; v < range.end; ++v) {
+    parallelFor(0, rows, [&](int v_lo, int v_hi) {
+        for (int v = v_lo; v < v_hi; ++v) {
             const float* z = depth_m.ptr<float>(v);
             uchar* m = mask_u8.ptr<uchar>(v);
             for (int u = 0; u < cols; ++u) {

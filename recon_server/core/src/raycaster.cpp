@@ -3,7 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <opencv2/core/utility.hpp>
+
+#include "recon/parallel.hpp"
 
 namespace facescan::recon {
 namespace {
@@ -116,8 +117,8 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
     const Eigen::Matrix3f r = T_world_camera.linear();
     const Eigen::Vector3f o_vox = grid.toVoxel(T_world_camera.translation());
     const bool have_hint = !depth_hint_m.empty();
-    cv::parallel_for_(cv::Range(roi.y, roi.y + roi.height), [&](const cv::Range& rows) {
-        for (int v = rows.start; v < rows.end; ++v) {
+    parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
+        for (int v = v_lo; v < v_hi; ++v) {
             auto* vert = out.vertex.ptr<cv::Vec3f>(v);
             auto* norm = out.normal.ptr<cv::Vec3f>(v);
             const float* hint = have_hint ? depth_hint_m.ptr<float>(v) : nullptr;
@@ -169,8 +170,8 @@ void Raycaster::renderShaded(const VoxelBlockGrid& grid, const Intrinsics& k, co
     const float step_vox = params_.step_trunc_fraction * grid.trunc_dist_m / vs;
     const Eigen::Matrix3f r = T_world_camera.linear();
     const Eigen::Vector3f o_vox = grid.toVoxel(T_world_camera.translation());
-    cv::parallel_for_(cv::Range(0, k.height_px), [&](const cv::Range& rows) {
-        for (int v = rows.start; v < rows.end; ++v) {
+    parallelFor(0, k.height_px, [&](int v_lo, int v_hi) {
+        for (int v = v_lo; v < v_hi; ++v) {
             auto* out = shaded_bgr.ptr<cv::Vec3b>(v);
             for (int u = 0; u < k.width_px; ++u) {
                 const Eigen::Vector3f ray_cam = k.ray(static_cast<float>(u), static_cast<float>(v));

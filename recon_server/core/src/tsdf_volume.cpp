@@ -2,7 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <opencv2/core/utility.hpp>
+
+#include "recon/parallel.hpp"
 
 namespace facescan::recon {
 
@@ -194,8 +195,8 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
     const float min_cos = params_.min_cos_angle;
     pixel_range_m_.create(frame.depth_m.size(), CV_32FC1);  // allocates on the first frame only
     pixel_weight_.create(frame.depth_m.size(), CV_32FC1);
-    cv::parallel_for_(cv::Range(roi.y, roi.y + roi.height), [&](const cv::Range& rows) {
-        for (int v = rows.start; v < rows.end; ++v) {
+    parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
+        for (int v = v_lo; v < v_hi; ++v) {
             const float* z = frame.depth_m.ptr<float>(v);
             const auto* nrm = frame.normal.ptr<cv::Vec3f>(v);
             float* range_m = pixel_range_m_.ptr<float>(v);
@@ -223,8 +224,8 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
     const bool have_colour = !colour_bgr.empty();
     const Eigen::Vector3f step_x = r_cw.col(0) * vs, step_y = r_cw.col(1) * vs, step_z = r_cw.col(2) * vs;
     const int u0 = roi.x, v0 = roi.y, u1 = roi.x + roi.width, v1 = roi.y + roi.height;
-    cv::parallel_for_(cv::Range(0, static_cast<int>(touched_.size())), [&](const cv::Range& range) {
-        for (int t = range.start; t < range.end; ++t) {
+    parallelFor(0, static_cast<int>(touched_.size()), [&](int t_lo, int t_hi) {
+        for (int t = t_lo; t < t_hi; ++t) {
             const int slot = touched_[t];
             const Eigen::Vector3i& bc = grid_.block_coords[slot];
             Voxel* block = &grid_.voxels[static_cast<size_t>(slot) * kBlockVoxels];
