@@ -76,15 +76,11 @@ void runChunk(const JobView& j, int c) {
     j.fn(j.body, lo, hi);
 }
 
-// Polls done() for up to kPollBeforeSleep, yielding the core between polls; true once done() holds.
+// Polls done() until it holds or kPollBeforeSleep has passed, yielding the core between polls.
 template <class Done>
-bool pollFor(Done done) {
+void pollFor(Done done) {
     const auto until = std::chrono::steady_clock::now() + kPollBeforeSleep;
-    while (!done()) {
-        if (std::chrono::steady_clock::now() > until) return false;
-        std::this_thread::yield();
-    }
-    return true;
+    while (!done() && std::chrono::steady_clock::now() < until) std::this_thread::yield();
 }
 
 void finishChunk(Slot& s) {
