@@ -116,8 +116,13 @@ TEST(ParallelFor, WorkersShareTheWork) {
     for (int attempt = 0; attempt < 20 && !shared; ++attempt) {
         std::atomic<int> on_other_threads{0}, finished{0};
         parallelFor(0, 64, [&](int lo, int hi) {
-            if (std::this_thread::get_id() != caller) on_other_threads += hi - lo;
-            std::this_thread::sleep_for(std::chrono::microseconds(500));
+            if (std::this_thread::get_id() != caller) {
+                on_other_threads += hi - lo;
+                // Slower than the caller's chunks: the caller runs out of chunks first and must wait for this one.
+                std::this_thread::sleep_for(std::chrono::milliseconds(2));
+            } else {
+                std::this_thread::sleep_for(std::chrono::microseconds(100));
+            }
             finished += hi - lo;
         });
         ASSERT_EQ(finished.load(), 64) << "returned before every chunk had finished";
