@@ -3,9 +3,6 @@
 // ray casting together, wall clock over the whole loop. With --gt-accuracy on synthetic input the final mesh is
 // measured against the ground-truth head with the accuracy ruler, next to a single-frame baseline; completeness
 // is reported over the whole face region and over its observable part (eval/observed_region.hpp).
-// Replacing operator new with malloc/free is deliberate (allocation counting); GCC flags the pairing.
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-
 #include <sys/resource.h>
 
 #include <Eigen/SVD>
@@ -25,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "allocation_counter.hpp"  // counts heap allocations: the frame loop must make none after warm-up
 #include "bench_command.hpp"
 #include "eval/accuracy.hpp"
 #include "eval/mesh_io.hpp"
@@ -32,21 +30,6 @@
 #include "recon/face_pipeline.hpp"
 #include "recon/reconstructor.hpp"
 #include "synth/kinect_simulator.hpp"
-
-// Counts heap allocations so the bench can show that the frame loop allocates nothing after warm-up.
-namespace {
-std::atomic<long> g_allocations{0};
-}
-void* operator new(std::size_t n) {
-    g_allocations.fetch_add(1, std::memory_order_relaxed);
-    if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-    throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) { return operator new(n); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
 
 namespace facescan::bench {
 namespace {
@@ -425,7 +408,7 @@ int runRecon(const std::vector<std::string>& args) {
     std::map<std::string, int> reasons;
     const auto t0 = std::chrono::steady_clock::now();
     for (int i = 0; i < n; ++i) {
-        if (i == warmup) allocations_after_warmup = g_allocations.load();
+        if (i == warmup) allocations_after_warmup = testing::heapAllocations();
         recon::FrameResult r;
         std::string head_reason;  // outlives r.reason's use below
         if (pipeline) {
@@ -465,7 +448,7 @@ int runRecon(const std::vector<std::string>& args) {
         }
     }
     const double loop_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    allocations_after_warmup = n > warmup ? g_allocations.load() - allocations_after_warmup : 0;
+    allocations_after_warmup = n > warmup ? testing::heapAllocations() - allocations_after_warmup : 0;
     const double rss_recon_mb = currentRssMb() - rss_frames_mb;
 
     const auto tm = std::chrono::steady_clock::now();
