@@ -31,7 +31,7 @@ done
 # OpenNI2's driver folder: beside the libOpenNI2 that the dynamic loader finds.
 find_driver_dir() {
     local lib
-    lib=$(ldconfig -p 2>/dev/null | awk '/libOpenNI2\.so(\.0)? .*x86-64|libOpenNI2\.so(\.0)? /{print $NF; exit}')
+    lib=$(ldconfig -p 2>/dev/null | awk '/libOpenNI2\.so(\.0)? .*x86-64|libOpenNI2\.so(\.0)? / && !found {print $NF; found = 1}')
     if [ -z "$lib" ]; then
         lib=$(dpkg -L libopenni2-0 2>/dev/null | grep -m1 '/libOpenNI2\.so' || true)
     fi
@@ -99,7 +99,7 @@ if ! apt-get source -qq libfreenect >source.log 2>&1; then
     tar xf "$orig"
     patched=0
 fi
-src=$(find "$work_dir" -maxdepth 1 -type d -name 'libfreenect-*' | head -1)
+src=$(find "$work_dir" -maxdepth 1 -type d -name 'libfreenect-*' -print -quit)
 [ -n "$src" ] || die "apt-get source gave no libfreenect-* folder in $work_dir"
 [ -d "$src/OpenNI2-FreenectDriver" ] || die "$src has no OpenNI2-FreenectDriver folder (changed upstream layout?)"
 echo "install-kinect-driver: building the OpenNI2 driver from $(basename "$src") (Debian patches applied: $patched)"
@@ -114,7 +114,7 @@ cmake -S "$src" -B "$src/build" -DCMAKE_BUILD_TYPE=Release -DBUILD_OPENNI2_DRIVE
 cmake --build "$src/build" --target FreenectDriver -j "$(nproc)" >build.log 2>&1 ||
     { tail -40 build.log >&2; die "building the freenectdriver target failed"; }
 
-built=$(find "$src/build" -name 'libFreenectDriver.so*' -type f | head -1)
+built=$(find "$src/build" -name 'libFreenectDriver.so*' -type f -print -quit)
 [ -n "$built" ] || die "the build finished but produced no libFreenectDriver.so"
 
 # 5. Install: a real file (the driver links libfreenect statically with BUILD_REDIST_PACKAGE) plus the .so name

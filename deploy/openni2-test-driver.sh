@@ -21,7 +21,9 @@ name=libFacescanSynth.so
 installed_name=$name.0
 
 # OpenNI2's driver folder, found from where the dynamic loader finds libOpenNI2.
-lib=$(ldconfig -p 2>/dev/null | awk '$1 ~ /^libOpenNI2\.so/ {print $NF; exit}')
+# awk reads to the end (no early exit): with pipefail, an awk that exits first makes ldconfig die of SIGPIPE and
+# the whole script exit 141 under set -e (seen once in CI).
+lib=$(ldconfig -p 2>/dev/null | awk '$1 ~ /^libOpenNI2\.so/ && !found {print $NF; found = 1}')
 if [ -z "$lib" ]; then
     lib=$(dpkg -L libopenni2-0 2>/dev/null | grep -m1 '/libOpenNI2\.so' || true)
 fi
