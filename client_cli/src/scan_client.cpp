@@ -19,27 +19,7 @@ std::vector<uint8_t> copyBytes(const dds_sequence_octet& seq) {
 
 SessionStatus fromMessage(const facescan_wire_ScanStatus& m) {
     SessionStatus s;
-    s.session_id = wire::fromDds(m.session_id);
-    s.server_id = wire::fromDds(m.server_id);
-    s.state = m.state;
-    s.detail = wire::fromDds(m.detail);
-    s.frames_received = m.frames_received;
-    s.frames_integrated = m.frames_integrated;
-    s.frames_rejected = m.frames_rejected;
-    s.frames_skipped = m.frames_skipped;
-    s.frames_dropped = m.frames_dropped;
-    s.every_frame = m.every_frame;
-    s.fps = m.fps;
-    s.ms_detect = m.ms_detect;
-    s.ms_segment = m.ms_segment;
-    s.ms_filter = m.ms_filter;
-    s.ms_icp = m.ms_icp;
-    s.ms_integrate = m.ms_integrate;
-    s.ms_raycast = m.ms_raycast;
-    s.ms_mesh = m.ms_mesh;
-    s.latency_p95_ms = m.latency_p95_ms;
-    s.snapshot_seq = m.snapshot_seq;
-    s.updated_ns = m.updated_ns;
+    static_cast<wire::ScanStatusData&>(s) = wire::fromMessage(m);
     return s;
 }
 

@@ -36,6 +36,60 @@ Status CameraInfoData::validate() const {
     return Status::ok();
 }
 
+facescan_wire_ScanStatus toMessage(const ScanStatusData& status) {
+    facescan_wire_ScanStatus m{};
+    m.session_id = stringView(status.session_id);
+    m.server_id = stringView(status.server_id);
+    m.state = status.state;
+    m.detail = stringView(status.detail);
+    m.frames_received = status.frames_received;
+    m.frames_integrated = status.frames_integrated;
+    m.frames_rejected = status.frames_rejected;
+    m.frames_skipped = status.frames_skipped;
+    m.frames_dropped = status.frames_dropped;
+    m.every_frame = status.every_frame;
+    m.fps = status.fps;
+    m.ms_detect = status.ms_detect;
+    m.ms_segment = status.ms_segment;
+    m.ms_filter = status.ms_filter;
+    m.ms_icp = status.ms_icp;
+    m.ms_integrate = status.ms_integrate;
+    m.ms_raycast = status.ms_raycast;
+    m.ms_mesh = status.ms_mesh;
+    m.latency_p95_ms = status.latency_p95_ms;
+    m.snapshot_seq = status.snapshot_seq;
+    m.updated_ns = status.updated_ns;
+    return m;
+}
+
+ScanStatusData fromMessage(const facescan_wire_ScanStatus& m) {
+    ScanStatusData s;
+    s.session_id = fromDds(m.session_id);
+    s.server_id = fromDds(m.server_id);
+    s.state = m.state >= facescan_wire_STATE_WAITING && m.state <= facescan_wire_STATE_REFUSED
+                  ? m.state
+                  : facescan_wire_STATE_WAITING;
+    s.detail = fromDds(m.detail);
+    s.frames_received = m.frames_received;
+    s.frames_integrated = m.frames_integrated;
+    s.frames_rejected = m.frames_rejected;
+    s.frames_skipped = m.frames_skipped;
+    s.frames_dropped = m.frames_dropped;
+    s.every_frame = m.every_frame;
+    s.fps = m.fps;
+    s.ms_detect = m.ms_detect;
+    s.ms_segment = m.ms_segment;
+    s.ms_filter = m.ms_filter;
+    s.ms_icp = m.ms_icp;
+    s.ms_integrate = m.ms_integrate;
+    s.ms_raycast = m.ms_raycast;
+    s.ms_mesh = m.ms_mesh;
+    s.latency_p95_ms = m.latency_p95_ms;
+    s.snapshot_seq = m.snapshot_seq;
+    s.updated_ns = m.updated_ns;
+    return s;
+}
+
 facescan_wire_CameraInfo toMessage(const CameraInfoData& info) {
     facescan_wire_CameraInfo msg{};
     msg.session_id = stringView(info.session_id);

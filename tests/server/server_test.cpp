@@ -106,7 +106,8 @@ std::unique_ptr<TestAgent> makeAgent(uint32_t domain, const std::string& session
 }
 
 bool settled(const StatusCopy& s) {
-    return s.received > 0 && s.integrated + s.rejected + s.skipped + s.dropped >= s.received;
+    return s.frames_received > 0 &&
+           s.frames_integrated + s.frames_rejected + s.frames_skipped + s.frames_dropped >= s.frames_received;
 }
 
 TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) {
@@ -119,13 +120,13 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
     ASSERT_TRUE(agent->stream(sequence(), 45, 30.0f, /*end_of_stream=*/false).isOk());
 
     auto status = rig.client->waitForStatus(
-        "live-1", [](const StatusCopy& s) { return s.received == 45 && settled(s); }, 20s);
+        "live-1", [](const StatusCopy& s) { return s.frames_received == 45 && settled(s); }, 20s);
     ASSERT_TRUE(status) << "status never settled";
     EXPECT_FALSE(status->every_frame);
     // Throughput depends on the machine (live mode skips what it cannot process); correctness does not.
-    EXPECT_GE(status->integrated, 10u) << status->detail << "; rejected " << status->rejected << ", skipped "
-                                       << status->skipped << ", fps " << status->fps;
-    EXPECT_EQ(status->dropped, 0u);
+    EXPECT_GE(status->frames_integrated, 10u) << status->detail << "; rejected " << status->frames_rejected
+                                              << ", skipped " << status->frames_skipped << ", fps " << status->fps;
+    EXPECT_EQ(status->frames_dropped, 0u);
     EXPECT_GT(status->latency_p95_ms, 0.0f);
 
     auto snapshot = rig.client->waitForSnapshot("live-1", 5s);
@@ -140,7 +141,7 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
     EXPECT_EQ(traj->server_id, "test-server");
     EXPECT_EQ(traj->kind, static_cast<uint32_t>(facescan_wire_CMD_GET_TRAJECTORY));
     const std::string tum(traj->payload.begin(), traj->payload.end());
-    EXPECT_EQ(static_cast<uint32_t>(std::count(tum.begin(), tum.end(), '\n')), status->integrated);
+    EXPECT_EQ(static_cast<uint32_t>(std::count(tum.begin(), tum.end(), '\n')), status->frames_integrated);
 
     auto mesh = rig.client->command("live-1", facescan_wire_CMD_GET_MESH);
     ASSERT_TRUE(mesh.isOk() && mesh->ok) << (mesh.isOk() ? mesh->error : mesh.status().toString());
@@ -212,11 +213,11 @@ TEST(ServerSession, EveryFrameRecordingProcessesAllFramesAndFinishesAtEndOfStrea
         "rec-1", [](const StatusCopy& s) { return s.state == facescan_wire_STATE_FINISHED; }, 30s);
     ASSERT_TRUE(status) << "the recording never finished";
     EXPECT_TRUE(status->every_frame);
-    EXPECT_EQ(status->received, kFrames);
-    EXPECT_EQ(status->skipped, 0u);
-    EXPECT_EQ(status->dropped, 2u) << "both damaged frames are counted";
-    EXPECT_EQ(status->integrated + status->rejected, kFrames - 2);
-    EXPECT_GE(status->integrated, 30u) << "the damaged frames must not harm the session: " << status->detail;
+    EXPECT_EQ(status->frames_received, kFrames);
+    EXPECT_EQ(status->frames_skipped, 0u);
+    EXPECT_EQ(status->frames_dropped, 2u) << "both damaged frames are counted";
+    EXPECT_EQ(status->frames_integrated + status->frames_rejected, kFrames - 2);
+    EXPECT_GE(status->frames_integrated, 30u) << "the damaged frames must not harm the session: " << status->detail;
     expectSessionWritten(params.data_dir / "rec-1", /*with_mesh=*/true);
     EXPECT_NE(readFile(params.data_dir / "rec-1" / "summary.json").find("\"mode\": \"every_frame\""),
               std::string::npos);
@@ -250,7 +251,7 @@ TEST(ServerSession, KilledAgentLeavesTheSessionFinalisable) {
         "killed-1", [](const StatusCopy& s) { return s.detail == "agent gone"; }, 15s);
     ASSERT_TRUE(gone) << "the killed agent was never noticed";
     EXPECT_EQ(gone->state, static_cast<uint32_t>(facescan_wire_STATE_WAITING));
-    EXPECT_GT(gone->integrated, 0u);
+    EXPECT_GT(gone->frames_integrated, 0u);
     auto finish = rig.client->command("killed-1", facescan_wire_CMD_FINISH);
     ASSERT_TRUE(finish.isOk() && finish->ok) << (finish.isOk() ? finish->error : finish.status().toString());
     EXPECT_GT(finish->triangle_count, 0u);
@@ -291,7 +292,7 @@ TEST(ServerSession, ShutdownFinishesOpenSessionsToDisk) {
     ASSERT_TRUE(agent);
     ASSERT_TRUE(agent->stream(sequence(), 20, 30.0f, /*end_of_stream=*/false).isOk());
     ASSERT_TRUE(rig.client->waitForStatus(
-        "open-1", [](const StatusCopy& s) { return s.integrated > 5; }, 10s));
+        "open-1", [](const StatusCopy& s) { return s.frames_integrated > 5; }, 10s));
     rig.server->shutdown();  // what Ctrl-C does
     EXPECT_EQ(rig.server->openSessions(), 0);
     expectSessionWritten(params.data_dir / "open-1", /*with_mesh=*/true);

@@ -200,17 +200,7 @@ std::optional<StatusCopy> TestClient::waitForStatus(const std::string& session_i
         bool done = false;
         (void)impl_->status_reader->take([&](const facescan_wire_ScanStatus& s, const dds_sample_info_t& info) {
             if (!info.valid_data || wire::fromDds(s.session_id) != session_id) return;
-            StatusCopy c;
-            c.state = static_cast<uint32_t>(s.state);
-            c.detail = wire::fromDds(s.detail);
-            c.received = s.frames_received;
-            c.integrated = s.frames_integrated;
-            c.rejected = s.frames_rejected;
-            c.skipped = s.frames_skipped;
-            c.dropped = s.frames_dropped;
-            c.every_frame = s.every_frame;
-            c.fps = s.fps;
-            c.latency_p95_ms = s.latency_p95_ms;
+            StatusCopy c = wire::fromMessage(s);
             last = c;
             if (pred(c)) done = true;
         });

@@ -51,13 +51,7 @@ struct ReplyCopy {
     uint32_t kind = 0, vertex_count = 0, triangle_count = 0;
     std::vector<uint8_t> payload;
 };
-struct StatusCopy {
-    uint32_t state = 0;
-    std::string detail;
-    uint32_t received = 0, integrated = 0, rejected = 0, skipped = 0, dropped = 0;
-    bool every_frame = false;
-    float fps = 0, latency_p95_ms = 0;
-};
+using StatusCopy = wire::ScanStatusData;
 struct SnapshotCopy {
     uint32_t seq = 0, frames_integrated = 0, vertex_count = 0, triangle_count = 0;
     std::vector<uint8_t> draco;

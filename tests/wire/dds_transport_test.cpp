@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "test_domain.hpp"
+#include "wire/messages.hpp"
 #include "wire/topics.hpp"
 
 namespace facescan::wire {
@@ -182,6 +183,50 @@ TEST(DdsProfiles, SocketBufferCheckNamesTheSysctlToRaise) {
     auto loopback = loadProfileXml("loopback");
     ASSERT_TRUE(loopback.isOk());
     EXPECT_TRUE(checkSocketBuffers(*loopback).isOk()) << "this machine cannot run the loopback profile";
+}
+
+TEST(WireMessages, ScanStatusRoundTripsAndAnUnknownStateReadsAsWaiting) {
+    ScanStatusData d;
+    d.session_id = "s-1";
+    d.server_id = "box";
+    d.state = facescan_wire_STATE_LOST;
+    d.detail = "tracking lost";
+    d.frames_received = 7;
+    d.frames_integrated = 5;
+    d.frames_rejected = 1;
+    d.frames_skipped = 2;
+    d.frames_dropped = 3;
+    d.every_frame = true;
+    d.fps = 29.5f;
+    d.ms_detect = 1, d.ms_segment = 2, d.ms_filter = 3, d.ms_icp = 4, d.ms_integrate = 5, d.ms_raycast = 6;
+    d.ms_mesh = 7;
+    d.latency_p95_ms = 23.5f;
+    d.snapshot_seq = 9;
+    d.updated_ns = 123456789012345;
+    const ScanStatusData back = fromMessage(toMessage(d));
+    EXPECT_EQ(back.session_id, "s-1");
+    EXPECT_EQ(back.server_id, "box");
+    EXPECT_EQ(back.state, facescan_wire_STATE_LOST);
+    EXPECT_EQ(back.detail, "tracking lost");
+    EXPECT_EQ(back.frames_received + back.frames_integrated + back.frames_rejected + back.frames_skipped +
+                  back.frames_dropped,
+              18u);
+    EXPECT_EQ(back.frames_dropped, 3u);
+    EXPECT_TRUE(back.every_frame);
+    EXPECT_FLOAT_EQ(back.fps, 29.5f);
+    EXPECT_FLOAT_EQ(back.ms_detect + back.ms_segment + back.ms_filter + back.ms_icp + back.ms_integrate +
+                        back.ms_raycast + back.ms_mesh,
+                    28.0f);
+    EXPECT_FLOAT_EQ(back.latency_p95_ms, 23.5f);
+    EXPECT_EQ(back.snapshot_seq, 9u);
+    EXPECT_EQ(back.updated_ns, 123456789012345);
+
+    facescan_wire_ScanStatus m = toMessage(d);
+    m.state = static_cast<facescan_wire_ScanState>(99);  // a state from a newer server
+    m.detail = nullptr;                                  // a missing string reads as empty
+    const ScanStatusData odd = fromMessage(m);
+    EXPECT_EQ(odd.state, facescan_wire_STATE_WAITING);
+    EXPECT_TRUE(odd.detail.empty());
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "recon/status.hpp"
+#include "wire/messages.hpp"
 #include "wire/topics.hpp"
 
 namespace facescan::client {
@@ -36,22 +37,8 @@ struct CommandReply {
     std::vector<uint8_t> payload;
 };
 
-struct SessionStatus {
-    std::string session_id;
-    std::string server_id;
-    facescan_wire_ScanState state = facescan_wire_STATE_WAITING;
-    std::string detail;
-    uint32_t frames_received = 0;
-    uint32_t frames_integrated = 0;
-    uint32_t frames_rejected = 0;
-    uint32_t frames_skipped = 0;
-    uint32_t frames_dropped = 0;
-    bool every_frame = false;
-    float fps = 0;
-    float ms_detect = 0, ms_segment = 0, ms_filter = 0, ms_icp = 0, ms_integrate = 0, ms_raycast = 0, ms_mesh = 0;
-    float latency_p95_ms = 0;
-    uint32_t snapshot_seq = 0;
-    int64_t updated_ns = 0;
+// The latest ScanStatus of a session (wire::ScanStatusData, converted in one place) and whether its server lives.
+struct SessionStatus : wire::ScanStatusData {
     bool alive = true;  // false once the server that publishes it is gone
 };
 

@@ -35,6 +35,30 @@ Status validateSessionId(const std::string& session_id);
 facescan_wire_CameraInfo toMessage(const CameraInfoData& info);
 StatusOr<CameraInfoData> fromMessage(const facescan_wire_CameraInfo& msg);
 
+// ScanStatus as a C++ value: the server fills it, the client and tests read it. One conversion each way, so the
+// message's 22 fields are listed in exactly one place (messages.cpp).
+struct ScanStatusData {
+    std::string session_id;
+    std::string server_id;
+    facescan_wire_ScanState state = facescan_wire_STATE_WAITING;
+    std::string detail;
+    uint32_t frames_received = 0;
+    uint32_t frames_integrated = 0;
+    uint32_t frames_rejected = 0;  // could not be aligned, or no head
+    uint32_t frames_skipped = 0;   // live stream: older frames skipped to stay real-time
+    uint32_t frames_dropped = 0;   // gaps in seq, or undecodable payloads
+    bool every_frame = false;      // recording mode: every frame processed
+    float fps = 0;
+    float ms_detect = 0, ms_segment = 0, ms_filter = 0, ms_icp = 0, ms_integrate = 0, ms_raycast = 0, ms_mesh = 0;
+    float latency_p95_ms = 0;  // capture to pose known
+    uint32_t snapshot_seq = 0;
+    int64_t updated_ns = 0;  // server's CLOCK_REALTIME when published
+};
+// The message points at `status`'s strings: keep it alive until the sample is written.
+facescan_wire_ScanStatus toMessage(const ScanStatusData& status);
+// Any state value outside the IDL enum reads as WAITING (a newer server's state this build does not know).
+ScanStatusData fromMessage(const facescan_wire_ScanStatus& msg);
+
 // One compressed frame, buffers reused frame to frame.
 struct EncodedFrame {
     uint32_t seq = 0;

@@ -349,29 +349,29 @@ void Server::reply(const Command& c, const Status& status, const MeshResult* mes
 }
 
 void Server::publishStatus(const SessionStats& s) {
-    facescan_wire_ScanStatus m{};
-    m.session_id = wire::stringView(s.session_id);
-    m.server_id = wire::stringView(params_.server_id);
-    m.state = toWire(s.state);
-    m.detail = wire::stringView(s.detail);
-    m.frames_received = s.frames_received;
-    m.frames_integrated = s.frames_integrated;
-    m.frames_rejected = s.frames_rejected;
-    m.frames_skipped = s.frames_skipped;
-    m.frames_dropped = s.frames_dropped;
-    m.every_frame = s.every_frame;
-    m.fps = s.fps;
-    m.ms_detect = s.ms.detect;
-    m.ms_segment = s.ms.segment;
-    m.ms_filter = s.ms.filter;
-    m.ms_icp = s.ms.icp;
-    m.ms_integrate = s.ms.integrate;
-    m.ms_raycast = s.ms.raycast;
-    m.ms_mesh = s.ms.mesh;
-    m.latency_p95_ms = s.latency_p95_ms;
-    m.snapshot_seq = s.snapshot_seq;
-    m.updated_ns = realtimeNowNs();
-    (void)status_writer_->write(m);
+    wire::ScanStatusData d;
+    d.session_id = s.session_id;
+    d.server_id = params_.server_id;
+    d.state = toWire(s.state);
+    d.detail = s.detail;
+    d.frames_received = s.frames_received;
+    d.frames_integrated = s.frames_integrated;
+    d.frames_rejected = s.frames_rejected;
+    d.frames_skipped = s.frames_skipped;
+    d.frames_dropped = s.frames_dropped;
+    d.every_frame = s.every_frame;
+    d.fps = s.fps;
+    d.ms_detect = s.ms.detect;
+    d.ms_segment = s.ms.segment;
+    d.ms_filter = s.ms.filter;
+    d.ms_icp = s.ms.icp;
+    d.ms_integrate = s.ms.integrate;
+    d.ms_raycast = s.ms.raycast;
+    d.ms_mesh = s.ms.mesh;
+    d.latency_p95_ms = s.latency_p95_ms;
+    d.snapshot_seq = s.snapshot_seq;
+    d.updated_ns = realtimeNowNs();
+    (void)status_writer_->write(wire::toMessage(d));
 }
 
 void Server::publishRefused(const std::string& session_id, const std::string& detail) {
