@@ -1,7 +1,7 @@
 // Lossless depth codecs: header, dispatch, and the zstd / delta / PNG bodies (RVL is in rvl_codec.cpp).
 #include "wire/depth_codec.hpp"
 
-// For ZSTD_c_literalCompressionMode (zstd's "experimental" parameters; see zstdFastLiterals below).
+// For ZSTD_c_literalCompressionMode (zstd's "experimental" parameters; see zstdInto's fast_literals below).
 #define ZSTD_STATIC_LINKING_ONLY
 #include <zstd.h>
 

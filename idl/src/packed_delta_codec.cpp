@@ -2,7 +2,6 @@
 // input.
 #include "wire/packed_delta_codec.hpp"
 
-#include <bit>
 #include <cstring>
 #include <string>
 

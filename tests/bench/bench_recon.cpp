@@ -351,9 +351,8 @@ int runRecon(const std::vector<std::string>& args) {
                 "       [--volume-m M] [--trunc-m M] [--mask input|pipeline] [--verbose] [--json]\n"
                 "SRC: synthetic[:distance=0.7,yaw=35,pitch=12,yaw_period=300,pitch_period=150,frames=300,seed=1,\n"
                 "     noise=1,head=lps|builtin] | tum:DIR | 7scenes:DIR\n"
-                "--mask pipeline: find the head per frame with the server's FacePipeline (timed in the loop) instead "
-                "of\n"
-                "     the input's mask (synthetic: the renderer's head label; tum/7scenes: none).\n");
+                "--mask pipeline: find the head per frame with the server's FacePipeline (timed in the loop)\n"
+                "     instead of the input's mask (synthetic: the renderer's head label; tum/7scenes: none).\n");
             return a == "--help" ? 0 : 2;
         }
     }

@@ -4,6 +4,7 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <future>
@@ -394,19 +395,22 @@ void Server::publishSnapshot(const std::string& session_id, const SnapshotResult
     (void)snapshot_writer_->write(m);
 }
 
+bool Server::waitForTick(std::chrono::steady_clock::time_point& next, std::chrono::duration<double> period) {
+    // A late tick does not make the next one fire at once: it comes a full period after the late one.
+    next = std::max(next, std::chrono::steady_clock::now()) +
+           std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
+    std::unique_lock lk(sleep_mutex_);
+    sleep_cv_.wait_until(lk, next, [&] { return stopping_.load(); });
+    return !stopping_;
+}
+
 void Server::snapshotLoop() {
     // Snapshots are a nicety; frames are not: let the scheduler prefer the workers on a busy machine.
     (void)setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
     const auto period = params_.snapshot_hz > 0 ? std::chrono::duration<double>(1.0 / params_.snapshot_hz)
                                                 : std::chrono::duration<double>(0.5);
     auto next = std::chrono::steady_clock::now();
-    while (!stopping_) {
-        next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
-        {
-            std::unique_lock lk(sleep_mutex_);
-            sleep_cv_.wait_until(lk, next, [&] { return stopping_.load(); });
-        }
-        if (stopping_) return;
+    while (waitForTick(next, period)) {
         std::vector<std::shared_ptr<Session>> all;
         {
             std::lock_guard lk(sessions_mutex_);
@@ -419,7 +423,6 @@ void Server::snapshotLoop() {
                 if (auto snap = s->makeSnapshot()) publishSnapshot(s->id(), *snap);
             }
         }
-        if (std::chrono::steady_clock::now() > next) next = std::chrono::steady_clock::now();
     }
 }
 
@@ -428,13 +431,7 @@ void Server::statusLoop() {
     const int64_t idle_ns = static_cast<int64_t>(params_.idle_timeout_s * 1e9);
     std::map<std::string, bool> final_sent;  // finished sessions: their FINISHED status went out once
     auto next = std::chrono::steady_clock::now();
-    while (!stopping_) {
-        next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
-        {
-            std::unique_lock lk(sleep_mutex_);
-            sleep_cv_.wait_until(lk, next, [&] { return stopping_.load(); });
-        }
-        if (stopping_) return;
+    while (waitForTick(next, period)) {
         std::vector<std::shared_ptr<Session>> all;
         std::map<std::string, Refused> refused;
         {
@@ -455,7 +452,6 @@ void Server::statusLoop() {
             publishStatus(st);
         }
         for (const auto& [id, r] : refused) publishRefused(id, r.detail);
-        if (std::chrono::steady_clock::now() > next) next = std::chrono::steady_clock::now();
     }
 }
 

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <map>
@@ -61,6 +62,9 @@ class Server {
     void commandLoop();
     void snapshotLoop();
     void statusLoop();
+    // The status and snapshot threads' clock: advances `next` by `period` (from now when the last tick ran late)
+    // and sleeps until then; false when the server is stopping.
+    bool waitForTick(std::chrono::steady_clock::time_point& next, std::chrono::duration<double> period);
     void runCommand(const Command& c);
     // The session for a new or known id, or null when refused (max sessions) or invalid.
     std::shared_ptr<Session> sessionFor(const std::string& session_id);
