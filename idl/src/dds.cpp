@@ -139,6 +139,16 @@ StatusOr<Participant> Participant::create(const DomainConfig& config) {
     return participant;
 }
 
+StatusOr<Entity> partitionParent(dds_entity_t participant, const std::string& partition, bool publisher) {
+    if (partition.empty()) return Entity();
+    Qos qos;
+    dds_qset_partition1(qos.get(), partition.c_str());
+    const dds_entity_t h = publisher ? dds_create_publisher(participant, qos.get(), nullptr)
+                                     : dds_create_subscriber(participant, qos.get(), nullptr);
+    if (h < 0) return ddsStatus(h, "create " + std::string(publisher ? "publisher" : "subscriber") + " of " + partition);
+    return Entity(h);
+}
+
 bool pollUntil(const std::function<bool()>& done, std::chrono::milliseconds timeout) {
     const auto deadline = std::chrono::steady_clock::now() + timeout;
     while (!done()) {

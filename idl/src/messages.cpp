@@ -4,19 +4,6 @@
 
 namespace facescan::wire {
 
-Status validateSessionId(const std::string& session_id) {
-    if (session_id.empty() || session_id.size() > 64) {
-        return invalidArgument("session id must be 1-64 characters, got " + std::to_string(session_id.size()));
-    }
-    if (session_id == "." || session_id == "..") return invalidArgument("session id may not be '.' or '..'");
-    for (const char c : session_id) {
-        const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '-' ||
-                        c == '_' || c == '.';
-        if (!ok) return invalidArgument("session id '" + session_id + "' may only use letters, digits, '.', '-', '_'");
-    }
-    return Status::ok();
-}
-
 Status CameraInfoData::validate() const {
     RETURN_IF_ERROR(validateSessionId(session_id));
     const recon::Intrinsics& k = intrinsics;

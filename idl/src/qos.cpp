@@ -22,6 +22,38 @@ Qos scanStatusQos() { return reliable(DDS_DURABILITY_TRANSIENT_LOCAL, DDS_HISTOR
 Qos meshSnapshotQos() { return reliable(DDS_DURABILITY_TRANSIENT_LOCAL, DDS_HISTORY_KEEP_LAST, 1); }
 Qos commandQos() { return reliable(DDS_DURABILITY_VOLATILE, DDS_HISTORY_KEEP_ALL, 0); }
 
+namespace {
+Qos noAutoDispose(Qos q) {
+    dds_qset_writer_data_lifecycle(q.get(), false);
+    return q;
+}
+}  // namespace
+
+Qos serverAnnounceQos() {
+    return noAutoDispose(reliable(DDS_DURABILITY_TRANSIENT_LOCAL, DDS_HISTORY_KEEP_LAST, 1));
+}
+Qos sessionOwnerQos() {
+    Qos q = noAutoDispose(reliable(DDS_DURABILITY_TRANSIENT_LOCAL, DDS_HISTORY_KEEP_LAST, 1));
+    dds_qset_ownership(q.get(), DDS_OWNERSHIP_EXCLUSIVE);
+    return q;
+}
+Qos claimWriterQos(int32_t strength) {
+    Qos q = sessionOwnerQos();
+    dds_qset_ownership_strength(q.get(), strength);
+    return q;
+}
+Qos replicaQos() {
+    Qos q = reliable(DDS_DURABILITY_VOLATILE, DDS_HISTORY_KEEP_ALL, 0);
+    // A few replicas in flight per standby: a slow standby blocks the owner's replication thread (never its
+    // frame path), and the owner then skips a round instead of queueing megabytes.
+    dds_qset_resource_limits(q.get(), 4, DDS_LENGTH_UNLIMITED, 4);
+    return q;
+}
+Qos replicaAckQos() { return reliable(DDS_DURABILITY_VOLATILE, DDS_HISTORY_KEEP_LAST, 4); }
+
+std::string sessionPartition(const std::string& session_id) { return "facescan.session." + session_id; }
+std::string serverPartition(const std::string& server_id) { return "facescan.server." + server_id; }
+
 Qos frameWriterQos(bool every_frame) {
     if (!every_frame) return rgbdFrameQos();
     Qos q = reliable(DDS_DURABILITY_VOLATILE, DDS_HISTORY_KEEP_ALL, 0);

@@ -90,6 +90,10 @@ class Participant {
     uint32_t domain_id_ = 0;
 };
 
+// A publisher (or subscriber) of one DDS partition under `participant`; an empty Entity for an empty partition
+// (the writer or reader then lives in the default partition).
+StatusOr<Entity> partitionParent(dds_entity_t participant, const std::string& partition, bool publisher);
+
 // What a generated C type needs to become a topic: its descriptor, its topic name and its QoS profile.
 // Specialised for every facescan topic in wire/topics.hpp.
 template <typename T>
@@ -120,11 +124,14 @@ template <typename T>
 class Writer {
  public:
     // `qos` overrides the topic's default writer QoS (e.g. keep-all for recordings that must not lose frames).
-    static StatusOr<Writer> create(const Topic<T>& topic, const Qos* qos = nullptr) {
+    // A non-empty `partition` puts the writer in its own publisher of that DDS partition: only readers of the
+    // same partition match (wire::sessionPartition routes a session's frames to its owner alone).
+    static StatusOr<Writer> create(const Topic<T>& topic, const Qos* qos = nullptr, const std::string& partition = {}) {
         Writer writer;
+        ASSIGN_OR_RETURN(writer.publisher_, partitionParent(topic.participant(), partition, /*publisher=*/true));
+        const dds_entity_t parent = writer.publisher_.valid() ? writer.publisher_.handle() : topic.participant();
         const Qos defaults = TopicTraits<T>::qos();
-        const dds_entity_t h =
-            dds_create_writer(topic.participant(), topic.handle(), qos ? qos->get() : defaults.get(), nullptr);
+        const dds_entity_t h = dds_create_writer(parent, topic.handle(), qos ? qos->get() : defaults.get(), nullptr);
         if (h < 0) return ddsStatus(h, std::string("create writer for ") + TopicTraits<T>::name());
         writer.entity_ = Entity(h);
         return writer;
@@ -154,17 +161,20 @@ class Writer {
     dds_entity_t handle() const { return entity_.handle(); }
 
  private:
+    Entity publisher_;  // declared first: destroyed after the writer
     Entity entity_;
 };
 
 template <typename T>
 class Reader {
  public:
-    static StatusOr<Reader> create(const Topic<T>& topic, const Qos* qos = nullptr) {
+    // A non-empty `partition`: the reader gets its own subscriber of that DDS partition (see Writer::create).
+    static StatusOr<Reader> create(const Topic<T>& topic, const Qos* qos = nullptr, const std::string& partition = {}) {
         Reader reader;
+        ASSIGN_OR_RETURN(reader.subscriber_, partitionParent(topic.participant(), partition, /*publisher=*/false));
+        const dds_entity_t parent = reader.subscriber_.valid() ? reader.subscriber_.handle() : topic.participant();
         const Qos defaults = TopicTraits<T>::qos();
-        const dds_entity_t h =
-            dds_create_reader(topic.participant(), topic.handle(), qos ? qos->get() : defaults.get(), nullptr);
+        const dds_entity_t h = dds_create_reader(parent, topic.handle(), qos ? qos->get() : defaults.get(), nullptr);
         if (h < 0) return ddsStatus(h, std::string("create reader for ") + TopicTraits<T>::name());
         reader.entity_ = Entity(h);
         const dds_entity_t ws = dds_create_waitset(topic.participant());
@@ -229,6 +239,7 @@ class Reader {
     dds_entity_t handle() const { return entity_.handle(); }
 
  private:
+    Entity subscriber_;  // declared first: destroyed after the reader
     Entity entity_;
     Entity waitset_;
 };

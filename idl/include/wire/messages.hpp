@@ -29,6 +29,7 @@ struct CameraInfoData {
 };
 
 // Session ids travel as DDS keys and end up in file names on the server: 1-64 of [A-Za-z0-9._-], not ".."/".".
+// (Defined with the other id rules in cluster_codec.cpp.)
 Status validateSessionId(const std::string& session_id);
 
 // Holds the strings the message points at: keep it alive until the sample is written.

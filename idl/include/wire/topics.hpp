@@ -12,6 +12,14 @@ Qos rgbdFrameQos();     // reliable, volatile, keep-last 8: live streams; the se
 Qos scanStatusQos();    // reliable, transient-local, keep-last 1: `facescan sessions` sees current state at once
 Qos meshSnapshotQos();  // reliable, transient-local, keep-last 1: late subscribers get the latest mesh
 Qos commandQos();       // reliable, volatile, keep-all: no request or reply is ever dropped
+// The cluster (issue 13). Writers of announcements and claims do not auto-dispose: a writer that dies leaves its
+// instance NOT_ALIVE_NO_WRITERS (a lapsed liveliness), a deliberate end disposes (NOT_ALIVE_DISPOSED).
+Qos serverAnnounceQos();  // reliable, transient-local, keep-last 1
+Qos sessionOwnerQos();    // reliable, transient-local, keep-last 1, EXCLUSIVE ownership
+Qos replicaQos();         // reliable, volatile, keep-all with a small bound: a delta is never lost silently
+Qos replicaAckQos();      // reliable, volatile, keep-last 4
+// A claim writer's QoS: sessionOwnerQos with this ownership strength (claimStrength).
+Qos claimWriterQos(int32_t strength);
 
 // Frames of a recording must all arrive: keep-all with a bounded history, so a slow server blocks the writer
 // (reliable back-pressure) instead of losing frames. Live cameras use keep-last: old frames are worth nothing.
@@ -34,8 +42,17 @@ FACESCAN_TOPIC(facescan_wire_ScanStatus, "facescan/ScanStatus", scanStatusQos);
 FACESCAN_TOPIC(facescan_wire_MeshSnapshot, "facescan/MeshSnapshot", meshSnapshotQos);
 FACESCAN_TOPIC(facescan_wire_ScanCommand, "facescan/ScanCommand", commandQos);
 FACESCAN_TOPIC(facescan_wire_ScanReply, "facescan/ScanReply", commandQos);
+FACESCAN_TOPIC(facescan_wire_ServerAnnounce, "facescan/ServerAnnounce", serverAnnounceQos);
+FACESCAN_TOPIC(facescan_wire_SessionOwner, "facescan/SessionOwner", sessionOwnerQos);
+FACESCAN_TOPIC(facescan_wire_SessionReplica, "facescan/cluster/SessionReplica", replicaQos);
+FACESCAN_TOPIC(facescan_wire_ReplicaAck, "facescan/cluster/ReplicaAck", replicaAckQos);
 
 #undef FACESCAN_TOPIC
+
+// DDS partitions that route a session's frames to its owner only, and replicas and acknowledgements to one
+// server only: "facescan.session.<id>", "facescan.server.<id>". Ids are [A-Za-z0-9._-] (no partition wildcards).
+std::string sessionPartition(const std::string& session_id);
+std::string serverPartition(const std::string& server_id);
 
 // Borrowing view for writing: a sample's sequence pointing at our own buffer (no copy; DDS never frees it).
 inline dds_sequence_octet octetView(const uint8_t* data, size_t size) {

@@ -148,15 +148,16 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     trajectory_.emplace_back(frame.timestamp_ns, T_world_camera_);
     const cv::Rect& roi0 = frame_.levels[0].roi;
     const int m = params_.roi_margin_px;
-    raycastModel(cv::Rect(roi0.x - m, roi0.y - m, roi0.width + 2 * m, roi0.height + 2 * m));
+    raycastModel(T_world_camera_, cv::Rect(roi0.x - m, roi0.y - m, roi0.width + 2 * m, roi0.height + 2 * m),
+                 frame_.levels[0].depth_m);
     result.ms.raycast = watch.lapMs();
     result.tracking.T_world_camera = T_world_camera_;
     result.consecutive_failures = 0;
     return result;
 }
 
-void Reconstructor::raycastModel(const cv::Rect& roi) {
-    raycaster_.cast(volume_.grid(), k_, T_world_camera_, roi, frame_.levels[0].depth_m, model_.levels[0]);
+void Reconstructor::raycastModel(const Pose& T_world_camera, const cv::Rect& roi, const cv::Mat& depth_hint_m) {
+    raycaster_.cast(volume_.grid(), k_, T_world_camera, roi, depth_hint_m, model_.levels[0]);
     // The hint is only valid inside the frame's ROI; outside it the rays march the cube (see RaycastParams).
     for (int l = 1; l < model_.count; ++l) {
         downsampleVertexMap(model_.levels[l - 1].vertex, model_.levels[l - 1].roi, model_.levels[l].vertex,
@@ -164,7 +165,7 @@ void Reconstructor::raycastModel(const cv::Rect& roi) {
         cv::Rect unused;
         downsampleNormalMap(model_.levels[l - 1].normal, model_.levels[l - 1].roi, model_.levels[l].normal, unused);
     }
-    T_world_model_ = T_world_camera_;
+    T_world_model_ = T_world_camera;
 }
 
 void Reconstructor::reset() {
@@ -192,6 +193,68 @@ Mesh Reconstructor::extractMesh(const MeshParams& p) const {
 void Reconstructor::renderPreview(const Pose& T_world_camera, cv::Mat& shaded_bgr) const {
     std::lock_guard<std::mutex> lock(volume_mutex_);
     raycaster_.renderShaded(volume_.grid(), k_, T_world_camera, shaded_bgr);
+}
+
+void Reconstructor::captureState(uint64_t since_generation, size_t trajectory_from, ReconState& out) const {
+    const TsdfParams& tp = params_.tsdf;
+    out = ReconState{};
+    out.resolution_vox = tp.resolution_vox;
+    out.volume_size_m = tp.volume_size_m;
+    out.trunc_dist_m = tp.trunc_dist_m;
+    out.placed = volume_.placed();
+    out.origin_world = volume_.grid().origin_world;
+    // A delta across a reset (or from a trajectory longer than ours) would be meaningless: send everything.
+    out.full = since_generation == 0 || since_generation < volume_.resetGeneration() ||
+               since_generation > volume_.generation() || trajectory_from > trajectory_.size();
+    out.generation = volume_.generation();
+    out.since_generation = out.full ? 0 : since_generation;
+    out.total_blocks = volume_.grid().allocated_blocks;
+    {
+        std::lock_guard<std::mutex> lock(volume_mutex_);  // cheap here: the frame thread is the only writer
+        volume_.copyBlocks(out.since_generation, out.blocks.coords, out.blocks.voxels);
+    }
+    out.have_model = have_model_;
+    out.frames_integrated = frames_integrated_;
+    out.consecutive_failures = consecutive_failures_;
+    out.T_world_camera = T_world_camera_;
+    out.T_world_model = T_world_model_;
+    out.model_roi = model_.levels[0].roi;
+    out.trajectory_begin = out.full ? 0 : trajectory_from;
+    out.trajectory.assign(trajectory_.begin() + static_cast<ptrdiff_t>(out.trajectory_begin), trajectory_.end());
+}
+
+Status Reconstructor::restoreState(const ReconState& s) {
+    RETURN_IF_ERROR(init_status_);
+    if (!s.full) return invalidArgument("only a full state can be restored");
+    RETURN_IF_ERROR(s.validate());
+    const TsdfParams& tp = params_.tsdf;
+    if (s.resolution_vox != tp.resolution_vox || s.volume_size_m != tp.volume_size_m ||
+        s.trunc_dist_m != tp.trunc_dist_m) {
+        return invalidArgument("the saved model was made with another volume (" + std::to_string(s.resolution_vox) +
+                               " voxels over " + std::to_string(s.volume_size_m) + " m; this server uses " +
+                               std::to_string(tp.resolution_vox) + " over " + std::to_string(tp.volume_size_m) +
+                               " m): run every server with the same tsdf settings");
+    }
+    reset();
+    {
+        std::lock_guard<std::mutex> lock(volume_mutex_);
+        RETURN_IF_ERROR(volume_.applyBlocks(s.blocks.coords, s.blocks.voxels));
+        volume_.setPlacement(s.placed, s.origin_world);
+        volume_.setGeneration(s.generation);
+    }
+    have_model_ = s.have_model;
+    frames_integrated_ = s.frames_integrated;
+    consecutive_failures_ = s.consecutive_failures;
+    T_world_camera_ = s.T_world_camera;
+    trajectory_.assign(s.trajectory.begin(), s.trajectory.end());
+    if (have_model_) {
+        // The model the next frame registers against: cast again from where it was cast last, over the same
+        // pixels, without the depth hint of a frame this reconstructor never saw (rays march the cube instead).
+        const cv::Rect roi = s.model_roi.area() > 0 ? s.model_roi : cv::Rect(0, 0, k_.width_px, k_.height_px);
+        raycastModel(s.T_world_model, roi, cv::Mat());
+    }
+    T_world_model_ = s.T_world_model;
+    return Status::ok();
 }
 
 bool Reconstructor::predictedHeadBox(cv::Rect& box) const {

@@ -112,6 +112,7 @@ TsdfVolume::TsdfVolume(const TsdfParams& p) : params_(p) {
     grid_.voxels.reserve(static_cast<size_t>(p.max_blocks) * kBlockVoxels);
     block_flag_.assign(block_count, 0);
     touched_.reserve(static_cast<size_t>(p.max_blocks));
+    block_generation_.reserve(static_cast<size_t>(p.max_blocks));
 }
 
 void TsdfVolume::reset() {
@@ -119,7 +120,9 @@ void TsdfVolume::reset() {
     grid_.block_coords.clear();
     grid_.voxels.clear();
     grid_.allocated_blocks = 0;
+    block_generation_.clear();
     placed_ = false;
+    reset_generation_ = ++generation_;
 }
 
 bool TsdfVolume::place(const SurfaceLevel& first) {
@@ -178,6 +181,7 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
                     slot = grid_.allocated_blocks++;
                     grid_.block_coords.emplace_back(bx, by, bz);
                     grid_.voxels.resize(grid_.voxels.size() + kBlockVoxels);  // within the reserved capacity
+                    block_generation_.push_back(0);
                     ++stats.blocks_allocated;
                 }
                 block_flag_[bi] = 1;
@@ -186,6 +190,8 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
         }
     }
     stats.blocks_touched = static_cast<int>(touched_.size());
+    ++generation_;
+    for (const int32_t slot : touched_) block_generation_[static_cast<size_t>(slot)] = generation_;
 
     // 2. Per pixel, once: the distance to the surface along the ray (z |K^-1 [u v 1]|, eq. 4.24) and the
     //    measurement's weight (Algorithm 3), 0 where there is no usable measurement (no depth, no normal, grazing).
@@ -269,6 +275,45 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
         block_flag_[(static_cast<size_t>(bc.z()) * bps + bc.y()) * bps + bc.x()] = 0;
     }
     return stats;
+}
+
+void TsdfVolume::copyBlocks(uint64_t since_generation, std::vector<Eigen::Vector3i>& coords,
+                            std::vector<Voxel>& voxels) const {
+    for (int slot = 0; slot < grid_.allocated_blocks; ++slot) {
+        if (since_generation != 0 && block_generation_[static_cast<size_t>(slot)] <= since_generation) continue;
+        coords.push_back(grid_.block_coords[static_cast<size_t>(slot)]);
+        const auto first = grid_.voxels.begin() + static_cast<ptrdiff_t>(slot) * kBlockVoxels;
+        voxels.insert(voxels.end(), first, first + kBlockVoxels);
+    }
+}
+
+Status TsdfVolume::applyBlocks(const std::vector<Eigen::Vector3i>& coords, const std::vector<Voxel>& voxels) {
+    if (voxels.size() != coords.size() * kBlockVoxels) return invalidArgument("block voxels do not match the blocks");
+    const int bps = grid_.blocks_per_side;
+    for (size_t i = 0; i < coords.size(); ++i) {
+        const Eigen::Vector3i& c = coords[i];
+        if (c.minCoeff() < 0 || c.maxCoeff() >= bps) return invalidArgument("block coordinates outside the cube");
+        int32_t& slot = grid_.block_index[(static_cast<size_t>(c.z()) * bps + c.y()) * bps + c.x()];
+        if (slot < 0) {
+            if (grid_.allocated_blocks >= params_.max_blocks) {
+                return resourceExhausted("the block pool (tsdf.max_blocks " + std::to_string(params_.max_blocks) +
+                                         ") cannot hold the restored model");
+            }
+            slot = grid_.allocated_blocks++;
+            grid_.block_coords.push_back(c);
+            grid_.voxels.resize(grid_.voxels.size() + kBlockVoxels);
+            block_generation_.push_back(0);
+        }
+        std::copy_n(voxels.begin() + static_cast<ptrdiff_t>(i) * kBlockVoxels, kBlockVoxels,
+                    grid_.voxels.begin() + static_cast<ptrdiff_t>(slot) * kBlockVoxels);
+        block_generation_[static_cast<size_t>(slot)] = generation_;
+    }
+    return Status::ok();
+}
+
+void TsdfVolume::setPlacement(bool placed, const Eigen::Vector3f& origin_world) {
+    placed_ = placed;
+    grid_.origin_world = origin_world;
 }
 
 }  // namespace facescan::recon

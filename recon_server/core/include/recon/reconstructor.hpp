@@ -17,6 +17,7 @@
 #include "recon/marching_cubes.hpp"
 #include "recon/mesh.hpp"
 #include "recon/raycaster.hpp"
+#include "recon/recon_state.hpp"
 #include "recon/status.hpp"
 #include "recon/tsdf_volume.hpp"
 
@@ -86,6 +87,13 @@ class Reconstructor {
     // casting, so prefer calling it at preview rates, not per frame).
     void renderPreview(const Pose& T_world_camera, cv::Mat& shaded_bgr) const;
 
+    // Replication (recon_state.hpp). captureState copies the blocks integrated after `since_generation` (all
+    // blocks when 0, or when the model was reset since) and the trajectory from `trajectory_from` on; call it on
+    // the frame thread between frames. restoreState makes a fresh reconstructor continue from a full state: the
+    // volume, poses and counters, and the model ray cast again from the last pose so tracking goes on.
+    void captureState(uint64_t since_generation, size_t trajectory_from, ReconState& out) const;
+    Status restoreState(const ReconState& full_state);
+
     // Where the model projects in the last camera (the box of the last ray cast): lets callers skip detection
     // while tracking. False before the first frame, while re-acquiring, or when the model is not visible.
     bool predictedHeadBox(cv::Rect& box) const;
@@ -96,7 +104,8 @@ class Reconstructor {
 
  private:
     bool checkInput(const RgbdFrame& frame, const cv::Mat& head_mask, FrameResult& result) const;
-    void raycastModel(const cv::Rect& roi);
+    // Casts the model seen from T_world_camera over roi into model_ (all levels); sets T_world_model_.
+    void raycastModel(const Pose& T_world_camera, const cv::Rect& roi, const cv::Mat& depth_hint_m);
 
     Intrinsics k_;
     ReconParams params_;

@@ -107,10 +107,26 @@ class TsdfVolume {
     const VoxelBlockGrid& grid() const { return grid_; }
     const TsdfParams& params() const { return params_; }
 
+    // Replication (recon_state.hpp). Every integrate() advances the generation and stamps the blocks it touched;
+    // reset() starts over (a capture across a reset must be full: resetGeneration() tells when it happened).
+    uint64_t generation() const { return generation_; }
+    uint64_t resetGeneration() const { return reset_generation_; }
+    // Appends the allocated blocks touched after `since_generation` (all of them for 0) to `out`.
+    void copyBlocks(uint64_t since_generation, std::vector<Eigen::Vector3i>& coords, std::vector<Voxel>& voxels) const;
+    // Writes blocks (allocating missing ones) and, for a full restore, places the cube at origin_world.
+    // ResourceExhausted when the pool cannot hold them; InvalidArgument for coordinates outside the cube.
+    Status applyBlocks(const std::vector<Eigen::Vector3i>& coords, const std::vector<Voxel>& voxels);
+    void setPlacement(bool placed, const Eigen::Vector3f& origin_world);
+    // After a restore: later captures count from here.
+    void setGeneration(uint64_t generation) { generation_ = reset_generation_ = generation; }
+
  private:
     TsdfParams params_;
     VoxelBlockGrid grid_;
     bool placed_ = false;
+    uint64_t generation_ = 0;              // integrations so far (monotonic across resets)
+    uint64_t reset_generation_ = 0;        // generation_ at the last reset
+    std::vector<uint64_t> block_generation_;  // per pool slot: the generation that last touched it
     std::vector<uint8_t> block_flag_;  // per block: touched this frame
     std::vector<int32_t> touched_;     // pool indices of the blocks touched this frame
     cv::Mat pixel_range_m_;            // CV_32F, metres: distance to the measured surface along each pixel's ray

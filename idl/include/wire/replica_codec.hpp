@@ -1,0 +1,68 @@
+// A session's replica as bytes (issue 13): what the owner sends its standby every round and appends to its data
+// dir, so that the standby (or the same server after a restart) continues the scan. One versioned format:
+//
+//   header (24 bytes, little-endian): magic "FSRP", u16 format version, u16 flags (bit 0: full),
+//                                     u32 body bytes, u32 compressed bytes, u64 reserved (0)
+//   body (one zstd frame with its content checksum): ids and counters, the CameraInfo, the recon core's state
+//        (recon::ReconState), its voxels stored byte-plane by byte-plane (similar bytes together compress best).
+//
+// The decoder checks every size and value before anything is allocated or used: network and disk bytes are not
+// trusted (tests/fuzz/fuzz_replica.cpp).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "recon/recon_state.hpp"
+#include "recon/status.hpp"
+#include "wire/messages.hpp"
+
+namespace facescan::wire {
+
+inline constexpr uint16_t kReplicaFormatVersion = 1;
+inline constexpr size_t kReplicaHeaderBytes = 24;
+inline constexpr size_t kMaxReplicaBodyBytes = size_t{512} << 20;  // 512 MiB: far above a face volume
+
+// The service's counters a takeover continues from (the recon core's own are in ReconState).
+struct SessionCounters {
+    uint32_t frames_received = 0;
+    uint32_t frames_integrated = 0;
+    uint32_t frames_rejected = 0;
+    uint32_t frames_skipped = 0;
+    uint32_t frames_dropped = 0;
+    uint32_t snapshot_seq = 0;
+    uint32_t failovers = 0;
+    float last_takeover_ms = 0;
+    uint64_t frames_processed = 0;
+    double duration_s = 0;       // seconds of processing so far
+    uint64_t frames_digest = 0;  // FNV-1a over the payloads of every frame accepted, in order (frameDigest)
+};
+
+struct ReplicaData {
+    std::string session_id;
+    std::string owner_id;
+    uint32_t epoch = 1;
+    uint32_t round = 1;       // 1, 2, ... per owner and epoch
+    uint32_t base_round = 0;  // 0: a full state; else the round this delta applies to
+    uint32_t next_seq = 0;    // frames with seq < next_seq are in this state
+    CameraInfoData camera;
+    SessionCounters counters;
+    recon::ReconState state;  // full iff base_round == 0
+
+    bool full() const { return base_round == 0; }
+};
+
+// Encodes `r` into `out` (cleared first). zstd_level trades CPU for bytes (1 = fastest).
+Status encodeReplica(const ReplicaData& r, std::vector<uint8_t>& out, int zstd_level = 1);
+// Decodes and validates. kUnimplemented for another format version (the message says which), kDataLoss for
+// corrupt or truncated bytes, kInvalidArgument/kOutOfRange for values that make no sense.
+Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out);
+
+// Running digest of accepted frames: FNV-1a 64 over depth then colour bytes (a recording that arrived bit-exact
+// has the digest the agent computed while sending it).
+uint64_t frameDigest(uint64_t digest, const uint8_t* depth, size_t depth_size, const uint8_t* colour,
+                     size_t colour_size);
+inline constexpr uint64_t kFrameDigestSeed = 1469598103934665603ull;
+
+}  // namespace facescan::wire

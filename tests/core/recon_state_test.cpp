@@ -1,0 +1,129 @@
+// Replication of the reconstructor's state (issue 13): deltas merged on a "standby" equal the owner's full state
+// bit for bit, a reconstructor restored from it continues the scan like the original, and states that do not
+// fit (another volume, a gap, a bad value) are refused.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "recon/reconstructor.hpp"
+#include "synth/kinect_simulator.hpp"
+
+namespace facescan::recon {
+namespace {
+
+struct Scene {
+    synth::KinectSimulator sim;
+    explicit Scene(int frames) : sim(synth::builtinHead(), params(frames)) {}
+    static synth::SequenceParams params(int frames) {
+        synth::SequenceParams sp;
+        sp.frames = frames;
+        return sp;
+    }
+    void feed(Reconstructor& r, int i) const {
+        RgbdFrame frame;
+        synth::FrameTruth truth;
+        sim.render(i, frame, &truth);
+        const cv::Mat mask = truth.label == static_cast<uint8_t>(synth::PixelLabel::kHead);
+        (void)r.processFrame(frame, mask);
+    }
+};
+
+ReconParams smallVolume() {
+    ReconParams p;
+    p.tsdf.resolution_vox = 128;  // a coarser cube keeps the test fast; the state logic is the same
+    return p;
+}
+
+void expectSameVoxels(const ReconState& a, const ReconState& b) {
+    ASSERT_EQ(a.blocks.count(), b.blocks.count());
+    // Block order may differ (pool order vs merge order): compare by coordinates.
+    for (size_t i = 0; i < a.blocks.count(); ++i) {
+        size_t j = 0;
+        while (j < b.blocks.count() && b.blocks.coords[j] != a.blocks.coords[i]) ++j;
+        ASSERT_LT(j, b.blocks.count()) << "block missing";
+        EXPECT_EQ(0, std::memcmp(&a.blocks.voxels[i * kBlockVoxels], &b.blocks.voxels[j * kBlockVoxels],
+                                 kBlockVoxels * sizeof(Voxel)));
+    }
+}
+
+TEST(ReconState, DeltasMergedOnAStandbyEqualTheFullStateAndARestoredScanContinuesLikeTheOriginal) {
+    const Scene scene(40);
+    const ReconParams params = smallVolume();
+    Reconstructor owner(scene.sim.intrinsics(), params);
+    ASSERT_TRUE(owner.initStatus().isOk());
+    ReconState standby, delta;
+    size_t delta_blocks = 0, full_blocks = 0;
+    for (int i = 0; i < 20; ++i) {
+        scene.feed(owner, i);
+        if (i % 5 != 4) continue;  // a replica every 5 frames
+        owner.captureState(standby.generation, standby.trajectorySize(), delta);
+        if (i == 4) {
+            EXPECT_TRUE(delta.full);
+        }
+        ASSERT_TRUE(mergeState(standby, delta).isOk());
+        if (!delta.full) {
+            delta_blocks += delta.blocks.count();
+            full_blocks += static_cast<size_t>(delta.total_blocks);
+        }
+    }
+    EXPECT_LT(delta_blocks, full_blocks) << "deltas should carry only the blocks that changed";
+    ReconState full;
+    owner.captureState(0, 0, full);
+    expectSameVoxels(full, standby);
+    EXPECT_EQ(standby.frames_integrated, owner.framesIntegrated());
+    ASSERT_EQ(standby.trajectory.size(), owner.trajectory().size());
+    EXPECT_TRUE(standby.T_world_camera.isApprox(owner.lastPose()));
+
+    Reconstructor restored(scene.sim.intrinsics(), params);
+    ASSERT_TRUE(restored.restoreState(standby).isOk());
+    EXPECT_EQ(restored.framesIntegrated(), owner.framesIntegrated());
+    for (int i = 20; i < 40; ++i) {
+        scene.feed(owner, i);
+        scene.feed(restored, i);
+    }
+    EXPECT_EQ(restored.framesIntegrated(), owner.framesIntegrated());
+    ASSERT_EQ(restored.trajectory().size(), owner.trajectory().size());
+    float worst_m = 0;
+    for (size_t i = 0; i < owner.trajectory().size(); ++i) {
+        const Pose d = owner.trajectory()[i].second.inverse() * restored.trajectory()[i].second;
+        worst_m = std::max(worst_m, d.translation().norm());
+    }
+    EXPECT_LT(worst_m, 0.0005f) << "the restored scan drifted from the original";
+}
+
+TEST(ReconState, StatesThatDoNotFitAreRefused) {
+    const Scene scene(6);
+    Reconstructor owner(scene.sim.intrinsics(), smallVolume());
+    for (int i = 0; i < 6; ++i) scene.feed(owner, i);
+    ReconState full, delta;
+    owner.captureState(0, 0, full);
+    ASSERT_TRUE(full.validate().isOk());
+
+    // Another volume.
+    Reconstructor other(scene.sim.intrinsics(), ReconParams{});
+    EXPECT_FALSE(other.restoreState(full).isOk());
+    // A delta that skips a generation.
+    ReconState base = full;
+    base.generation -= 1;
+    owner.captureState(full.generation, full.trajectorySize(), delta);
+    EXPECT_FALSE(mergeState(base, delta).isOk());
+    // Impossible values.
+    ReconState bad = full;
+    bad.blocks.voxels[3].tsdf = 7.0f;
+    EXPECT_FALSE(bad.validate().isOk());
+    bad = full;
+    bad.blocks.coords.push_back(bad.blocks.coords.front());
+    bad.blocks.voxels.resize(bad.blocks.voxels.size() + kBlockVoxels);
+    ++bad.total_blocks;
+    EXPECT_FALSE(bad.validate().isOk()) << "a duplicate block must be refused";
+    bad = full;
+    bad.T_world_camera.matrix()(0, 3) = std::nanf("");
+    EXPECT_FALSE(bad.validate().isOk());
+    // A reset in between makes the next capture full.
+    owner.reset();
+    owner.captureState(full.generation, full.trajectorySize(), delta);
+    EXPECT_TRUE(delta.full);
+}
+
+}  // namespace
+}  // namespace facescan::recon
