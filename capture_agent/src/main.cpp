@@ -36,7 +36,11 @@ options:
   --depth-codec NAME    lossless depth codec: packed-delta-zstd (default), delta-zstd, rvl-zstd, rvl, zstd,
                         raw16, png (`facescan-bench codecs` compares them on your frames)
   --tum-depth-scale S   raw depth units per metre of tum: sources (default 5000; Kinect millimetres: 1000)
-  --wait-for-server S   give up when no server appears within S seconds (default: wait forever)
+  --wait-for-server S   give up when no server takes the session within S seconds (default: wait forever)
+  --keep-frames N       recording frames kept until the owning server confirms them (replicated to its
+                        standby or on its disk), to resend after a takeover; when full, the agent waits
+                        (default 300)
+  --finish-timeout S    after the last frame, wait at most S seconds for the server to finish (default 120)
   --profile P           DDS network profile: loopback, lan (default) or FILE.xml
   --domain N            DDS domain id 0-232 (default 0); agent, server and client must agree
   --help                this text
@@ -102,6 +106,11 @@ int main(int argc, char** argv) {
             options.source_options.tum_depth_units_m = 1.0f / per_m;
         } else if (arg == "--wait-for-server") {
             options.wait_for_server_s = std::strtof(text.c_str(), nullptr);
+        } else if (arg == "--keep-frames") {
+            if (!parseInt(text, 8, 100000, n)) return usageError("--keep-frames takes 8-100000");
+            options.keep_frames = static_cast<int>(n);
+        } else if (arg == "--finish-timeout") {
+            options.finish_timeout_s = std::strtof(text.c_str(), nullptr);
         } else if (arg == "--profile") {
             options.dds.profile = text;
         } else if (arg == "--domain") {
@@ -125,6 +134,7 @@ int main(int argc, char** argv) {
                 info.expected_frames > 0 ? (", " + std::to_string(info.expected_frames) + " frames").c_str() : "");
     std::fflush(stdout);
 
+    uint64_t last_digest = 0;
     std::signal(SIGINT, onSignal);
     std::signal(SIGTERM, onSignal);
     const Status status = (*agent)->run(
@@ -133,18 +143,28 @@ int main(int argc, char** argv) {
             std::printf("facescan-agent: %s\n", event.c_str());
             std::fflush(stdout);
         },
-        [](const capture::AgentStats& st) {
-            std::printf("frames %u | %.1f fps | %.2f Mbit/s | ratio %.1f:1 | dropped %u | servers %d\n", st.published,
-                        st.fps, st.bytes_per_s * 8e-6, st.ratio, st.dropped, st.servers);
+        [&](const capture::AgentStats& st) {
+            // The owner, or why nothing is sent (no server alive, a takeover under way): the operator sees it here.
+            std::string link = st.waiting.empty() ? "owner " + (st.owner.empty() ? std::string("-") : st.owner) +
+                                                        (st.standby.empty() ? "" : " (standby " + st.standby + ")")
+                                                  : "WAITING: " + st.waiting;
+            if ((*agent)->everyFrame()) link += " | kept " + std::to_string(st.kept);
+            if (st.takeovers > 0) {
+                link += " | takeovers " + std::to_string(st.takeovers) + ", resent " + std::to_string(st.replayed);
+            }
+            std::printf("frames %u | %.1f fps | %.2f Mbit/s | ratio %.1f:1 | dropped %u | servers %d | %s\n",
+                        st.published, st.fps, st.bytes_per_s * 8e-6, st.ratio, st.dropped, st.servers, link.c_str());
             std::fflush(stdout);
+            last_digest = st.digest;
         });
 
     rusage usage{};
     getrusage(RUSAGE_SELF, &usage);
     const double cpu_s =
         usage.ru_utime.tv_sec + usage.ru_utime.tv_usec * 1e-6 + usage.ru_stime.tv_sec + usage.ru_stime.tv_usec * 1e-6;
-    std::printf("facescan-agent: %s; cpu %.1f s\n",
-                g_stop ? "stopped (Ctrl-C), server told the stream ended" : "stream ended", cpu_s);
+    std::printf("facescan-agent: %s; cpu %.1f s; frames digest %016llx\n",
+                g_stop ? "stopped (Ctrl-C), server told the stream ended" : "stream ended", cpu_s,
+                static_cast<unsigned long long>(last_digest));
     if (!status.isOk()) {
         std::fprintf(stderr, "facescan-agent: %s\n", status.toString().c_str());
         return 1;

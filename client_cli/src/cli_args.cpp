@@ -41,8 +41,18 @@ const std::vector<CommandSpec>& commandSpecs() {
          0,
          {"--json"},
          "Usage: facescan sessions [--json]\n"
-         "Lists the scan sessions live on the domain (found by discovery): state, frames, fps, server.\n"
+         "Lists the scan sessions live on the domain (found by discovery): state, frames, fps, the server that\n"
+         "owns each one and its standby (the server that takes over when the owner dies).\n"
          "  --json          one JSON object per session instead of the table\n"},
+        {Command::kServers,
+         "servers",
+         0,
+         0,
+         {"--json"},
+         "Usage: facescan servers [--json]\n"
+         "Lists the facescan servers alive on the domain: sessions owned (of their capacity), sessions they stand\n"
+         "by for, CPU load (cores), uptime and version.\n"
+         "  --json          one JSON object per server instead of the table\n"},
         {Command::kWatch,
          "watch",
          0,
@@ -60,7 +70,8 @@ const std::vector<CommandSpec>& commandSpecs() {
          1,
          {"--json"},
          "Usage: facescan status SESSION [--json]\n"
-         "Asks the servers who owns SESSION and prints its state, frame counts and per-stage times.\n"
+         "Asks the servers who owns SESSION and prints its state, frame counts, per-stage times, its standby and\n"
+         "the failovers it went through (count, last takeover time).\n"
          "  --json          one JSON object\n"},
         {Command::kMesh,
          "mesh",
@@ -146,7 +157,8 @@ std::string usageText(const std::string& command) {
                "The client of facescan: watch scans live and fetch their results over DDS.\n"
                "\n"
                "Commands:\n"
-               "  sessions                       the live sessions on the domain, with state and frames\n"
+               "  sessions                       the live sessions on the domain, with state, frames and owner\n"
+               "  servers                        the servers on the domain, with capacity, load and uptime\n"
                "  watch [SESSION]                follow a scan live (--save DIR keeps every snapshot)\n"
                "  status SESSION                 state, frame counts and timings of one session\n"
                "  mesh SESSION -o FILE           the mesh as .ply .obj .stl .off or .drc (--finish ends the scan)\n"

@@ -76,17 +76,34 @@ std::string jsonString(const std::string& s) {
     return out + "\"";
 }
 
-std::string statusJson(const SessionStatus& s) {
-    char numbers[640];
+// The owner from the claims (what every server and agent follows); the status's server when no claim arrived.
+struct Ownership {
+    std::string owner, standby;
+    uint32_t epoch = 0;
+    bool alive = true;
+};
+Ownership ownershipOf(const SessionStatus& s, const std::map<std::string, OwnerInfo>& owners) {
+    Ownership o{s.server_id, s.standby_id, s.owner_epoch, true};
+    if (const auto it = owners.find(s.session_id); it != owners.end()) {
+        o = {it->second.owner_id, it->second.standby_id, it->second.epoch, it->second.alive};
+    }
+    return o;
+}
+
+std::string statusJson(const SessionStatus& s, const Ownership& o) {
+    char numbers[768];
     std::snprintf(numbers, sizeof(numbers),
                   "\"frames_received\":%u,\"frames_integrated\":%u,\"frames_rejected\":%u,\"frames_skipped\":%u,"
                   "\"frames_dropped\":%u,\"every_frame\":%s,\"fps\":%.2f,\"ms\":{\"detect\":%.3f,\"segment\":%.3f,"
                   "\"filter\":%.3f,\"icp\":%.3f,\"integrate\":%.3f,\"raycast\":%.3f,\"mesh\":%.3f},"
-                  "\"latency_p95_ms\":%.2f,\"snapshot_seq\":%u",
+                  "\"latency_p95_ms\":%.2f,\"snapshot_seq\":%u,\"epoch\":%u,\"owner_alive\":%s,\"failovers\":%u,"
+                  "\"last_takeover_ms\":%.1f",
                   s.frames_received, s.frames_integrated, s.frames_rejected, s.frames_skipped, s.frames_dropped,
                   s.every_frame ? "true" : "false", s.fps, s.ms_detect, s.ms_segment, s.ms_filter, s.ms_icp,
-                  s.ms_integrate, s.ms_raycast, s.ms_mesh, s.latency_p95_ms, s.snapshot_seq);
+                  s.ms_integrate, s.ms_raycast, s.ms_mesh, s.latency_p95_ms, s.snapshot_seq, o.epoch,
+                  o.alive ? "true" : "false", s.failovers, s.last_takeover_ms);
     return "{\"session\":" + jsonString(s.session_id) + ",\"server\":" + jsonString(s.server_id) +
+           ",\"owner\":" + jsonString(o.owner) + ",\"standby\":" + jsonString(o.standby) +
            ",\"state\":" + jsonString(scanStateName(s.state)) + ",\"detail\":" + jsonString(s.detail) + "," + numbers +
            "}";
 }
@@ -97,8 +114,10 @@ int runSessions(const CliOptions& options) {
     if (!client) return code;
     auto sessions = client->sessions(std::chrono::milliseconds(1000));
     if (!sessions.isOk()) return fail(exitCodeForRequest(sessions.status()), sessions.status().message());
+    auto owners = client->owners(std::chrono::milliseconds(200));
+    if (!owners.isOk()) return fail(exitCodeForRequest(owners.status()), owners.status().message());
     if (options.json) {
-        for (const SessionStatus& s : *sessions) std::printf("%s\n", statusJson(s).c_str());
+        for (const SessionStatus& s : *sessions) std::printf("%s\n", statusJson(s, ownershipOf(s, *owners)).c_str());
         return kExitOk;
     }
     if (sessions->empty()) {
@@ -106,11 +125,59 @@ int runSessions(const CliOptions& options) {
                     options.domain.domain_id);
         return kExitOk;
     }
-    std::printf("%-24s %-9s %10s %10s %8s %6s  %s\n", "SESSION", "STATE", "INTEGRATED", "RECEIVED", "REJECTED", "FPS",
-                "SERVER");
+    std::printf("%-24s %-9s %10s %10s %8s %6s  %-20s %s\n", "SESSION", "STATE", "INTEGRATED", "RECEIVED", "REJECTED",
+                "FPS", "OWNER", "STANDBY");
     for (const SessionStatus& s : *sessions) {
-        std::printf("%-24s %-9s %10u %10u %8u %6.1f  %s\n", s.session_id.c_str(), scanStateName(s.state),
-                    s.frames_integrated, s.frames_received, s.frames_rejected, s.fps, s.server_id.c_str());
+        const Ownership o = ownershipOf(s, *owners);
+        const std::string owner = o.alive ? o.owner : o.owner + " (gone)";
+        std::printf("%-24s %-9s %10u %10u %8u %6.1f  %-20s %s\n", s.session_id.c_str(), scanStateName(s.state),
+                    s.frames_integrated, s.frames_received, s.frames_rejected, s.fps, owner.c_str(),
+                    o.standby.empty() ? "-" : o.standby.c_str());
+    }
+    return kExitOk;
+}
+
+std::string uptimeText(int64_t started_ns) {
+    const auto now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                            std::chrono::system_clock::now().time_since_epoch())
+                            .count();
+    const int64_t s = std::max<int64_t>(0, (now_ns - started_ns) / 1'000'000'000);
+    char buf[32];
+    if (s >= 3600) {
+        std::snprintf(buf, sizeof(buf), "%lldh%02lldm", static_cast<long long>(s / 3600),
+                      static_cast<long long>(s / 60 % 60));
+    } else {
+        std::snprintf(buf, sizeof(buf), "%lldm%02llds", static_cast<long long>(s / 60), static_cast<long long>(s % 60));
+    }
+    return buf;
+}
+
+int runServers(const CliOptions& options) {
+    int code = kExitOk;
+    auto client = connectOrFail(options, code);
+    if (!client) return code;
+    auto servers = client->servers(std::chrono::milliseconds(std::min<int64_t>(1000, options.timeout.count())));
+    if (!servers.isOk()) return fail(exitCodeForRequest(servers.status()), servers.status().message());
+    if (options.json) {
+        for (const ServerInfo& s : *servers) {
+            std::printf("{\"server\":%s,\"host\":%s,\"pid\":%u,\"open_sessions\":%u,\"max_sessions\":%u,"
+                        "\"standby_sessions\":%u,\"cpu_load\":%.2f,\"started_ns\":%lld,\"joining\":%s,"
+                        "\"protocol\":%u,\"software\":%s}\n",
+                        jsonString(s.server_id).c_str(), jsonString(s.host).c_str(), s.pid, s.open_sessions,
+                        s.max_sessions, s.standby_sessions, s.cpu_load, static_cast<long long>(s.started_ns),
+                        s.joining ? "true" : "false", s.protocol_version, jsonString(s.software).c_str());
+        }
+        return kExitOk;
+    }
+    std::printf("%-24s %-16s %9s %8s %6s %8s  %s\n", "SERVER", "HOST", "SESSIONS", "STANDBY", "LOAD", "UPTIME",
+                "VERSION");
+    for (const ServerInfo& s : *servers) {
+        const std::string sessions = std::to_string(s.open_sessions) + "/" + std::to_string(s.max_sessions);
+        std::string version = s.software;
+        if (s.protocol_version != wire::kClusterProtocolVersion) version += " (other protocol: not a peer)";
+        if (s.joining) version += " (joining)";
+        std::printf("%-24s %-16s %9s %8u %6.2f %8s  %s\n", s.server_id.c_str(), s.host.c_str(), sessions.c_str(),
+                    s.standby_sessions, s.cpu_load, uptimeText(s.started_ns).c_str(), version.c_str());
     }
     return kExitOk;
 }
@@ -138,12 +205,20 @@ int runStatus(const CliOptions& options) {
         return kExitOk;
     }
     const SessionStatus& s = *found;
+    auto owners = client->owners(std::chrono::milliseconds(100));
+    const Ownership o = ownershipOf(s, owners.isOk() ? *owners : std::map<std::string, OwnerInfo>{});
     if (options.json) {
-        std::printf("%s\n", statusJson(s).c_str());
+        std::printf("%s\n", statusJson(s, o).c_str());
         return kExitOk;
     }
     std::printf("session     %s\n", s.session_id.c_str());
-    std::printf("server      %s\n", s.server_id.c_str());
+    std::printf("owner       %s (epoch %u%s)\n", o.owner.c_str(), o.epoch, o.alive ? "" : ", gone");
+    std::printf("standby     %s\n", o.standby.empty() ? "none" : o.standby.c_str());
+    if (s.failovers > 0) {
+        std::printf("failovers   %u (last takeover %.0f ms)\n", s.failovers, static_cast<double>(s.last_takeover_ms));
+    } else {
+        std::printf("failovers   0\n");
+    }
     std::printf("state       %s%s%s\n", scanStateName(s.state), s.detail.empty() ? "" : " - ", s.detail.c_str());
     std::printf("mode        %s\n", s.every_frame ? "recording (every frame processed)" : "live (newest frame)");
     std::printf("frames      %u received, %u integrated, %u rejected, %u skipped, %u dropped\n", s.frames_received,
@@ -265,6 +340,7 @@ int runCommand(const CliOptions& options) {
         case Command::kTrajectory: return runPayloadCommand(options, facescan_wire_CMD_GET_TRAJECTORY);
         case Command::kFinish: return runSimpleCommand(options, facescan_wire_CMD_FINISH);
         case Command::kReset: return runSimpleCommand(options, facescan_wire_CMD_RESET);
+        case Command::kServers: return runServers(options);
     }
     return kExitUsage;
 }

@@ -84,6 +84,12 @@ struct ScanClient::Endpoints {
     std::optional<wire::Topic<facescan_wire_MeshSnapshot>> snapshot_topic;
     std::optional<wire::Reader<facescan_wire_MeshSnapshot>> snapshot_reader;
     std::map<dds_instance_handle_t, std::string> status_instances;  // for not-alive notices, which carry no data
+    std::optional<wire::Topic<facescan_wire_ServerAnnounce>> announce_topic;
+    std::optional<wire::Reader<facescan_wire_ServerAnnounce>> announce_reader;
+    std::optional<wire::Topic<facescan_wire_SessionOwner>> owner_topic;
+    std::optional<wire::Reader<facescan_wire_SessionOwner>> owner_reader;
+    std::map<std::string, ServerInfo> servers;
+    std::map<std::string, OwnerInfo> owners;
     bool server_seen = false;
 };
 
@@ -263,6 +269,74 @@ Status ScanClient::poll(milliseconds wait, std::map<std::string, SessionStatus>&
         },
         64);
     return taken.isOk() ? Status::ok() : taken.status();
+}
+
+Status ScanClient::ensureClusterReaders() {
+    Endpoints& e = *endpoints_;
+    if (e.owner_reader) return Status::ok();
+    ASSIGN_OR_RETURN(auto announce_topic, wire::Topic<facescan_wire_ServerAnnounce>::create(e.participant));
+    e.announce_topic.emplace(std::move(announce_topic));
+    ASSIGN_OR_RETURN(auto announce_reader, wire::Reader<facescan_wire_ServerAnnounce>::create(*e.announce_topic));
+    e.announce_reader.emplace(std::move(announce_reader));
+    ASSIGN_OR_RETURN(auto owner_topic, wire::Topic<facescan_wire_SessionOwner>::create(e.participant));
+    e.owner_topic.emplace(std::move(owner_topic));
+    ASSIGN_OR_RETURN(auto owner_reader, wire::Reader<facescan_wire_SessionOwner>::create(*e.owner_topic));
+    e.owner_reader.emplace(std::move(owner_reader));
+    return Status::ok();
+}
+
+namespace {
+
+// Takes the samples of a cluster topic into `into` (by key); malformed ones are left out, not-alive notices
+// mark the entry.
+template <typename Msg, typename Info>
+Status takeKeyed(wire::Reader<Msg>& reader, std::map<std::string, Info>& into, char* Msg::*key) {
+    auto taken = reader.take(
+        [&](const Msg& m, const dds_sample_info_t& info) {
+            const std::string id = wire::fromDds(m.*key);
+            if (!info.valid_data) {
+                if (auto it = into.find(id); it != into.end()) it->second.alive = info.instance_state == DDS_IST_ALIVE;
+                return;
+            }
+            auto parsed = wire::fromMessage(m);
+            if (!parsed.isOk()) return;
+            Info v;
+            static_cast<decltype(*parsed)&>(v) = std::move(*parsed);
+            v.alive = info.instance_state == DDS_IST_ALIVE;
+            into[id] = std::move(v);
+        },
+        1024);
+    return taken.isOk() ? Status::ok() : taken.status();
+}
+
+}  // namespace
+
+StatusOr<std::vector<ServerInfo>> ScanClient::servers(milliseconds settle) {
+    RETURN_IF_ERROR(ensureClusterReaders());
+    Endpoints& e = *endpoints_;
+    const auto deadline = Clock::now() + settle;
+    // Announcements are durable: they come right after discovery; then a moment for the others.
+    while (Clock::now() < deadline) {
+        e.announce_reader->waitForData(std::min(milliseconds(100), remaining(deadline)));
+        RETURN_IF_ERROR(takeKeyed(*e.announce_reader, e.servers, &facescan_wire_ServerAnnounce::server_id));
+    }
+    std::vector<ServerInfo> out;
+    for (const auto& [id, s] : e.servers) {
+        if (s.alive) out.push_back(s);
+    }
+    if (out.empty()) return deadlineExceeded(noServerMessage(config_.domain));
+    return out;
+}
+
+StatusOr<std::map<std::string, OwnerInfo>> ScanClient::owners(milliseconds settle) {
+    RETURN_IF_ERROR(ensureClusterReaders());
+    Endpoints& e = *endpoints_;
+    const auto deadline = Clock::now() + settle;
+    do {
+        e.owner_reader->waitForData(std::min(milliseconds(50), remaining(deadline)));
+        RETURN_IF_ERROR(takeKeyed(*e.owner_reader, e.owners, &facescan_wire_SessionOwner::session_id));
+    } while (Clock::now() < deadline);
+    return e.owners;
 }
 
 }  // namespace facescan::client

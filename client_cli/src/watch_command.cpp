@@ -108,6 +108,7 @@ int runWatch(const CliOptions& options) {
     std::optional<Clock::time_point> snapshot_received;
     std::optional<Clock::time_point> last_draw;
     bool confirmed = false;  // a server said it owns the session (it may not have published a status yet)
+    std::optional<Clock::time_point> owner_lost;  // when the session's status lost its live writer
     if (session.empty()) display.message("waiting for a scan to start (Ctrl-C to stop) ...");
 
     while (!g_interrupted) {
@@ -148,7 +149,17 @@ int runWatch(const CliOptions& options) {
             confirmed = true;
         }
         const bool finished = view.have_status && view.status.state == facescan_wire_STATE_FINISHED;
-        const bool gone = view.have_status && !view.status.alive;
+        // A dead owner with a standby: the standby takes over within the lease (issue 13); wait for it a while.
+        if (view.have_status && !view.status.alive && !owner_lost) {
+            owner_lost = Clock::now();
+            if (!view.status.standby_id.empty()) {
+                display.message("the server of " + session + " is gone: waiting for its standby '" +
+                                view.status.standby_id + "' to take over");
+            }
+        }
+        if (view.have_status && view.status.alive) owner_lost.reset();
+        const double takeover_wait_s = view.status.standby_id.empty() ? 0.0 : 15.0;
+        const bool gone = owner_lost && secondsSince(*owner_lost) >= takeover_wait_s;
         if (finished || gone || !last_draw || secondsSince(*last_draw) >= redraw_s) {
             display.draw(view);
             last_draw = Clock::now();

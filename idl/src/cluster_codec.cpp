@@ -79,9 +79,13 @@ StatusOr<ServerAnnounceData> fromMessage(const facescan_wire_ServerAnnounce& m) 
     return a;
 }
 
+static_assert(static_cast<int>(OwnerState::kReady) == facescan_wire_OWNER_READY &&
+              static_cast<int>(OwnerState::kReleased) == facescan_wire_OWNER_RELEASED);
+
 const char* ownerStateName(OwnerState state) {
     switch (state) {
         case OwnerState::kClaiming: return "claiming";
+        case OwnerState::kReady: return "ready";
         case OwnerState::kActive: return "active";
         case OwnerState::kFinished: return "finished";
         case OwnerState::kReleased: return "released";
@@ -116,9 +120,6 @@ StatusOr<SessionOwnerData> fromMessage(const facescan_wire_SessionOwner& m) {
     if (m.epoch == 0 || m.epoch > 0x7fff) return invalidArgument("owner of '" + o.session_id + "': bad epoch");
     if (static_cast<uint32_t>(m.state) > static_cast<uint32_t>(facescan_wire_OWNER_RELEASED)) {
         return invalidArgument("owner of '" + o.session_id + "': unknown state " + std::to_string(m.state));
-    }
-    if (m.confirmed_seq > m.resume_seq && m.state == facescan_wire_OWNER_ACTIVE) {
-        return invalidArgument("owner of '" + o.session_id + "': confirmed frames beyond the resume point");
     }
     if (!std::isfinite(m.last_takeover_ms) || m.last_takeover_ms < 0) {
         return invalidArgument("owner of '" + o.session_id + "': bad takeover time");

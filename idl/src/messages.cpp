@@ -46,6 +46,10 @@ facescan_wire_ScanStatus toMessage(const ScanStatusData& status) {
     m.latency_p95_ms = status.latency_p95_ms;
     m.snapshot_seq = status.snapshot_seq;
     m.updated_ns = status.updated_ns;
+    m.standby_id = stringView(status.standby_id);
+    m.owner_epoch = status.owner_epoch;
+    m.failovers = status.failovers;
+    m.last_takeover_ms = status.last_takeover_ms;
     return m;
 }
 
@@ -74,6 +78,10 @@ ScanStatusData fromMessage(const facescan_wire_ScanStatus& m) {
     s.latency_p95_ms = m.latency_p95_ms;
     s.snapshot_seq = m.snapshot_seq;
     s.updated_ns = m.updated_ns;
+    s.standby_id = fromDds(m.standby_id);
+    s.owner_epoch = m.owner_epoch;
+    s.failovers = m.failovers;
+    s.last_takeover_ms = m.last_takeover_ms;
     return s;
 }
 

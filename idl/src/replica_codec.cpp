@@ -353,4 +353,26 @@ Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out) {
     return Status::ok();
 }
 
+Status mergeReplica(ReplicaData& base, const ReplicaData& delta) {
+    if (delta.full()) {
+        base = delta;
+        return Status::ok();
+    }
+    if (!base.full() && base.round == 0) return invalidArgument("replica: no full state to apply a delta to");
+    if (delta.session_id != base.session_id || delta.owner_id != base.owner_id || delta.epoch != base.epoch) {
+        return invalidArgument("replica: the delta is from another session or owner");
+    }
+    if (delta.base_round != base.round) {
+        return invalidArgument("replica: round " + std::to_string(delta.round) + " applies to round " +
+                               std::to_string(delta.base_round) + ", the copy here is at round " +
+                               std::to_string(base.round));
+    }
+    RETURN_IF_ERROR(recon::mergeState(base.state, delta.state));
+    base.round = delta.round;
+    base.next_seq = delta.next_seq;
+    base.camera = delta.camera;
+    base.counters = delta.counters;
+    return Status::ok();
+}
+
 }  // namespace facescan::wire

@@ -16,6 +16,7 @@
 #include "capture/frame_source.hpp"
 #include "synth/kinect_simulator.hpp"
 #include "test_domain.hpp"
+#include "wire/cluster_codec.hpp"
 #include "wire/messages.hpp"
 
 extern char** environ;
@@ -70,9 +71,21 @@ void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expec
     auto frame_topic = wire::Topic<facescan_wire_RgbdFrame>::create(*participant);
     ASSERT_TRUE(info_topic.isOk() && frame_topic.isOk());
     auto info_reader = wire::Reader<facescan_wire_CameraInfo>::create(*info_topic);
+    // This test plays the session's owning server: it claims the session (the agent streams only to an owner) and
+    // reads its frames in the session's partition, where only the owner listens.
     const wire::Qos qos = wire::frameReaderQos();
-    auto frame_reader = wire::Reader<facescan_wire_RgbdFrame>::create(*frame_topic, &qos);
+    auto frame_reader = wire::Reader<facescan_wire_RgbdFrame>::create(*frame_topic, &qos, wire::sessionPartition(session));
     ASSERT_TRUE(info_reader.isOk() && frame_reader.isOk());
+    auto owner_topic = wire::Topic<facescan_wire_SessionOwner>::create(*participant);
+    ASSERT_TRUE(owner_topic.isOk());
+    const wire::Qos claim_qos = wire::claimWriterQos(wire::claimStrength(1, "test-owner", session));
+    auto claim = wire::Writer<facescan_wire_SessionOwner>::create(*owner_topic, &claim_qos);
+    ASSERT_TRUE(claim.isOk());
+    wire::SessionOwnerData owner;
+    owner.session_id = session;
+    owner.owner_id = "test-owner";
+    owner.state = wire::OwnerState::kReady;
+    ASSERT_TRUE(claim->write(wire::toMessage(owner)).isOk());
 
     std::optional<wire::CameraInfoData> camera;
     wire::DepthDecoder decoder;
@@ -112,6 +125,9 @@ void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expec
         });
         ASSERT_TRUE(n.isOk());
     }
+    // The agent waits for its owner to finish the scan before it exits.
+    owner.state = wire::OwnerState::kFinished;
+    ASSERT_TRUE(claim->write(wire::toMessage(owner)).isOk());
     int status = 0;
     waitpid(agent, &status, 0);
     EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "agent exit status " << status;

@@ -39,6 +39,7 @@ ServerParams testParams(uint32_t domain, const std::string& name) {
     p.data_dir = tempDataDir(name);
     p.server_id = "test-server";
     p.snapshot_hz = 2.0f;
+    p.join_settle_s = 0.3f;  // loopback discovery takes milliseconds; a lone server has nobody to wait for
     return p;
 }
 
@@ -96,12 +97,16 @@ Rig makeRig(const ServerParams& params) {
     return rig;
 }
 
-std::unique_ptr<TestAgent> makeAgent(uint32_t domain, const std::string& session, bool every_frame) {
+std::unique_ptr<TestAgent> makeAgent(uint32_t domain, const std::string& session, bool every_frame,
+                                     bool expect_owner = true) {
     auto agent = TestAgent::create(domain, session, sequence().intrinsics, every_frame);
     EXPECT_TRUE(agent.isOk()) << agent.status().toString();
     if (!agent.isOk()) return nullptr;
     EXPECT_TRUE((*agent)->waitForServer(10s));
     EXPECT_TRUE((*agent)->sendCamera().isOk());
+    if (expect_owner) {
+        EXPECT_TRUE((*agent)->waitForOwner(10s)) << "no server took session " << session;
+    }
     return std::move(agent).value();
 }
 
@@ -230,6 +235,7 @@ TEST(ServerSession, EveryFrameRecordingProcessesAllFramesAndFinishesAtEndOfStrea
     if (!agent.isOk()) _exit(10);
     if (!(*agent)->waitForServer(20s)) _exit(11);
     if (!(*agent)->sendCamera().isOk()) _exit(12);
+    if (!(*agent)->waitForOwner(20s)) _exit(15);
     if (!(*agent)->stream(seq, 20, 30.0f, /*end_of_stream=*/false).isOk()) _exit(13);
     raise(SIGKILL);
     _exit(14);
@@ -268,7 +274,7 @@ TEST(ServerSession, SessionsBeyondMaxSessionsAreRefusedWithAReason) {
     ASSERT_TRUE(first);
     ASSERT_TRUE(rig.client->waitForStatus(
         "first", [](const StatusCopy&) { return true; }, 5s));
-    auto second = makeAgent(domain, "second", false);
+    auto second = makeAgent(domain, "second", false, /*expect_owner=*/false);
     ASSERT_TRUE(second);
     auto refused = rig.client->waitForStatus(
         "second", [](const StatusCopy& s) { return s.state == facescan_wire_STATE_REFUSED; }, 5s);

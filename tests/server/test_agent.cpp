@@ -69,14 +69,19 @@ StatusOr<std::unique_ptr<TestAgent>> TestAgent::create(uint32_t domain, const st
     ASSIGN_OR_RETURN(m.frame_topic, wire::Topic<facescan_wire_RgbdFrame>::create(*m.participant));
     ASSIGN_OR_RETURN(m.camera_writer, wire::Writer<facescan_wire_CameraInfo>::create(*m.camera_topic));
     const wire::Qos qos = wire::frameWriterQos(every_frame);
-    ASSIGN_OR_RETURN(m.frame_writer, wire::Writer<facescan_wire_RgbdFrame>::create(*m.frame_topic, &qos));
+    ASSIGN_OR_RETURN(m.frame_writer,
+                     wire::Writer<facescan_wire_RgbdFrame>::create(*m.frame_topic, &qos, wire::sessionPartition(session_id)));
     return agent;
 }
 
 TestAgent::~TestAgent() = default;
 
 bool TestAgent::waitForServer(std::chrono::milliseconds timeout) {
-    return impl_->camera_writer->waitForReaders(1, timeout) && impl_->frame_writer->waitForReaders(1, timeout);
+    return impl_->camera_writer->waitForReaders(1, timeout);
+}
+
+bool TestAgent::waitForOwner(std::chrono::milliseconds timeout) {
+    return impl_->frame_writer->waitForReaders(1, timeout);
 }
 
 Status TestAgent::sendCamera() {

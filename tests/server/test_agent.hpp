@@ -29,8 +29,11 @@ class TestAgent {
     static StatusOr<std::unique_ptr<TestAgent>> create(uint32_t domain, const std::string& session_id,
                                                        const recon::Intrinsics& k, bool every_frame);
     ~TestAgent();
-    // Waits for the server's readers (CameraInfo and RgbdFrame) to match.
+    // Waits for a server's CameraInfo reader to match.
     bool waitForServer(std::chrono::milliseconds timeout);
+    // After sendCamera: waits until a server owns the session (its frame reader, in the session's partition,
+    // matched: frames written before that would reach nobody).
+    bool waitForOwner(std::chrono::milliseconds timeout);
     Status sendCamera();
     // Sends frame `f` as sequence number `seq`, stamped with the current wall clock (latency).
     Status sendFrame(uint32_t seq, const wire::EncodedFrame& f);

@@ -11,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "capture/owner_link.hpp"
 #include "wire/messages.hpp"
 
 namespace facescan::capture {
@@ -64,6 +65,8 @@ Status AgentOptions::validate() const {
     if (jpeg_quality < 1 || jpeg_quality > 100) return invalidArgument("--jpeg-quality must be 1..100");
     // Two at least: a live camera drops the oldest queued frame when all slots are taken.
     if (queue_frames < 2 || queue_frames > 64) return invalidArgument("queue_frames must be 2..64");
+    if (keep_frames < 8 || keep_frames > 100000) return invalidArgument("--keep-frames must be 8..100000");
+    if (!(finish_timeout_s > 0)) return invalidArgument("--finish-timeout must be > 0 seconds");
     if (wait_for_server_s < 0) return invalidArgument("--wait-for-server must be >= 0 seconds");
     return depth.validate();
 }
@@ -91,7 +94,8 @@ struct Agent::Impl {
     wire::Topic<facescan_wire_CameraInfo> info_topic;
     wire::Writer<facescan_wire_CameraInfo> info_writer;
     wire::Topic<facescan_wire_RgbdFrame> frame_topic;
-    wire::Writer<facescan_wire_RgbdFrame> frame_writer;
+    wire::Writer<facescan_wire_RgbdFrame> frame_writer;  // in the session's partition: only its owner reads it
+    std::optional<OwnerLink> link;
 
     // Camera thread -> publisher hand-over.
     std::mutex mutex;
@@ -120,7 +124,9 @@ StatusOr<std::unique_ptr<Agent>> Agent::create(AgentOptions options) {
     ASSIGN_OR_RETURN(impl->info_writer, wire::Writer<facescan_wire_CameraInfo>::create(impl->info_topic));
     ASSIGN_OR_RETURN(impl->frame_topic, wire::Topic<facescan_wire_RgbdFrame>::create(impl->participant));
     const wire::Qos frame_qos = wire::frameWriterQos(agent->everyFrame());
-    ASSIGN_OR_RETURN(impl->frame_writer, wire::Writer<facescan_wire_RgbdFrame>::create(impl->frame_topic, &frame_qos));
+    ASSIGN_OR_RETURN(impl->frame_writer, wire::Writer<facescan_wire_RgbdFrame>::create(
+                                             impl->frame_topic, &frame_qos, wire::sessionPartition(agent->session_id_)));
+    ASSIGN_OR_RETURN(impl->link, OwnerLink::create(impl->participant, agent->session_id_));
     const int queue = agent->options_.queue_frames;
     impl->slots.resize(static_cast<size_t>(queue));
     impl->free_slots.emplace(queue);
@@ -149,23 +155,13 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
     RETURN_IF_ERROR(camera.validate());
     RETURN_IF_ERROR(s.info_writer.write(wire::toMessage(camera)));
 
-    // Nothing is read from the source until a server listens, so a recording loses no frame while we wait.
+    // Nothing is read from the source until a server owns the session, so a recording loses no frame while we wait.
     const std::string where =
         "domain " + std::to_string(options_.dds.domain_id) + " (profile " + options_.dds.profile + ")";
-    if (!s.frame_writer.waitForReaders(1, 300ms)) {
-        on_event("waiting for a facescan-server on " + where + " ...");
-        const auto deadline = Clock::now() + std::chrono::duration<float>(options_.wait_for_server_s);
-        while (!s.frame_writer.waitForReaders(1, 200ms)) {
-            if (stop) return Status::ok();
-            if (options_.wait_for_server_s > 0 && Clock::now() > deadline) {
-                char seconds[32];
-                std::snprintf(seconds, sizeof(seconds), "%g", options_.wait_for_server_s);
-                return deadlineExceeded("no facescan-server appeared on " + where + " within " + seconds +
-                                        " s: start one with the same --profile and --domain");
-            }
-        }
-    }
-    on_event("server found: streaming session " + session_id_ + (every_frame ? " (every frame)" : " (live)"));
+    SessionStream stream(std::move(*s.link), s.frame_writer, session_id_, every_frame,
+                         static_cast<size_t>(options_.keep_frames), where, on_event);
+    RETURN_IF_ERROR(stream.waitUntilServed(stop, options_.wait_for_server_s));
+    if (stop) return Status::ok();
 
     // The camera thread: reads frames, paces recordings, never waits on the network in live mode.
     const bool paced = options_.rate == RateMode::kFixed || (options_.rate == RateMode::kReal && info.is_recording);
@@ -217,7 +213,6 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
     double raw_bytes = 0, sent_bytes = 0, interval_bytes = 0;
     uint32_t interval_frames = 0;
     auto last_report = Clock::now();
-    bool server_lost = false;
     auto report = [&](bool force) {
         const auto now = Clock::now();
         const double dt = std::chrono::duration<double>(now - last_report).count();
@@ -231,13 +226,23 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
         snapshot.fps = dt > 0 ? interval_frames / dt : 0;
         snapshot.bytes_per_s = dt > 0 ? interval_bytes / dt : 0;
         snapshot.ratio = sent_bytes > 0 ? raw_bytes / sent_bytes : 0;
-        snapshot.servers = s.frame_writer.matchedReaders();
+        const StreamState st = stream.state();
+        snapshot.servers = st.servers;
+        snapshot.owner = st.owner;
+        snapshot.standby = st.standby;
+        snapshot.epoch = st.epoch;
+        snapshot.takeovers = st.takeovers;
+        snapshot.replayed = st.replayed;
+        snapshot.kept = st.kept;
+        snapshot.waiting = st.waiting;
+        snapshot.digest = st.digest;
         on_stats(snapshot);
         last_report = now;
         interval_bytes = 0;
         interval_frames = 0;
     };
 
+    stream.onWait([&] { report(false); });
     while (result.isOk()) {
         int slot = -1;
         {
@@ -266,24 +271,13 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
             result = encode_status;
             break;
         }
-        // A recording must not be sent into the void: wait for a server to come back.
-        while (every_frame && s.frame_writer.matchedReaders() == 0 && !stop) {
-            if (!server_lost) on_event("server lost: waiting for a facescan-server on " + where + " ...");
-            server_lost = true;
-            std::this_thread::sleep_for(200ms);
-        }
-        if (server_lost && s.frame_writer.matchedReaders() > 0) {
-            on_event("server back: resuming");
-            server_lost = false;
-        }
-        const facescan_wire_RgbdFrame msg = wire::toMessage(session_id_, encoded);
-        Status written = s.frame_writer.write(msg);
-        // Back-pressure: a keep-all writer times out when the server has not taken frames for a while.
-        while (written.code() == StatusCode::kDeadlineExceeded && !stop) written = s.frame_writer.write(msg);
-        if (!written.isOk() && !stop) {
+        // To the session's owner; waits while there is none (a takeover), resends what a new owner needs.
+        const Status written = stream.send(encoded, /*end_of_stream=*/false, stop);
+        if (!written.isOk()) {
             result = written;
             break;
         }
+        if (stop) break;
         {
             std::lock_guard lock(s.mutex);
             ++s.stats.published;
@@ -303,14 +297,21 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
     camera_thread.join();
     report(true);
 
-    // Tell the server the stream ended (also after Ctrl-C or a camera failure), and let it acknowledge.
-    facescan_wire_RgbdFrame end{};
-    end.session_id = wire::stringView(session_id_);
+    // Tell the server the stream ended (also after Ctrl-C or a camera failure), and wait until it finished the
+    // scan: a recording's kept frames are still needed if its owner dies before that.
+    wire::EncodedFrame end;
     end.seq = s.stats.captured;
     end.capture_time_ns = wallClockNs();
-    end.end_of_stream = true;
-    const Status end_status = s.frame_writer.write(end);
-    if (end_status.isOk()) (void)s.frame_writer.waitForAcks(5s);
+    const std::atomic<bool> no_stop{false};
+    // After Ctrl-C: a few seconds to hand the end of the stream to an owner, not forever.
+    Status end_status = stream.send(end, /*end_of_stream=*/true, stop ? no_stop : stop, stop ? 5.0f : 0.0f);
+    if (end_status.isOk() && !stream.waitFinished(stop, stop ? 5.0f : options_.finish_timeout_s)) {
+        if (!stop) {
+            end_status = deadlineExceeded("the server did not finish session " + session_id_ + " within " +
+                                          std::to_string(static_cast<int>(options_.finish_timeout_s)) + " s");
+        }
+    }
+    report(true);
 
     if (!s.capture_status.isOk()) return s.capture_status;
     RETURN_IF_ERROR(result);

@@ -21,7 +21,7 @@ enum ExitCode : int {
     kExitInterrupted = 130,  // Ctrl-C (128 + SIGINT, the shell convention)
 };
 
-enum class Command { kSessions, kWatch, kStatus, kMesh, kPreview, kTrajectory, kFinish, kReset };
+enum class Command { kSessions, kWatch, kStatus, kMesh, kPreview, kTrajectory, kFinish, kReset, kServers };
 
 struct CliOptions {
     Command command = Command::kSessions;

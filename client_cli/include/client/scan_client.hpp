@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "recon/status.hpp"
+#include "wire/cluster_codec.hpp"
 #include "wire/messages.hpp"
 #include "wire/topics.hpp"
 
@@ -40,6 +41,16 @@ struct CommandReply {
 // The latest ScanStatus of a session (wire::ScanStatusData, converted in one place) and whether its server lives.
 struct SessionStatus : wire::ScanStatusData {
     bool alive = true;  // false once the server that publishes it is gone
+};
+
+// A server of the domain (its announcement) and whether it is alive.
+struct ServerInfo : wire::ServerAnnounceData {
+    bool alive = true;
+};
+
+// Who owns a session (the strongest live claim: every reader sees the same one).
+struct OwnerInfo : wire::SessionOwnerData {
+    bool alive = true;  // false once its owner died and nobody took it over yet
 };
 
 struct MeshSnapshotData {
@@ -83,6 +94,12 @@ class ScanClient {
     // `settle` for the durable samples. Sorted by session id.
     StatusOr<std::vector<SessionStatus>> sessions(std::chrono::milliseconds settle);
 
+    // The servers alive on the domain (their durable announcements), after up to `settle` for them to arrive.
+    // Sorted by id.
+    StatusOr<std::vector<ServerInfo>> servers(std::chrono::milliseconds settle);
+    // The owner of every session that has one (durable claims), after up to `settle`.
+    StatusOr<std::map<std::string, OwnerInfo>> owners(std::chrono::milliseconds settle);
+
     // Live following: takes what has arrived into `statuses` (by session id) and returns new snapshots of
     // `snapshot_session` (empty: none wanted). Waits at most `wait` for something to arrive.
     Status poll(std::chrono::milliseconds wait, std::map<std::string, SessionStatus>& statuses,
@@ -92,6 +109,7 @@ class ScanClient {
     explicit ScanClient(ClientConfig config);
     Status ensureStatusReader();
     Status ensureSnapshotReader();
+    Status ensureClusterReaders();
     Status takeStatuses(std::map<std::string, SessionStatus>& statuses);
     std::string nextRequestId();
 

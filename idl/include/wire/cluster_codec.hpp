@@ -36,7 +36,7 @@ struct ServerAnnounceData {
 facescan_wire_ServerAnnounce toMessage(const ServerAnnounceData& a);
 StatusOr<ServerAnnounceData> fromMessage(const facescan_wire_ServerAnnounce& msg);
 
-enum class OwnerState { kClaiming, kActive, kFinished, kReleased };
+enum class OwnerState { kClaiming, kReady, kActive, kFinished, kReleased };  // facescan.idl's OwnerState
 const char* ownerStateName(OwnerState state);
 
 struct SessionOwnerData {

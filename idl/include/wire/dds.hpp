@@ -256,6 +256,13 @@ bool Reader<T>::waitForWriters(int count, std::chrono::milliseconds timeout) con
     return pollUntil([&] { return matchedWriters() >= count; }, timeout);
 }
 
+// A created entity moved to the heap (members that are made after their owner's constructor).
+template <typename T>
+StatusOr<std::unique_ptr<T>> boxed(StatusOr<T> v) {
+    if (!v.isOk()) return v.status();
+    return std::make_unique<T>(std::move(v).value());
+}
+
 // Borrowing views for writing string fields (no copy; DDS never frees them).
 inline char* stringView(const std::string& s) { return const_cast<char*>(s.c_str()); }
 // A received string field (may be null in a malformed sample).

@@ -54,6 +54,11 @@ struct ScanStatusData {
     float latency_p95_ms = 0;  // capture to pose known
     uint32_t snapshot_seq = 0;
     int64_t updated_ns = 0;  // server's CLOCK_REALTIME when published
+    // The cluster (issue 13).
+    std::string standby_id;
+    uint32_t owner_epoch = 0;
+    uint32_t failovers = 0;
+    float last_takeover_ms = 0;
 };
 // The message points at `status`'s strings: keep it alive until the sample is written.
 facescan_wire_ScanStatus toMessage(const ScanStatusData& status);

@@ -59,6 +59,10 @@ Status encodeReplica(const ReplicaData& r, std::vector<uint8_t>& out, int zstd_l
 // corrupt or truncated bytes, kInvalidArgument/kOutOfRange for values that make no sense.
 Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out);
 
+// Applies a delta replica onto a full one (the standby's copy, or the rounds of a replica log): the delta must
+// belong to the same session and owner epoch and continue base.round. Leaves base unchanged on error.
+Status mergeReplica(ReplicaData& base, const ReplicaData& delta);
+
 // Running digest of accepted frames: FNV-1a 64 over depth then colour bytes (a recording that arrived bit-exact
 // has the digest the agent computed while sending it).
 uint64_t frameDigest(uint64_t digest, const uint8_t* depth, size_t depth_size, const uint8_t* colour,

@@ -1,5 +1,7 @@
 #include "service/server.hpp"
 
+#include "service/replication.hpp"
+
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -8,6 +10,7 @@
 #include <chrono>
 #include <cstdio>
 #include <future>
+#include <thread>
 
 namespace facescan::service {
 namespace {
@@ -25,12 +28,6 @@ facescan_wire_ScanState toWire(SessionState s) {
     return facescan_wire_STATE_WAITING;
 }
 
-template <typename T>
-StatusOr<std::unique_ptr<T>> boxed(StatusOr<T> v) {
-    if (!v.isOk()) return v.status();
-    return std::make_unique<T>(std::move(v).value());
-}
-
 }  // namespace
 
 StatusOr<std::unique_ptr<Server>> Server::create(const ServerParams& params) {
@@ -41,6 +38,7 @@ StatusOr<std::unique_ptr<Server>> Server::create(const ServerParams& params) {
 }
 
 Status Server::start() {
+    using wire::boxed;
     ASSIGN_OR_RETURN(participant_, boxed(wire::Participant::create(params_.domain)));
     const wire::Participant& p = *participant_;
     ASSIGN_OR_RETURN(camera_topic_, boxed(wire::Topic<facescan_wire_CameraInfo>::create(p)));
@@ -50,12 +48,17 @@ Status Server::start() {
     ASSIGN_OR_RETURN(command_topic_, boxed(wire::Topic<facescan_wire_ScanCommand>::create(p)));
     ASSIGN_OR_RETURN(reply_topic_, boxed(wire::Topic<facescan_wire_ScanReply>::create(p)));
     ASSIGN_OR_RETURN(camera_reader_, boxed(wire::Reader<facescan_wire_CameraInfo>::create(*camera_topic_)));
-    const wire::Qos frame_qos = wire::frameReaderQos();
-    ASSIGN_OR_RETURN(frame_reader_, boxed(wire::Reader<facescan_wire_RgbdFrame>::create(*frame_topic_, &frame_qos)));
     ASSIGN_OR_RETURN(command_reader_, boxed(wire::Reader<facescan_wire_ScanCommand>::create(*command_topic_)));
     ASSIGN_OR_RETURN(status_writer_, boxed(wire::Writer<facescan_wire_ScanStatus>::create(*status_topic_)));
     ASSIGN_OR_RETURN(snapshot_writer_, boxed(wire::Writer<facescan_wire_MeshSnapshot>::create(*snapshot_topic_)));
     ASSIGN_OR_RETURN(reply_writer_, boxed(wire::Writer<facescan_wire_ScanReply>::create(*reply_topic_)));
+    Cluster::Options cluster;
+    cluster.server_id = params_.server_id;
+    cluster.max_sessions = params_.max_sessions;
+    cluster.join_settle_s = params_.join_settle_s;
+    cluster.domain = params_.domain;
+    ASSIGN_OR_RETURN(cluster_, Cluster::create(p, cluster));
+    ASSIGN_OR_RETURN(replicator_, Replicator::create(p, params_, *cluster_, [this] { return ownedSessions(); }));
 
     const dds_entity_t ws = dds_create_waitset(p.handle());
     if (ws < 0) return wire::ddsStatus(ws, "create waitset");
@@ -63,25 +66,41 @@ Status Server::start() {
     const dds_entity_t wake = dds_create_guardcondition(p.handle());
     if (wake < 0) return wire::ddsStatus(wake, "create guard condition");
     wake_ = wire::Entity(wake);
-    // Frames wake the intake only while they are unread: samples of a recording whose queue is full are read
-    // once (marked) and left in the reader; the guard condition wakes the intake when that queue has room.
-    const dds_entity_t conds[] = {
-        dds_create_readcondition(camera_reader_->handle(), DDS_ANY_STATE),
-        dds_create_readcondition(command_reader_->handle(), DDS_ANY_STATE),
-        dds_create_readcondition(frame_reader_->handle(),
-                                 DDS_NOT_READ_SAMPLE_STATE | DDS_ANY_VIEW_STATE | DDS_ANY_INSTANCE_STATE),
-        wake};
+    // Each owned session's frame reader is attached when the session starts (activate).
+    const dds_entity_t conds[] = {dds_create_readcondition(camera_reader_->handle(), DDS_ANY_STATE),
+                                  dds_create_readcondition(command_reader_->handle(), DDS_ANY_STATE),
+                                  dds_create_readcondition(cluster_->announceReader(), DDS_ANY_STATE),
+                                  dds_create_readcondition(cluster_->ownerReader(), DDS_ANY_STATE), wake};
     for (const dds_entity_t c : conds) {
         if (c < 0) return wire::ddsStatus(c, "create read condition");
         const dds_return_t rc = dds_waitset_attach(ws, c, c);
         if (rc < 0) return wire::ddsStatus(rc, "attach condition");
     }
+    loadResumable();
+    RETURN_IF_ERROR(join());
+    replicator_->start();
     intake_ = std::thread([this] { intakeLoop(); });
     command_ = std::thread([this] { commandLoop(); });
     snapshot_ = std::thread([this] { snapshotLoop(); });
     status_ = std::thread([this] { statusLoop(); });
     return Status::ok();
 }
+
+Status Server::join() {
+    // Discovery first: the domain's servers and claims must be known before this server takes any session, and a
+    // second server with our id must be found before we use it.
+    while (!cluster_->joined()) {
+        RETURN_IF_ERROR(cluster_->poll());
+        replicator_->poll();  // replicas may already come in for sessions we stand by for
+        cluster_->announce(0, standbySessions());
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    RETURN_IF_ERROR(cluster_->poll());
+    cluster_->announce(0, standbySessions(), /*force=*/true);
+    return Status::ok();
+}
+
+Server::Server(const ServerParams& params) : params_(params) {}
 
 Server::~Server() { shutdown(); }
 
@@ -90,11 +109,8 @@ void Server::shutdown() {
     shut_down_ = true;
     // Finish every open session to disk first, while the DDS endpoints still answer.
     std::vector<std::shared_ptr<Session>> open;
-    {
-        std::lock_guard lk(sessions_mutex_);
-        for (auto& [id, s] : sessions_) {
-            if (s->open()) open.push_back(s);
-        }
+    for (const auto& o : ownedSessions()) {
+        if (o->session && o->session->open()) open.push_back(o->session);
     }
     std::vector<std::future<void>> done;
     for (auto& s : open) {
@@ -114,17 +130,23 @@ void Server::shutdown() {
     for (std::thread* t : {&intake_, &command_, &snapshot_, &status_}) {
         if (t->joinable()) t->join();
     }
+    if (replicator_) replicator_->stop();
     if (!status_writer_) return;
-    // The last word on every session: final status and final mesh (durable: late subscribers still get them).
+    // The last word on every session: final status and final mesh (durable: late subscribers still get them),
+    // and the claims say FINISHED (a standby must not take over a session that ended here).
     for (const SessionStats& s : sessions()) publishStatus(s);
-    std::vector<std::shared_ptr<Session>> all;
-    {
-        std::lock_guard lk(sessions_mutex_);
-        for (auto& [id, s] : sessions_) all.push_back(s);
+    for (const auto& o : ownedSessions()) {
+        if (o->session) {
+            if (auto snap = o->session->takeFinalSnapshot()) publishSnapshot(o->id, *snap);
+        }
+        if (o->claim) {
+            const bool finished = o->session && o->session->finished();
+            o->claim->update([&](wire::SessionOwnerData& r) {
+                r.state = finished ? wire::OwnerState::kFinished : wire::OwnerState::kReleased;
+            });
+        }
     }
-    for (auto& s : all) {
-        if (auto snap = s->takeFinalSnapshot()) publishSnapshot(s->id(), *snap);
-    }
+    if (cluster_) cluster_->withdraw();
     (void)status_writer_->waitForAcks(std::chrono::milliseconds(1000));
     (void)snapshot_writer_->waitForAcks(std::chrono::milliseconds(1000));
     (void)reply_writer_->waitForAcks(std::chrono::milliseconds(1000));
@@ -133,7 +155,9 @@ void Server::shutdown() {
 std::vector<SessionStats> Server::sessions() const {
     std::vector<SessionStats> out;
     std::lock_guard lk(sessions_mutex_);
-    for (const auto& [id, s] : sessions_) out.push_back(s->stats());
+    for (const auto& [id, o] : owned_) {
+        if (o->session) out.push_back(o->session->stats());
+    }
     for (const auto& [id, r] : refused_) {
         SessionStats s;
         s.session_id = id;
@@ -147,59 +171,77 @@ std::vector<SessionStats> Server::sessions() const {
 int Server::openSessions() const {
     std::lock_guard lk(sessions_mutex_);
     int n = 0;
-    for (const auto& [id, s] : sessions_) n += s->open() ? 1 : 0;
+    for (const auto& [id, o] : owned_) {
+        n += o->phase != OwnedSession::Phase::kFinished && !(o->session && o->session->finished()) ? 1 : 0;
+    }
     return n;
 }
 
-std::shared_ptr<Session> Server::sessionFor(const std::string& session_id) {
-    std::unique_lock lk(sessions_mutex_);
-    if (auto it = sessions_.find(session_id); it != sessions_.end()) return it->second;
-    if (refused_.count(session_id)) return nullptr;
-    if (!wire::validateSessionId(session_id).isOk()) return nullptr;  // ids become directory names
-    int open = 0;
-    for (const auto& [id, s] : sessions_) open += s->open() ? 1 : 0;
-    if (open >= params_.max_sessions) {
-        const std::string detail = "refused: server '" + params_.server_id + "' already runs " + std::to_string(open) +
-                                   " sessions (--max-sessions " + std::to_string(params_.max_sessions) + ")";
-        refused_[session_id] = {detail};
-        lk.unlock();
-        publishRefused(session_id, detail);
-        return nullptr;
-    }
-    auto session = std::make_shared<Session>(session_id, params_, [this] {
-        if (wake_.valid()) dds_set_guardcondition(wake_.handle(), true);
-    });
-    sessions_[session_id] = session;
-    return session;
+int Server::standbySessions() const { return replicator_ ? replicator_->standbyCount() : 0; }
+
+std::shared_ptr<OwnedSession> Server::owned(const std::string& session_id) const {
+    std::lock_guard lk(sessions_mutex_);
+    const auto it = owned_.find(session_id);
+    return it == owned_.end() ? nullptr : it->second;
+}
+
+std::vector<std::shared_ptr<OwnedSession>> Server::ownedSessions() const {
+    std::lock_guard lk(sessions_mutex_);
+    std::vector<std::shared_ptr<OwnedSession>> out;
+    for (const auto& [id, o] : owned_) out.push_back(o);
+    return out;
 }
 
 void Server::intakeLoop() {
+    bool duplicate_logged = false;
     while (!stopping_) {
-        dds_attach_t triggered[8];
-        (void)dds_waitset_wait(waitset_.handle(), triggered, 8, DDS_MSECS(200));
+        dds_attach_t triggered[16];
+        (void)dds_waitset_wait(waitset_.handle(), triggered, 16, DDS_MSECS(100));
         dds_set_guardcondition(wake_.handle(), false);
         if (stopping_) break;
+        if (const Status s = cluster_->poll(); !s.isOk() && !duplicate_logged) {
+            // After the join only a newer server can clash with our id, and that one refuses to start.
+            std::fprintf(stderr, "facescan-server: %s\n", s.message().c_str());
+            duplicate_logged = true;
+        }
         takeCameraInfos();
+        clusterTick();
         takeCommands();
         takeFrames();
     }
 }
 
 void Server::takeCameraInfos() {
-    auto n = camera_reader_->take([&](const facescan_wire_CameraInfo& msg, const dds_sample_info_t& info) {
-        if (!info.valid_data) return;
-        auto camera = wire::fromMessage(msg);
-        if (!camera.isOk()) {
-            std::fprintf(stderr, "facescan-server: CameraInfo of '%s' rejected: %s\n",
-                         wire::fromDds(msg.session_id).c_str(), camera.status().toString().c_str());
-            return;
-        }
-        std::shared_ptr<Session> session = sessionFor(camera->session_id);
-        if (!session) return;
-        if (const Status s = session->setCamera(*camera); !s.isOk()) {
-            std::fprintf(stderr, "facescan-server: %s\n", s.toString().c_str());
-        }
-    });
+    constexpr size_t kMaxCandidates = 4096;  // a flood of bogus ids costs bounded memory
+    auto n = camera_reader_->take(
+        [&](const facescan_wire_CameraInfo& msg, const dds_sample_info_t& info) {
+            const std::string id = wire::fromDds(msg.session_id);
+            if (!info.valid_data) {
+                if (auto it = candidates_.find(id); it != candidates_.end() && info.instance_state != DDS_IST_ALIVE) {
+                    it->second.writer_alive = false;  // the agent is gone
+                }
+                return;
+            }
+            auto camera = wire::fromMessage(msg);
+            if (!camera.isOk()) {
+                std::fprintf(stderr, "facescan-server: CameraInfo of '%s' rejected: %s\n", id.c_str(),
+                             camera.status().toString().c_str());
+                return;
+            }
+            if (candidates_.count(id) == 0 && candidates_.size() >= kMaxCandidates) {
+                auto oldest = std::min_element(candidates_.begin(), candidates_.end(), [](const auto& a, const auto& b) {
+                    return a.second.first_seen_ns < b.second.first_seen_ns;
+                });
+                candidates_.erase(oldest);
+            }
+            Candidate& c = candidates_[id];
+            if (c.first_seen_ns == 0) c.first_seen_ns = steadyNowNs();
+            c.camera = std::move(*camera);
+            c.writer = info.publication_handle;
+            c.order_key = info.source_timestamp;
+            c.writer_alive = true;
+        },
+        256);
     if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
 }
 
@@ -207,70 +249,76 @@ void Server::takeCommands() {
     std::vector<Command> got;
     auto n = command_reader_->take([&](const facescan_wire_ScanCommand& msg, const dds_sample_info_t& info) {
         if (!info.valid_data) return;
-        got.push_back({wire::fromDds(msg.session_id), wire::fromDds(msg.request_id), static_cast<uint32_t>(msg.kind)});
+        got.push_back({wire::fromDds(msg.session_id), wire::fromDds(msg.request_id), static_cast<uint32_t>(msg.kind),
+                       steadyNowNs()});
     });
     if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
-    if (got.empty()) return;
+    // Deferred ones first (they came earlier), then the new ones.
+    std::deque<Command> todo;
+    todo.swap(deferred_);
+    for (Command& c : got) todo.push_back(std::move(c));
+    constexpr int64_t kDeferNs = 3'000'000'000;  // a claim settles well within this
+    const std::string responder = cluster_->responder();
+    std::vector<Command> run;
+    for (Command& c : todo) {
+        const std::shared_ptr<OwnedSession> o = owned(c.session_id);
+        if (o && o->session) {
+            run.push_back(std::move(c));  // ours: only the owner answers
+        } else if (o && steadyNowNs() - c.received_ns < kDeferNs) {
+            deferred_.push_back(std::move(c));  // being claimed here: answer once it settled
+        } else if (responder == params_.server_id) {
+            const auto view = cluster_->owner(c.session_id);
+            if (!view || !view->alive) run.push_back(std::move(c));  // nobody owns it: the responder says so
+        }
+    }
+    if (run.empty()) return;
     {
         std::lock_guard lk(command_mutex_);
-        for (Command& c : got) commands_.push_back(std::move(c));
+        for (Command& c : run) commands_.push_back(std::move(c));
     }
     command_cv_.notify_one();
 }
 
 void Server::takeFrames() {
-    const dds_entity_t reader = frame_reader_->handle();
+    for (const auto& o : ownedSessions()) {
+        if (o->frames && o->session) takeFramesOf(*o);
+    }
+}
+
+void Server::takeFramesOf(OwnedSession& o) {
+    const dds_entity_t reader = o.frames->handle();
+    Session& session = *o.session;
     void* samples[kBatch];
     dds_sample_info_t infos[kBatch];
-    // 1. Unread samples tell which instances (sessions) have data; reading marks them, so a full recording's
-    //    frames no longer wake the intake until its queue has room.
     for (;;) {
+        const int room = std::min(kBatch, session.roomForFrames());
+        if (room <= 0) {
+            // Full recording queue: mark what waits as read so that it stops waking the intake; the guard
+            // condition wakes us when the worker made room, and the samples are taken then.
+            samples[0] = nullptr;
+            const dds_return_t n = dds_read_mask(reader, samples, infos, kBatch, kBatch,
+                                                 DDS_NOT_READ_SAMPLE_STATE | DDS_ANY_VIEW_STATE | DDS_ANY_INSTANCE_STATE);
+            if (n > 0) dds_return_loan(reader, samples, n);
+            return;
+        }
         samples[0] = nullptr;
-        const dds_return_t n = dds_read_mask(reader, samples, infos, kBatch, kBatch,
-                                             DDS_NOT_READ_SAMPLE_STATE | DDS_ANY_VIEW_STATE | DDS_ANY_INSTANCE_STATE);
-        if (n <= 0) break;
+        const dds_return_t n =
+            dds_take(reader, samples, infos, static_cast<size_t>(room), static_cast<uint32_t>(room));
+        if (n <= 0) return;
         for (int i = 0; i < n; ++i) {
-            const auto* msg = static_cast<const facescan_wire_RgbdFrame*>(samples[i]);
-            if (!frame_instances_.count(infos[i].instance_handle)) {
-                const std::string id = wire::fromDds(msg->session_id);  // keys are valid in invalid samples too
-                frame_instances_[infos[i].instance_handle] = id;
-                (void)sessionFor(id);
+            if (!infos[i].valid_data) {
+                if (infos[i].instance_state != DDS_IST_ALIVE) session.noteWriterGone();
+                continue;
+            }
+            const FrameFate fate = session.pushFrame(*static_cast<const facescan_wire_RgbdFrame*>(samples[i]));
+            if (fate == FrameFate::kAhead) o.ahead = true;
+            if (fate == FrameFate::kAccepted && o.phase == OwnedSession::Phase::kReady) {
+                o.phase = OwnedSession::Phase::kActive;
+                o.claim->update([](wire::SessionOwnerData& r) { r.state = wire::OwnerState::kActive; });
             }
         }
         dds_return_loan(reader, samples, n);
-        if (n < kBatch) break;
-    }
-    // 2. Take per instance, as much as each session has room for.
-    for (auto it = frame_instances_.begin(); it != frame_instances_.end();) {
-        std::shared_ptr<Session> session;
-        {
-            std::lock_guard lk(sessions_mutex_);
-            if (auto s = sessions_.find(it->second); s != sessions_.end()) session = s->second;
-        }
-        bool gone = false;
-        for (;;) {
-            const int room = session ? std::min(kBatch, session->roomForFrames()) : kBatch;
-            if (room <= 0) break;
-            samples[0] = nullptr;
-            const dds_return_t n = dds_take_instance(reader, samples, infos, static_cast<size_t>(room),
-                                                     static_cast<uint32_t>(room), it->first);
-            if (n < 0) {  // the instance no longer exists in the reader (all taken, writer gone)
-                gone = true;
-                break;
-            }
-            for (int i = 0; i < n; ++i) {
-                const auto& msg = *static_cast<const facescan_wire_RgbdFrame*>(samples[i]);
-                if (!session) continue;  // refused or invalid id: taken and discarded
-                if (!infos[i].valid_data) {
-                    if (infos[i].instance_state != DDS_IST_ALIVE) session->noteWriterGone();
-                    continue;
-                }
-                session->pushFrame(msg);
-            }
-            if (n > 0) dds_return_loan(reader, samples, n);
-            if (n < room) break;
-        }
-        it = gone ? frame_instances_.erase(it) : std::next(it);
+        if (n < room) return;
     }
 }
 
@@ -296,14 +344,22 @@ void Server::runCommand(const Command& c) {
     std::shared_ptr<Session> session;
     {
         std::lock_guard lk(sessions_mutex_);
-        if (auto it = sessions_.find(c.session_id); it != sessions_.end()) session = it->second;
+        if (auto it = owned_.find(c.session_id); it != owned_.end()) session = it->second->session;
         if (!session) {
             if (auto r = refused_.find(c.session_id); r != refused_.end()) {
                 return reply(c, resourceExhausted("session '" + c.session_id + "' was " + r->second.detail));
             }
         }
     }
-    if (!session) return reply(c, notFound("unknown session '" + c.session_id + "'"));
+    if (!session) {
+        // Only the responder gets here for sessions it does not own: say why nobody answers for it.
+        const auto view = cluster_->owner(c.session_id);
+        if (view && !view->alive && !view->disposed && view->data.state != wire::OwnerState::kFinished) {
+            return reply(c, unavailable("session '" + c.session_id + "' has no live owner: server '" +
+                                        view->data.owner_id + "' is gone and no standby has taken it over yet"));
+        }
+        return reply(c, notFound("unknown session '" + c.session_id + "'"));
+    }
     switch (static_cast<facescan_wire_CommandKind>(c.kind)) {
         case facescan_wire_CMD_RESET: session->requestReset([this, c](const Status& s) { reply(c, s); }); return;
         case facescan_wire_CMD_FINISH:
@@ -372,6 +428,10 @@ void Server::publishStatus(const SessionStats& s) {
     d.latency_p95_ms = s.latency_p95_ms;
     d.snapshot_seq = s.snapshot_seq;
     d.updated_ns = realtimeNowNs();
+    d.standby_id = s.standby_id;
+    d.owner_epoch = s.epoch;
+    d.failovers = s.failovers;
+    d.last_takeover_ms = s.last_takeover_ms;
     (void)status_writer_->write(wire::toMessage(d));
 }
 
@@ -412,9 +472,8 @@ void Server::snapshotLoop() {
     auto next = std::chrono::steady_clock::now();
     while (waitForTick(next, period)) {
         std::vector<std::shared_ptr<Session>> all;
-        {
-            std::lock_guard lk(sessions_mutex_);
-            for (auto& [id, s] : sessions_) all.push_back(s);
+        for (const auto& o : ownedSessions()) {
+            if (o->session) all.push_back(o->session);
         }
         for (auto& s : all) {
             if (auto fin = s->takeFinalSnapshot()) {
@@ -432,16 +491,22 @@ void Server::statusLoop() {
     std::map<std::string, bool> final_sent;  // finished sessions: their FINISHED status went out once
     auto next = std::chrono::steady_clock::now();
     while (waitForTick(next, period)) {
-        std::vector<std::shared_ptr<Session>> all;
+        std::vector<std::shared_ptr<OwnedSession>> all = ownedSessions();
         std::map<std::string, Refused> refused;
         {
             std::lock_guard lk(sessions_mutex_);
-            for (auto& [id, s] : sessions_) all.push_back(s);
             refused = refused_;
         }
         const int64_t now = steadyNowNs();
-        for (auto& s : all) {
+        for (auto& o : all) {
+            if (!o->session) continue;
+            Session* s = o->session.get();
             const SessionStats st = s->stats();
+            // The claim carries what the agent and the clients need from it (failovers, takeover time).
+            o->claim->update([&](wire::SessionOwnerData& r) {
+                r.failovers = st.failovers;
+                r.last_takeover_ms = st.last_takeover_ms;
+            });
             if (st.state == SessionState::kFinished) {
                 if (final_sent[st.session_id]) continue;
                 final_sent[st.session_id] = true;

@@ -1,5 +1,7 @@
 #include "service/server_params.hpp"
 
+#include "wire/cluster_codec.hpp"
+
 #include <unistd.h>
 
 #include <charconv>
@@ -121,6 +123,12 @@ const std::map<std::string, Setter>& setters() {
         FLOAT("status_hz", p.status_hz),
         INT("max_sessions", p.max_sessions),
         FLOAT("idle_timeout_s", p.idle_timeout_s),
+        FLOAT("replica_interval_s", p.replica_interval_s),
+        INT("replica_full_every", p.replica_full_every),
+        INT("replica_zstd_level", p.replica_zstd_level),
+        FLOAT("join_settle_s", p.join_settle_s),
+        FLOAT("claim_settle_s", p.claim_settle_s),
+        FLOAT("first_frame_timeout_s", p.first_frame_timeout_s),
         INT("queue_frames", p.queue_frames),
         {"data_dir",
          [](ServerParams& p, const std::string&, const std::string& value) -> Status {
@@ -173,7 +181,14 @@ Status applyPreset(ServerParams& p, const std::string& preset) {
 std::string defaultServerId() {
     char host[256] = {};
     if (gethostname(host, sizeof(host) - 1) != 0) host[0] = '\0';
-    return std::string(host[0] ? host : "server") + "-" + std::to_string(getpid());
+    std::string id = std::string(host[0] ? host : "server");
+    for (char& c : id) {
+        const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '-' ||
+                        c == '_' || c == '.';
+        if (!ok) c = '-';
+    }
+    if (id.size() > 48) id.resize(48);
+    return id + "-" + std::to_string(getpid());
 }
 
 }  // namespace
@@ -194,7 +209,17 @@ Status ServerParams::validate() const {
     }
     if (queue_frames < 1 || queue_frames > 64) return invalidArgument("queue_frames must be in [1, 64]");
     if (data_dir.empty()) return invalidArgument("--data-dir must not be empty");
-    if (server_id.empty() || server_id.size() > 128) return invalidArgument("--server-id must be 1-128 characters");
+    if (Status s = wire::validateServerId(server_id); !s.isOk()) return invalidArgument("--server-id: " + s.message());
+    if (!(replica_interval_s >= 0.05f && replica_interval_s <= 2.0f)) {
+        return invalidArgument("--replica-interval-s must be in [0.05, 2] seconds (a standby must be at most 2 s behind)");
+    }
+    if (replica_full_every < 1 || replica_full_every > 10000) return invalidArgument("replica_full_every: 1..10000");
+    if (replica_zstd_level < 1 || replica_zstd_level > 19) return invalidArgument("replica_zstd_level: 1..19");
+    if (!(join_settle_s >= 0 && join_settle_s <= 60)) return invalidArgument("join_settle_s must be in [0, 60] seconds");
+    if (!(claim_settle_s >= 0 && claim_settle_s <= 10)) return invalidArgument("claim_settle_s must be in [0, 10] s");
+    if (!(first_frame_timeout_s >= 1 && first_frame_timeout_s <= 3600)) {
+        return invalidArgument("first_frame_timeout_s must be in [1, 3600] seconds");
+    }
     return domain.validate();
 }
 
@@ -241,6 +266,7 @@ StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args) {
                                                               {"--profile", "profile"},
                                                               {"--domain", "domain"},
                                                               {"--server-id", "server_id"},
+                                                              {"--replica-interval-s", "replica_interval_s"},
                                                               {"--preset", "preset"},
                                                               {"--config", ""},
                                                               {"--set", ""}};
@@ -292,18 +318,24 @@ std::string serverUsage() {
     for (const std::string& k : settingKeys()) keys += "  " + k + "\n";
     return "usage: facescan-server [options]\n"
            "Runs the reconstruction service: every scan session seen on the DDS domain gets its own pipeline\n"
-           "(detection, segmentation, recon core) and worker; finished sessions are written to --data-dir.\n\n"
+           "(detection, segmentation, recon core) and worker; finished sessions are written to --data-dir.\n"
+           "Several servers on one domain share the work: each session is owned by exactly one of them (the least\n"
+           "loaded), replicated to a standby server and to --data-dir every --replica-interval-s, and taken over by\n"
+           "the standby (or resumed by this server restarted on the same --data-dir) when its owner dies.\n\n"
            "options:\n"
            "  --preset face|fast      recon parameters preset (default face: Meyer's values)\n"
            "  --config FILE           'key = value' lines (keys below); flags override the file\n"
            "  --set KEY=VALUE         one config key from the command line\n"
            "  --snapshot-hz HZ        MeshSnapshot rate per session (default 1; 0 = none while scanning)\n"
-           "  --max-sessions N        open sessions at once (default 4); more are refused in their status\n"
+           "  --max-sessions N        open sessions at once (default 4); when every server is full, new ones are\n"
+           "                          refused in their status until one frees up\n"
            "  --idle-timeout-s S      finish a session after S seconds without frames (default 60)\n"
-           "  --data-dir DIR          finished sessions go to DIR/SESSION/ (default ./facescan-data)\n"
+           "  --data-dir DIR          sessions go to DIR/SESSION/ (default ./facescan-data): their replica while\n"
+           "                          scanning, the results when finished; DIR/SESSION/owner.json names the owner\n"
            "  --profile P             DDS profile: loopback | lan | FILE.xml (default lan)\n"
            "  --domain N              DDS domain id (default 0)\n"
-           "  --server-id ID          name in replies and status (default HOST-PID)\n"
+           "  --server-id ID          this server's name on the domain, unique (default HOST-PID)\n"
+           "  --replica-interval-s S  seconds between replicas of a scan to its standby and data dir (default 1)\n"
            "  --help                  this text\n\n"
            "config keys:\n" +
            keys;

@@ -107,13 +107,19 @@ Session::~Session() {
     }
     cv_.notify_all();
     if (worker_.joinable()) worker_.join();
+    for (Control& c : control_) {  // never leave a waiting caller without an answer
+        if (c.kind == Control::kRun && c.reset_done) c.reset_done(unavailable("session '" + id_ + "' is closed"));
+    }
 }
 
-Status Session::setCamera(const wire::CameraInfoData& camera) {
+Status Session::setCamera(const wire::CameraInfoData& camera) { return start(camera, nullptr, 0); }
+
+Status Session::start(const wire::CameraInfoData& camera, const wire::ReplicaData* replica, int64_t takeover_from_ns) {
     std::unique_lock lk(mutex_);
     last_activity_ns_ = steadyNowNs();
     if (finishing_ || stats_.state == SessionState::kFinished) return Status::ok();
     if (camera_) {
+        if (replica) return invalidArgument("session '" + id_ + "' is already running: no replica to restore");
         const recon::Intrinsics& a = camera_->intrinsics;
         const recon::Intrinsics& b = camera.intrinsics;
         if (a.width_px != b.width_px || a.height_px != b.height_px || a.fx_px != b.fx_px || a.fy_px != b.fy_px ||
@@ -126,6 +132,7 @@ Status Session::setCamera(const wire::CameraInfoData& camera) {
     // Built outside the lock: loading the cascade and reserving the volume take a moment.
     auto recon = std::make_shared<recon::Reconstructor>(camera.intrinsics, params_.recon);
     if (!recon->initStatus().isOk()) return recon->initStatus();
+    if (replica) RETURN_IF_ERROR(recon->restoreState(replica->state));
     auto pipeline = recon::FacePipeline::create(params_.face, camera.intrinsics,
                                                 recon::ColourCamera::registeredTo(camera.intrinsics));
     if (!pipeline.isOk()) return pipeline.status();
@@ -138,6 +145,7 @@ Status Session::setCamera(const wire::CameraInfoData& camera) {
     stats_.every_frame = camera.every_frame;
     stats_.source = camera.source;
     stats_.detail = "waiting for frames";
+    if (replica) applyReplicaLocked(*replica, takeover_from_ns);
     // A live session keeps only the newest of what arrived before its CameraInfo.
     if (!camera.every_frame) {
         while (queue_.size() > 1 && !queue_.front().end_of_stream) {
@@ -160,15 +168,18 @@ int Session::roomForFrames() const {
     return std::max(0, params_.queue_frames - static_cast<int>(queue_.size()));
 }
 
-void Session::pushFrame(const facescan_wire_RgbdFrame& msg) {
+FrameFate Session::pushFrame(const facescan_wire_RgbdFrame& msg) {
     last_activity_ns_ = steadyNowNs();
     std::unique_lock lk(mutex_);
-    if (finishing_ || stats_.state == SessionState::kFinished) return;
+    if (finishing_ || stats_.state == SessionState::kFinished) return FrameFate::kIgnored;
+    const bool recording = camera_ && camera_->every_frame;
+    if (msg.seq < next_seq_) return recording ? FrameFate::kDuplicate : FrameFate::kIgnored;
+    // A recording is integrated in order: a frame after a gap (sent while a new owner took over) waits for the
+    // agent to resend from next_seq_.
+    if (recording && msg.seq > next_seq_) return FrameFate::kAhead;
+    if (msg.seq > next_seq_) stats_.frames_dropped += msg.seq - next_seq_;  // live: lost on the way
+    next_seq_ = msg.seq + 1;
     if (!msg.end_of_stream) ++stats_.frames_received;
-    if (last_seq_ >= 0 && static_cast<int64_t>(msg.seq) > last_seq_ + 1) {
-        stats_.frames_dropped += static_cast<uint32_t>(msg.seq - last_seq_ - 1);  // lost on the way
-    }
-    last_seq_ = std::max<int64_t>(last_seq_, msg.seq);
     if (camera_ && !camera_->every_frame && !msg.end_of_stream) {
         // Live: anything still waiting is older than this frame and will never be worth processing.
         while (!queue_.empty() && !queue_.back().end_of_stream) {
@@ -188,12 +199,12 @@ void Session::pushFrame(const facescan_wire_RgbdFrame& msg) {
     queue_.push_back(std::move(slot));
     lk.unlock();
     cv_.notify_all();
+    return FrameFate::kAccepted;
 }
 
-void Session::noteMalformed() {
+uint32_t Session::nextSeq() const {
     std::lock_guard lk(mutex_);
-    ++stats_.frames_received;
-    ++stats_.frames_dropped;
+    return next_seq_;
 }
 
 void Session::noteWriterGone() {
@@ -220,7 +231,7 @@ void Session::requestReset(std::function<void(const Status&)> done) {
         done(Status::ok());  // no model yet: nothing to clear
         return;
     }
-    control_.push_back({Control::kReset, "", std::move(done), nullptr});
+    control_.push_back({Control::kReset, "", std::move(done), nullptr, nullptr});
     lk.unlock();
     cv_.notify_all();
 }
@@ -235,7 +246,7 @@ void Session::requestFinish(const std::string& why, FinishCallback done) {
     }
     if (finishing_ && !done) return;  // already on its way (e.g. the idle check repeating itself)
     if (worker_.joinable() || finishing_) {
-        control_.push_back({Control::kFinish, why, nullptr, std::move(done)});
+        control_.push_back({Control::kFinish, why, nullptr, std::move(done), nullptr});
         lk.unlock();
         cv_.notify_all();
         return;
@@ -263,6 +274,12 @@ void Session::workerLoop() {
                 finalize(c.why, c.finish_done);
                 return;
             }
+            if (c.kind == Control::kRun) {
+                lk.unlock();
+                c.run();
+                c.reset_done(Status::ok());
+                continue;
+            }
             lk.unlock();
             recon_->reset();
             pipeline_->reset();
@@ -289,9 +306,14 @@ void Session::workerLoop() {
             finalize("end of stream", nullptr);
             return;
         }
+        const uint64_t digest =
+            wire::frameDigest(stats_.frames_digest, working_.depth.data(), working_.depth.size(),
+                              working_.colour.data(), working_.colour.size());  // the worker alone writes it
         processFrame(working_);
         copySnapshotIfAsked();
         lk.lock();
+        stats_.frames_digest = digest;
+        processed_next_seq_ = working_.seq + 1;
         spare_.push_back(std::move(working_));
         working_ = PendingFrame();
     }
@@ -338,6 +360,7 @@ void Session::processFrame(PendingFrame& pending) {
         stats_.detail = head.depth_only ? "face found (depth only)" : "face found";
         if (!recon_->trajectory().empty()) trajectory_.push_back(recon_->trajectory().back());
         last_pose_ = recon_->lastPose();
+        if (takeover_from_ns_ != 0) noteFirstFrameAfterTakeover(now);
         recordLatency(static_cast<float>(pose_known_ns - pending.capture_time_ns) * 1e-6f);
         return;
     }
@@ -360,7 +383,9 @@ SessionStats Session::stats() const {
     SessionStats s = stats_;
     const int64_t now = steadyNowNs();
     if (stats_.state == SessionState::kFinished) {
-        s.fps = s.duration_s > 0 ? static_cast<float>(static_cast<double>(processed_count_) / s.duration_s) : 0;
+        s.fps = s.duration_s > 0
+                    ? static_cast<float>(static_cast<double>(processed_before_ + processed_count_) / s.duration_s)
+                    : 0;
     } else if (!processed_ns_.empty()) {
         int n = 0;
         for (const int64_t t : processed_ns_) n += t >= now - kFpsWindowNs ? 1 : 0;
@@ -379,9 +404,11 @@ SessionStats Session::stats() const {
     }
     s.latency_p50_ms = percentile(latency_ms_, 0.5f);
     s.latency_p95_ms = percentile(latency_ms_, 0.95f);
-    if (stats_.state != SessionState::kFinished && processed_count_ > 0) {
-        s.duration_s = static_cast<double>(last_processed_ns_ - first_processed_ns_) * 1e-9;
+    if (stats_.state != SessionState::kFinished) {
+        s.duration_s = duration_before_s_;
+        if (processed_count_ > 0) s.duration_s += static_cast<double>(last_processed_ns_ - first_processed_ns_) * 1e-9;
     }
+    s.next_seq = next_seq_;
     return s;
 }
 

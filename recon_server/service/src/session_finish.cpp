@@ -1,6 +1,7 @@
 // Finishing a session: the final full-resolution mesh, its Draco bytes, a last preview, and the files in the
 // data dir (session_store.hpp). Runs on the session's worker (or on the caller's thread when the session never
 // had a worker), never on the intake thread.
+#include <cstdio>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
@@ -55,7 +56,9 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     SessionStats s = stats();
     {
         std::lock_guard lk(mutex_);  // the summary's fps is over the whole session, not the last 2 s
-        s.fps = s.duration_s > 0 ? static_cast<float>(static_cast<double>(processed_count_) / s.duration_s) : 0;
+        s.fps = s.duration_s > 0
+                    ? static_cast<float>(static_cast<double>(processed_before_ + processed_count_) / s.duration_s)
+                    : 0;
     }
     s.state = SessionState::kFinished;
     s.detail = "finished: " + why;
@@ -64,7 +67,15 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     files.draco = result.draco.get();
     files.trajectory_tum = trajectoryTum();
     files.summary_json = summaryJson(s, result);
-    if (status.isOk()) status = writeSessionFiles(params_.data_dir / id_, files);
+    if (status.isOk()) {
+        // The folder records its owner: a server that lost the session to another one (two servers that could
+        // not see each other) writes beside the other's files, never over them.
+        std::string note;
+        auto dir = claimSessionDir(params_.data_dir, id_, s.owner_id, s.epoch, &note);
+        if (!note.empty()) std::fprintf(stderr, "facescan-server: %s\n", note.c_str());
+        status = dir.isOk() ? writeSessionFiles(*dir, files) : dir.status();
+        if (status.isOk()) removeReplicaLog(*dir);
+    }
     if (!status.isOk()) s.detail += " (not written: " + status.message() + ")";
 
     std::deque<Control> pending;
@@ -85,6 +96,7 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     if (done) done(status, result);
     // Requests that arrived while finishing: a second finish is answered like the first; a reset cannot apply.
     for (Control& c : pending) {
+        if (c.kind == Control::kRun && c.reset_done) c.reset_done(unavailable("session '" + id_ + "' is finished"));
         if (c.kind == Control::kFinish && c.finish_done) c.finish_done(status, result);
         if (c.kind == Control::kReset && c.reset_done) {
             c.reset_done(invalidArgument("session '" + id_ + "' is finished: nothing to reset"));
@@ -120,6 +132,12 @@ std::string Session::summaryJson(const SessionStats& s, const MeshResult& m) con
     std::string j = "{\n";
     j += "  \"session_id\": \"" + jsonEscape(s.session_id) + "\",\n";
     j += "  \"server_id\": \"" + jsonEscape(params_.server_id) + "\",\n";
+    char digest[24];
+    std::snprintf(digest, sizeof(digest), "%016llx", static_cast<unsigned long long>(s.frames_digest));
+    j += "  \"owner\": {\"server_id\": \"" + jsonEscape(s.owner_id) + "\", \"epoch\": " + std::to_string(s.epoch) +
+         ", \"standby\": \"" + jsonEscape(s.standby_id) + "\", \"failovers\": " + std::to_string(s.failovers) +
+         ", \"last_takeover_ms\": " + num(s.last_takeover_ms) + "},\n";
+    j += "  \"frames_digest\": \"" + std::string(digest) + "\",\n";
     j += "  \"state\": \"" + std::string(sessionStateName(s.state)) + "\",\n";
     j += "  \"detail\": \"" + jsonEscape(s.detail) + "\",\n";
     j += "  \"source\": \"" + jsonEscape(s.source) + "\",\n";

@@ -6,6 +6,8 @@
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <cerrno>
 #include <cstring>
+#include <fstream>
+#include <regex>
 #include <sstream>
 
 namespace facescan::service {
@@ -99,6 +101,54 @@ std::string jsonEscape(const std::string& s) {
         }
     }
     return out;
+}
+
+std::optional<std::pair<std::string, uint32_t>> readSessionOwner(const std::filesystem::path& dir) {
+    std::ifstream in(dir / "owner.json");
+    if (!in) return std::nullopt;
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    static const std::regex kOwner(R"re("server_id"\s*:\s*"([A-Za-z0-9._-]+)"[\s\S]*?"epoch"\s*:\s*([0-9]{1,9}))re");
+    std::smatch m;
+    if (!std::regex_search(text, m, kOwner)) return std::nullopt;
+    return std::make_pair(m[1].str(), static_cast<uint32_t>(std::stoul(m[2].str())));
+}
+
+StatusOr<std::filesystem::path> claimSessionDir(const std::filesystem::path& data_dir, const std::string& session_id,
+                                                const std::string& server_id, uint32_t epoch, std::string* note) {
+    std::filesystem::path dir = data_dir / session_id;
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) return internalError("cannot create " + dir.string() + ": " + ec.message());
+    const auto current = readSessionOwner(dir);
+    std::string previous;
+    if (current && current->first != server_id) {
+        if (current->second >= epoch) {
+            // Another server owns this folder at our epoch or later: write beside it, never over it.
+            dir /= server_id + ".e" + std::to_string(epoch);
+            std::filesystem::create_directories(dir, ec);
+            if (ec) return internalError("cannot create " + dir.string() + ": " + ec.message());
+            if (note) {
+                *note = "session " + session_id + ": " + (data_dir / session_id).string() + " belongs to server '" +
+                        current->first + "' (epoch " + std::to_string(current->second) + "); this server's files (epoch " +
+                        std::to_string(epoch) + ") go to " + dir.string();
+            }
+        } else {
+            previous = ", \"previous\": {\"server_id\": \"" + current->first +
+                       "\", \"epoch\": " + std::to_string(current->second) + "}";
+        }
+    } else if (current && current->second >= epoch) {
+        return dir;  // ours already
+    }
+    const std::string owner = "{\"server_id\": \"" + jsonEscape(server_id) + "\", \"epoch\": " +
+                              std::to_string(epoch) + previous + "}\n";
+    RETURN_IF_ERROR(writeFileAtomic(dir / "owner.json", owner));
+    return dir;
+}
+
+void removeReplicaLog(const std::filesystem::path& dir) {
+    std::error_code ec;
+    std::filesystem::remove(dir / "replica.log", ec);
+    std::filesystem::remove(dir / "replica.log.tmp", ec);
 }
 
 }  // namespace facescan::service

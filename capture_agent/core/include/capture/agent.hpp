@@ -32,6 +32,10 @@ struct AgentOptions {
     wire::DepthCodecParams depth;
     float wait_for_server_s = 0;  // seconds to wait for a server before giving up; 0 = wait forever
     int queue_frames = 4;         // frames between the camera thread and the publisher
+    // Recording frames kept until the owner confirms them (replicated to its standby or on its disk), to resend
+    // after a takeover. When full, the agent waits for the owner (nothing is lost).
+    int keep_frames = 300;
+    float finish_timeout_s = 120;  // seconds to wait, after the last frame, for the server to finish the scan
 
     Status validate() const;
 };
@@ -44,7 +48,16 @@ struct AgentStats {
     double fps = 0;          // published frames per second over the last interval
     double bytes_per_s = 0;  // compressed bytes per second over the last interval
     double ratio = 0;        // raw bytes / compressed bytes so far
-    int servers = 0;         // matched frame readers (servers listening)
+    int servers = 0;         // servers alive on the domain
+    // The session's owner (issue 13).
+    std::string owner;       // empty: none yet
+    std::string standby;
+    uint32_t epoch = 0;
+    uint32_t takeovers = 0;  // owner changes seen while streaming
+    uint32_t replayed = 0;   // frames sent again to a new owner
+    size_t kept = 0;         // recording frames kept until the owner confirms them
+    std::string waiting;     // why nothing is sent right now (empty: streaming)
+    uint64_t digest = 0;     // of every frame sent (wire::frameDigest): the server's summary has the same
 };
 
 // A fresh session id: host-YYYYmmdd-HHMMSS-xxxx (unique per scan, valid as a DDS key and a file name).

@@ -1,35 +1,66 @@
-// facescan-server's engine: DDS endpoints on one participant and the threads of issue 8.
-//   intake    one waitset on CameraInfo, RgbdFrame and ScanCommand; it only routes samples (copies a frame's
-//             bytes into its session and returns the loan). Frames are taken per instance (= per session):
-//             a recording session whose bounded queue is full is simply not taken from, so its samples stay in
-//             the reader (keep-all, 16 per instance), the reader stops acknowledging and DDS reliability blocks
-//             the agent's writer. Live sessions and other recordings keep flowing meanwhile.
+// facescan-server's engine: DDS endpoints on one participant and the threads of issue 8, in a cluster (issue 13).
+//   intake    one waitset on CameraInfo, ScanCommand, the cluster's topics and the frame reader of every owned
+//             session; it routes samples and makes the cluster's decisions (server_cluster.cpp): which new
+//             session to claim, when a claim has settled, when to give one up, when to take over from a dead
+//             owner or resume from the data dir. A session's frames are read in its own DDS partition, so only
+//             its owner receives them; a recording whose bounded queue is full is simply not taken from, its
+//             samples stay in the reader and DDS reliability blocks the agent's writer.
 //   workers   one per session (session.hpp): decode -> detection/segmentation -> recon core.
-//   commands  replies to ScanCommand (mesh extraction and encoding happen here or on the session's worker).
+//   commands  replies to ScanCommand, for the sessions this server owns (and, on the one "responder" server,
+//             for sessions nobody owns).
 //   snapshots coarse meshes at --snapshot-hz, off the frame path, at a lower OS priority.
-//   status    ScanStatus per session at status_hz; finishes idle sessions.
+//   status    ScanStatus per owned session at status_hz, the server's announcement; finishes idle sessions.
+//   replicas  replication.hpp: every owned session's state to its standby and its data dir; replicas received
+//             as a standby.
 #pragma once
 
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <deque>
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "service/cluster.hpp"
 #include "service/server_params.hpp"
 #include "service/session.hpp"
 #include "wire/topics.hpp"
 
 namespace facescan::service {
 
+class Replicator;
+
+// A session this server claimed: its claim on SessionOwner and, once the claim settled, the session and the
+// reader of its frames. Shared with the replication thread.
+struct OwnedSession {
+    enum class Phase { kClaiming, kReady, kActive, kFinished };
+    std::string id;
+    uint32_t epoch = 1;
+    std::unique_ptr<Claim> claim;
+    std::atomic<Phase> phase{Phase::kClaiming};
+    int64_t claimed_ns = 0;  // steady clock
+    int64_t ready_ns = 0;
+    std::filesystem::path dir;  // its folder in the data dir (owner.json names this server)
+    std::shared_ptr<Session> session;
+    std::optional<wire::CameraInfoData> camera;      // a new session: from its CameraInfo
+    std::optional<wire::ReplicaData> restore_from;   // a takeover or a restart: the state to continue from
+    int64_t takeover_from_ns = 0;                    // the old owner's last sign of life (steady clock)
+    std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames;
+    dds_entity_t frame_condition = 0;
+    bool ahead = false;                // a recording frame after a gap arrived: the agent must resend
+    int64_t last_replay_request_ns = 0;
+    dds_instance_handle_t camera_writer = 0;  // the CameraInfo writer (flood control)
+};
+
 class Server {
  public:
-    // Validates params, joins the domain and starts the threads.
+    // Validates params, joins the domain (refusing a duplicate --server-id) and starts the threads.
     static StatusOr<std::unique_ptr<Server>> create(const ServerParams& params);
     ~Server();  // shutdown()
     Server(const Server&) = delete;
@@ -40,42 +71,66 @@ class Server {
     void shutdown();
 
     const ServerParams& params() const { return params_; }
-    // Current stats of every session this server knows (open, finished and refused).
+    // Current stats of every session this server owns or owned (open, finished) and of refused ones.
     std::vector<SessionStats> sessions() const;
     int openSessions() const;
+    int standbySessions() const;
 
  private:
     struct Command {
         std::string session_id, request_id;
         uint32_t kind = 0;
+        int64_t received_ns = 0;
+    };
+    struct Candidate {  // a CameraInfo of a session nobody owns yet
+        wire::CameraInfoData camera;
+        dds_instance_handle_t writer = 0;  // its publication handle: flood control per agent writer
+        int64_t order_key = 0;             // source timestamp: the same on every server
+        int64_t first_seen_ns = 0;         // steady clock
+        bool writer_alive = true;
     };
     struct Refused {
         std::string detail;
     };
 
-    explicit Server(const ServerParams& params) : params_(params) {}
+    explicit Server(const ServerParams& params);  // out of line: Replicator is incomplete here
     Status start();
+    Status join();
     void intakeLoop();
     void takeCameraInfos();
     void takeCommands();
     void takeFrames();
+    void takeFramesOf(OwnedSession& owned);
     void commandLoop();
     void snapshotLoop();
     void statusLoop();
-    // The status and snapshot threads' clock: advances `next` by `period` (from now when the last tick ran late)
-    // and sleeps until then; false when the server is stopping.
     bool waitForTick(std::chrono::steady_clock::time_point& next, std::chrono::duration<double> period);
     void runCommand(const Command& c);
-    // The session for a new or known id, or null when refused (max sessions) or invalid.
-    std::shared_ptr<Session> sessionFor(const std::string& session_id);
     void reply(const Command& c, const Status& status, const MeshResult* mesh = nullptr,
                const std::vector<uint8_t>* payload = nullptr);
     void publishStatus(const SessionStats& s);
     void publishSnapshot(const std::string& session_id, const SnapshotResult& snap);
     void publishRefused(const std::string& session_id, const std::string& detail);
 
+    // server_cluster.cpp: the cluster's decisions, on the intake thread.
+    void clusterTick();
+    void placeNewSessions(const std::map<std::string, OwnerView>& owners);
+    void settleClaims(const std::map<std::string, OwnerView>& owners);
+    void takeOverOrphans(const std::map<std::string, OwnerView>& owners);
+    void requestReplays();
+    void releaseStale();
+    Status claimSession(const std::string& session_id, uint32_t epoch, std::shared_ptr<OwnedSession> owned,
+                        const wire::SessionOwnerData& previous);
+    Status activate(OwnedSession& owned);
+    void yield(const std::string& session_id, const std::string& why);
+    void loadResumable();
+    std::shared_ptr<OwnedSession> owned(const std::string& session_id) const;
+    std::vector<std::shared_ptr<OwnedSession>> ownedSessions() const;
+
     ServerParams params_;
     std::unique_ptr<wire::Participant> participant_;
+    std::unique_ptr<Cluster> cluster_;
+    std::unique_ptr<Replicator> replicator_;
     std::unique_ptr<wire::Topic<facescan_wire_CameraInfo>> camera_topic_;
     std::unique_ptr<wire::Topic<facescan_wire_RgbdFrame>> frame_topic_;
     std::unique_ptr<wire::Topic<facescan_wire_ScanStatus>> status_topic_;
@@ -83,7 +138,6 @@ class Server {
     std::unique_ptr<wire::Topic<facescan_wire_ScanCommand>> command_topic_;
     std::unique_ptr<wire::Topic<facescan_wire_ScanReply>> reply_topic_;
     std::unique_ptr<wire::Reader<facescan_wire_CameraInfo>> camera_reader_;
-    std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frame_reader_;
     std::unique_ptr<wire::Reader<facescan_wire_ScanCommand>> command_reader_;
     std::unique_ptr<wire::Writer<facescan_wire_ScanStatus>> status_writer_;
     std::unique_ptr<wire::Writer<facescan_wire_MeshSnapshot>> snapshot_writer_;
@@ -91,10 +145,14 @@ class Server {
     wire::Entity waitset_;
     wire::Entity wake_;  // guard condition: queue space freed, or shutdown
 
-    mutable std::mutex sessions_mutex_;
-    std::map<std::string, std::shared_ptr<Session>> sessions_;
-    std::map<std::string, Refused> refused_;
-    std::map<dds_instance_handle_t, std::string> frame_instances_;  // RgbdFrame instance -> session id
+    mutable std::mutex sessions_mutex_;  // guards owned_ and refused_
+    std::map<std::string, std::shared_ptr<OwnedSession>> owned_;
+    std::map<std::string, Refused> refused_;  // as the responder: sessions no server had room for
+
+    // Intake thread only.
+    std::map<std::string, Candidate> candidates_;
+    std::map<std::string, wire::ReplicaData> resumable_;  // from the data dir, waiting for the join to end
+    std::deque<Command> deferred_;                         // commands for sessions being claimed here
 
     std::mutex command_mutex_;
     std::condition_variable command_cv_;

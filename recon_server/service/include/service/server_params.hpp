@@ -28,7 +28,14 @@ struct ServerParams {
     int queue_frames = 8;                  // frames; bounded per-session queue of a recording (every_frame) session
     std::filesystem::path data_dir = "facescan-data";  // finished sessions go to data_dir/SESSION/
     wire::DomainConfig domain{0, "lan"};
-    std::string server_id;  // in every reply and status; default "<hostname>-<pid>"
+    std::string server_id;  // in every reply, status and announcement; default "<hostname>-<pid>"; [A-Za-z0-9._-]
+    // The cluster (issue 13).
+    float replica_interval_s = 1.0f;  // seconds between replicas of a session (to the standby and the data dir)
+    int replica_full_every = 30;      // rounds; every this many, a full replica (the data dir's log starts over)
+    int replica_zstd_level = 1;       // 1 (fastest) .. 19
+    float join_settle_s = 2.0f;       // seconds of discovery after start before taking sessions
+    float claim_settle_s = 0.25f;     // seconds a claim must stand before the owner reads frames
+    float first_frame_timeout_s = 10.0f;  // seconds a claimed session may wait for its first frame (then released)
 
     Status validate() const;
 };

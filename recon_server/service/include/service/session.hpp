@@ -4,6 +4,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -19,6 +20,7 @@
 #include "recon/reconstructor.hpp"
 #include "service/server_params.hpp"
 #include "wire/messages.hpp"
+#include "wire/replica_codec.hpp"
 
 namespace facescan::service {
 
@@ -64,6 +66,30 @@ struct SessionStats {
     uint32_t snapshot_seq = 0;
     double duration_s = 0;  // first to last processed frame
     std::string source;
+    // The cluster (issue 13).
+    std::string owner_id;    // this server, as the session's owner
+    std::string standby_id;  // where its replicas go (empty: none)
+    uint32_t epoch = 1;      // ownership epoch: 1, +1 per takeover
+    uint32_t failovers = 0;
+    float last_takeover_ms = 0;  // the owner's last sign of life to the first frame integrated after the takeover
+    uint32_t next_seq = 0;       // the next frame the session takes (the agent resends from here)
+    uint64_t frames_digest = wire::kFrameDigestSeed;  // of the frames processed, in order
+};
+
+// What became of a received frame (Session::pushFrame).
+enum class FrameFate {
+    kAccepted,
+    kDuplicate,  // already had it (a replay overlapping what arrived)
+    kAhead,      // a recording's frame after a gap: dropped, the agent must resend from the session's next_seq
+    kIgnored,    // finished, or older than the newest live frame
+};
+
+// A replica taken by the worker between two frames (captureReplica).
+struct ReplicaCapture {
+    wire::CameraInfoData camera;
+    wire::SessionCounters counters;
+    uint32_t next_seq = 0;  // frames before this one are in the state
+    recon::ReconState state;
 };
 
 struct MeshResult {
@@ -97,13 +123,25 @@ class Session {
     // How many more frames the session takes now: a recording (or a session whose CameraInfo has not arrived yet)
     // has a bounded queue; live sessions and finished ones take everything (live keeps the newest).
     int roomForFrames() const;
-    void pushFrame(const facescan_wire_RgbdFrame& msg);
-    void noteMalformed();   // a sample that could not even be routed properly (counted as dropped)
+    // Recording frames are taken in order only (seq == next_seq); live frames when newer than the last one.
+    FrameFate pushFrame(const facescan_wire_RgbdFrame& msg);
     void noteWriterGone();  // the agent's writer is gone (killed or exited without end of stream)
     int64_t lastActivityNs() const { return last_activity_ns_.load(); }
 
     // --- any thread ---
     void requestReset(std::function<void(const Status&)> done);
+    // --- cluster (session_replica.cpp) ---
+    // Instead of setCamera: continues from a replica (a takeover, or a restart from the data dir). `takeover_from_ns`
+    // (steady clock) is the owner's last sign of life: the takeover time runs from there to the first frame
+    // integrated here.
+    Status restore(const wire::ReplicaData& replica, int64_t takeover_from_ns);
+    // Who owns it (the summary and the data dir record it) and where its replicas go.
+    void setOwnership(const std::string& owner_id, uint32_t epoch);
+    void setStandby(const std::string& standby_id);
+    // The state between two frames, taken by the worker: the blocks changed since the last capture (all of them
+    // when `full`). Unavailable when the session has no model or finished meanwhile.
+    Status captureReplica(bool full, ReplicaCapture& out, std::chrono::milliseconds timeout);
+    uint32_t nextSeq() const;
     // Finish now: queued frames are skipped, then the final mesh is extracted and written to dir.
     void requestFinish(const std::string& why, FinishCallback done);
     bool finished() const;
@@ -120,11 +158,17 @@ class Session {
 
  private:
     struct Control {
-        enum Kind { kReset, kFinish } kind;
+        enum Kind { kReset, kFinish, kRun } kind;
         std::string why;
-        std::function<void(const Status&)> reset_done;
+        std::function<void(const Status&)> reset_done;  // kReset; kRun: called with the outcome
         FinishCallback finish_done;
+        std::function<void()> run;  // kRun: executed by the worker between frames
     };
+    // setCamera and restore: builds the pipeline (from the replica's state when there is one), starts the worker.
+    Status start(const wire::CameraInfoData& camera, const wire::ReplicaData* replica, int64_t takeover_from_ns);
+    void applyReplicaLocked(const wire::ReplicaData& replica, int64_t takeover_from_ns);
+    void captureOnWorker(bool full, ReplicaCapture& out);
+    void noteFirstFrameAfterTakeover(int64_t now_ns);  // mutex_ held
     void workerLoop();
     void processFrame(PendingFrame& pending);
     void copySnapshotIfAsked();
@@ -145,7 +189,12 @@ class Session {
     bool stop_ = false;
     bool finishing_ = false;
     SessionStats stats_;
-    int64_t last_seq_ = -1;
+    uint32_t next_seq_ = 0;  // the next frame to take (intake side)
+    // Worker side of replication: where the last capture ended, and the frames processed.
+    uint32_t processed_next_seq_ = 0;
+    uint64_t replica_generation_ = 0;
+    size_t replica_trajectory_ = 0;
+    int64_t takeover_from_ns_ = 0;  // steady clock; 0 = no takeover pending
     std::vector<std::pair<int64_t, recon::Pose>> trajectory_;  // copy of the recon core's, for other threads
     recon::Pose last_pose_ = recon::Pose::Identity();
     std::vector<float> latency_ms_;  // ring of the last kLatencyWindow
@@ -153,6 +202,8 @@ class Session {
     std::deque<int64_t> processed_ns_;  // steady times of recently processed frames (fps)
     int64_t first_processed_ns_ = 0, last_processed_ns_ = 0;
     uint64_t processed_count_ = 0;
+    double duration_before_s_ = 0;  // processing time before a restore (the replica's)
+    uint64_t processed_before_ = 0;  // frames processed before a restore
     recon::StageTimesMs ms_sum_;
     uint64_t ms_count_ = 0;
     std::shared_ptr<recon::Reconstructor> recon_;  // null before the camera and after finishing

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,18 @@ struct SessionFiles {
 
 // Creates dir and writes the files that have content (mesh.ply and mesh.drc only for a non-empty mesh).
 Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& files);
+
+// The session's folder in the data dir for `server_id` at ownership `epoch`, recorded in DIR/owner.json. The main
+// folder (data_dir/SESSION) when it is free, already this server's, or recorded for an earlier epoch (a takeover:
+// owner.json is rewritten, naming the previous owner). When another server holds it at the same or a later epoch
+// (two servers that could not see each other both owned the session), a sub-folder "SERVER.eEPOCH" instead, and
+// `note` says so: nobody's results are overwritten.
+StatusOr<std::filesystem::path> claimSessionDir(const std::filesystem::path& data_dir, const std::string& session_id,
+                                                const std::string& server_id, uint32_t epoch, std::string* note);
+// The owner recorded in DIR/owner.json: (server id, epoch), or nullopt when none is readable.
+std::optional<std::pair<std::string, uint32_t>> readSessionOwner(const std::filesystem::path& dir);
+// A finished session needs no replica: removes DIR/replica.log (and its temporary file).
+void removeReplicaLog(const std::filesystem::path& dir);
 
 // Minimal JSON string escaping for summaries (quotes, backslash, control characters).
 std::string jsonEscape(const std::string& s);

@@ -1,0 +1,132 @@
+// The agent's side of the cluster (issue 13): which server owns its session, and the frames it keeps until they
+// are safe.
+//   OwnerLink     follows facescan/SessionOwner for the session (the strongest live claim, EXCLUSIVE ownership) and
+//                 facescan/ServerAnnounce (how many servers are alive). Frames go only to the owner: they are
+//                 written in the session's DDS partition, which only the owner reads.
+//   ReplayBuffer  every recording frame sent and not yet confirmed by the owner (replicated to its standby, or on
+//                 its disk): after a takeover, or when the owner asks, the agent sends them again from the frame
+//                 the owner names. Bounded: when full, the agent waits (a recording loses nothing).
+#pragma once
+
+#include <cstdint>
+#include <atomic>
+#include <deque>
+#include <functional>
+#include <map>
+#include <optional>
+#include <string>
+
+#include "wire/cluster_codec.hpp"
+#include "wire/messages.hpp"
+#include "wire/replica_codec.hpp"
+
+namespace facescan::capture {
+
+struct OwnerInfo {
+    wire::SessionOwnerData data;
+    bool alive = false;  // a live server holds the claim
+    // The owner reads the session's frames (READY or ACTIVE) and is alive.
+    bool serving() const {
+        return alive && (data.state == wire::OwnerState::kReady || data.state == wire::OwnerState::kActive);
+    }
+    bool finished() const { return data.state == wire::OwnerState::kFinished; }
+};
+
+class OwnerLink {
+ public:
+    static StatusOr<OwnerLink> create(const wire::Participant& participant, const std::string& session_id);
+    // Takes what arrived; cheap, call it before every frame.
+    void poll();
+    const std::optional<OwnerInfo>& owner() const { return owner_; }
+    int liveServers() const;
+
+ private:
+    std::string session_id_;
+    std::optional<wire::Topic<facescan_wire_SessionOwner>> owner_topic_;
+    std::optional<wire::Topic<facescan_wire_ServerAnnounce>> announce_topic_;
+    std::optional<wire::Reader<facescan_wire_SessionOwner>> owner_reader_;
+    std::optional<wire::Reader<facescan_wire_ServerAnnounce>> announce_reader_;
+    std::optional<OwnerInfo> owner_;
+    std::map<std::string, bool> servers_;  // id -> alive
+};
+
+class ReplayBuffer {
+ public:
+    explicit ReplayBuffer(size_t max_frames) : max_frames_(max_frames) {}
+    bool full() const { return frames_.size() >= max_frames_; }
+    size_t size() const { return frames_.size(); }
+    size_t bytes() const { return bytes_; }
+    void push(const wire::EncodedFrame& frame, bool end_of_stream);
+    // Drops the frames before `seq` (the owner confirmed them).
+    void dropBefore(uint32_t seq);
+    // Calls fn(frame, end_of_stream) for every kept frame from `seq` on, in order; stops when fn returns false.
+    template <typename Fn>
+    void forEachFrom(uint32_t seq, Fn&& fn) const {
+        for (const Entry& e : frames_) {
+            if (e.frame.seq >= seq && !fn(e.frame, e.end_of_stream)) return;
+        }
+    }
+
+ private:
+    struct Entry {
+        wire::EncodedFrame frame;
+        bool end_of_stream = false;
+    };
+    size_t max_frames_;
+    size_t bytes_ = 0;
+    std::deque<Entry> frames_;
+};
+
+// What the stream is doing, for the agent's status line.
+struct StreamState {
+    std::string owner;  // empty: none yet
+    std::string standby;
+    uint32_t epoch = 0;
+    uint32_t takeovers = 0;  // owner changes seen while streaming
+    uint32_t replayed = 0;   // frames sent again
+    size_t kept = 0;         // recording frames kept until confirmed
+    std::string waiting;     // why nothing is sent now (empty: streaming)
+    int servers = 0;         // servers alive on the domain
+    uint64_t digest = wire::kFrameDigestSeed;  // of every frame sent (the first time), as the server digests them
+};
+
+// Sends a session's frames to its owner: waits while nobody serves the session (live frames meanwhile are
+// dropped by the caller's queue, recording frames wait), resends the kept frames to a new owner or when the
+// owner asks, and forgets the ones the owner confirmed.
+class SessionStream {
+ public:
+    using Events = std::function<void(const std::string&)>;
+    SessionStream(OwnerLink link, wire::Writer<facescan_wire_RgbdFrame>& writer, std::string session_id,
+                  bool every_frame, size_t keep_frames, std::string where, Events on_event);
+    // Until an owner serves the session; DeadlineExceeded after timeout_s (0: no limit). Ok (not served) on stop.
+    Status waitUntilServed(const std::atomic<bool>& stop, float timeout_s);
+    // One frame, or the end of the stream. Waits for an owner and, for a recording, for room to keep it
+    // (DeadlineExceeded after timeout_s; 0: no limit).
+    Status send(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop,
+                float timeout_s = 0);
+    // After the end of the stream: until the owner reports the session finished (resending to a new owner
+    // meanwhile). False when it did not within timeout_s.
+    bool waitFinished(const std::atomic<bool>& stop, float timeout_s);
+    StreamState state() const;
+    // Called about every 20 ms while the stream waits (the agent reports its status line from it).
+    void onWait(std::function<void()> tick) { on_wait_ = std::move(tick); }
+
+ private:
+    // Follows the owner: forgets confirmed frames, resends to a new owner or on request. False: not served.
+    bool follow(const std::atomic<bool>& stop);
+    Status write(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop);
+    void say(const std::string& waiting);
+
+    OwnerLink link_;
+    wire::Writer<facescan_wire_RgbdFrame>& writer_;
+    std::string session_id_;
+    bool every_frame_;
+    ReplayBuffer kept_;
+    std::string where_;
+    Events on_event_;
+    StreamState state_;
+    uint32_t replay_seen_ = 0;
+    std::function<void()> on_wait_;
+};
+
+}  // namespace facescan::capture

@@ -1,0 +1,201 @@
+#include "capture/owner_link.hpp"
+
+#include <chrono>
+#include <cstdio>
+#include <thread>
+
+namespace facescan::capture {
+
+StatusOr<OwnerLink> OwnerLink::create(const wire::Participant& participant, const std::string& session_id) {
+    OwnerLink link;
+    link.session_id_ = session_id;
+    ASSIGN_OR_RETURN(link.owner_topic_, wire::Topic<facescan_wire_SessionOwner>::create(participant));
+    ASSIGN_OR_RETURN(link.announce_topic_, wire::Topic<facescan_wire_ServerAnnounce>::create(participant));
+    ASSIGN_OR_RETURN(link.owner_reader_, wire::Reader<facescan_wire_SessionOwner>::create(*link.owner_topic_));
+    ASSIGN_OR_RETURN(link.announce_reader_,
+                     wire::Reader<facescan_wire_ServerAnnounce>::create(*link.announce_topic_));
+    return link;
+}
+
+void OwnerLink::poll() {
+    (void)owner_reader_->take(
+        [&](const facescan_wire_SessionOwner& m, const dds_sample_info_t& info) {
+            if (wire::fromDds(m.session_id) != session_id_) return;
+            if (!info.valid_data) {
+                if (owner_ && info.instance_state != DDS_IST_ALIVE) owner_->alive = false;  // its owner died
+                return;
+            }
+            auto o = wire::fromMessage(m);
+            if (!o.isOk()) return;  // a malformed claim is not followed
+            owner_ = OwnerInfo{std::move(*o), info.instance_state == DDS_IST_ALIVE};
+        },
+        256);
+    (void)announce_reader_->take(
+        [&](const facescan_wire_ServerAnnounce& m, const dds_sample_info_t& info) {
+            const std::string id = wire::fromDds(m.server_id);
+            if (!wire::validateServerId(id).isOk()) return;
+            servers_[id] = info.instance_state == DDS_IST_ALIVE;
+        },
+        256);
+}
+
+int OwnerLink::liveServers() const {
+    int n = 0;
+    for (const auto& [id, alive] : servers_) n += alive ? 1 : 0;
+    return n;
+}
+
+void ReplayBuffer::push(const wire::EncodedFrame& frame, bool end_of_stream) {
+    frames_.push_back({frame, end_of_stream});
+    bytes_ += frame.bytes();
+}
+
+void ReplayBuffer::dropBefore(uint32_t seq) {
+    while (!frames_.empty() && frames_.front().frame.seq < seq) {
+        bytes_ -= frames_.front().frame.bytes();
+        frames_.pop_front();
+    }
+}
+
+namespace {
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+}  // namespace
+
+SessionStream::SessionStream(OwnerLink link, wire::Writer<facescan_wire_RgbdFrame>& writer, std::string session_id,
+                             bool every_frame, size_t keep_frames, std::string where, Events on_event)
+    : link_(std::move(link)),
+      writer_(writer),
+      session_id_(std::move(session_id)),
+      every_frame_(every_frame),
+      kept_(keep_frames),
+      where_(std::move(where)),
+      on_event_(std::move(on_event)) {}
+
+void SessionStream::say(const std::string& waiting) {
+    if (waiting == state_.waiting) return;
+    state_.waiting = waiting;
+    if (!waiting.empty()) on_event_(waiting);
+}
+
+bool SessionStream::follow(const std::atomic<bool>& stop) {
+    link_.poll();
+    state_.servers = link_.liveServers();
+    const std::optional<OwnerInfo>& o = link_.owner();
+    if (!o || !o->serving()) {
+        const std::string kept = every_frame_ ? " (" + std::to_string(kept_.size()) + " frames kept)" : "";
+        if (state_.servers == 0) {
+            say("no facescan-server alive on " + where_ + ": waiting for one" + kept);
+        } else if (o && !o->alive && !o->finished()) {
+            say("server '" + o->data.owner_id + "' is gone: waiting for its standby to take over" + kept);
+        } else if (!o || !o->finished()) {
+            say("waiting for a server to take session " + session_id_ + " (" + std::to_string(state_.servers) +
+                " alive)" + kept);
+        }
+        return false;
+    }
+    if (writer_.matchedReaders() == 0) return false;  // the owner's reader is not discovered yet
+    const wire::SessionOwnerData& d = o->data;
+    if (every_frame_) kept_.dropBefore(d.confirmed_seq);
+    state_.kept = kept_.size();
+    state_.standby = d.standby_id;
+    const bool new_owner = d.owner_id != state_.owner || d.epoch != state_.epoch;
+    if (!new_owner && d.replay_request == replay_seen_) {
+        say("");
+        return true;
+    }
+    if (new_owner && !state_.owner.empty()) {
+        ++state_.takeovers;
+        on_event_("session " + session_id_ + " taken over by '" + d.owner_id + "' (epoch " + std::to_string(d.epoch) +
+                  "): " + (every_frame_ ? "resending from frame " + std::to_string(d.resume_seq) : "streaming on"));
+    } else if (new_owner) {
+        on_event_("server '" + d.owner_id + "' owns session " + session_id_ + ": streaming" +
+                  (every_frame_ ? " (every frame)" : " (live)"));
+    }
+    state_.owner = d.owner_id;
+    state_.epoch = d.epoch;
+    replay_seen_ = d.replay_request;
+    say("");
+    if (!every_frame_) return true;
+    // The owner continues from resume_seq: everything kept from there goes again, in order.
+    Status sent;
+    kept_.forEachFrom(d.resume_seq, [&](const wire::EncodedFrame& f, bool eos) {
+        sent = write(f, eos, stop);
+        if (sent.isOk()) ++state_.replayed;
+        return sent.isOk();
+    });
+    return true;
+}
+
+Status SessionStream::waitUntilServed(const std::atomic<bool>& stop, float timeout_s) {
+    const auto deadline = Clock::now() + std::chrono::duration<float>(timeout_s);
+    while (!follow(stop)) {
+        if (stop) return Status::ok();
+        if (on_wait_) on_wait_();
+        if (timeout_s > 0 && Clock::now() > deadline) {
+            char seconds[32];
+            std::snprintf(seconds, sizeof(seconds), "%g", static_cast<double>(timeout_s));
+            return deadlineExceeded("no facescan-server took session " + session_id_ + " on " + where_ + " within " +
+                                    seconds + " s: start one with the same --profile and --domain");
+        }
+        std::this_thread::sleep_for(50ms);
+    }
+    return Status::ok();
+}
+
+Status SessionStream::write(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop) {
+    facescan_wire_RgbdFrame msg = wire::toMessage(session_id_, frame);
+    msg.end_of_stream = end_of_stream;
+    Status written = writer_.write(msg);
+    // Back-pressure: a keep-all writer times out when the owner has not taken frames for a while (or died: its
+    // reader then lapses with its lease and the writer is free again).
+    while (written.code() == StatusCode::kDeadlineExceeded && !stop) written = writer_.write(msg);
+    return stop ? Status::ok() : written;
+}
+
+Status SessionStream::send(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop,
+                           float timeout_s) {
+    const auto deadline = Clock::now() + std::chrono::duration<float>(timeout_s);
+    for (;;) {
+        if (stop) return Status::ok();
+        if (timeout_s > 0 && Clock::now() > deadline) return deadlineExceeded("no server took the frame in time");
+        if (!follow(stop)) {
+            if (on_wait_) on_wait_();
+            std::this_thread::sleep_for(20ms);
+            continue;
+        }
+        if (every_frame_ && kept_.full()) {
+            say("waiting for server '" + state_.owner + "' to confirm frames (" + std::to_string(kept_.size()) +
+                " kept, the limit)");
+            if (on_wait_) on_wait_();
+            std::this_thread::sleep_for(20ms);
+            continue;
+        }
+        break;
+    }
+    RETURN_IF_ERROR(write(frame, end_of_stream, stop));
+    if (!end_of_stream) {
+        state_.digest = wire::frameDigest(state_.digest, frame.depth.data(), frame.depth.size(), frame.colour.data(),
+                                          frame.colour.size());
+    }
+    if (every_frame_) kept_.push(frame, end_of_stream);
+    state_.kept = kept_.size();
+    return Status::ok();
+}
+
+bool SessionStream::waitFinished(const std::atomic<bool>& stop, float timeout_s) {
+    const auto start = Clock::now();
+    const auto deadline = start + std::chrono::duration<float>(timeout_s);
+    while (Clock::now() < deadline) {
+        (void)follow(stop);
+        const std::optional<OwnerInfo>& o = link_.owner();
+        if (o && o->finished()) return true;
+        if (stop && Clock::now() - start > 5s) return false;  // Ctrl-C: a short grace for the server to finish
+        std::this_thread::sleep_for(50ms);
+    }
+    return false;
+}
+
+StreamState SessionStream::state() const { return state_; }
+
+}  // namespace facescan::capture

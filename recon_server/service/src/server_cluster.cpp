@@ -1,0 +1,344 @@
+// The server's part in the cluster (issue 13), on the intake thread: which new session to claim, when a claim has
+// settled, when to give one up, when to take over from a dead owner or resume from the data dir. Every decision
+// is a function of the view that DDS gives (announcements with liveliness, claims with EXCLUSIVE ownership and
+// instance states); there is no protocol of our own beyond writing and reading those topics.
+#include <algorithm>
+#include <cstdio>
+#include <set>
+
+#include "service/replica_log.hpp"
+#include "service/replication.hpp"
+#include "service/server.hpp"
+#include "service/session_store.hpp"
+
+namespace facescan::service {
+namespace {
+
+constexpr int64_t kClaimBatchNs = 150'000'000;    // CameraInfos that arrive together are placed together
+constexpr int64_t kFallbackNs = 2'000'000'000;    // the next server in line claims after this per rank
+constexpr int64_t kReplayRepeatNs = 300'000'000;  // at most this often a new request to resend frames
+
+bool holding(wire::OwnerState s) {
+    return s == wire::OwnerState::kClaiming || s == wire::OwnerState::kReady || s == wire::OwnerState::kActive;
+}
+
+}  // namespace
+
+void Server::clusterTick() {
+    int open = 0;
+    for (const auto& o : ownedSessions()) open += o->phase != OwnedSession::Phase::kFinished ? 1 : 0;
+    cluster_->announce(open, standbySessions());
+    const std::map<std::string, OwnerView> owners = cluster_->owners();
+    settleClaims(owners);
+    takeOverOrphans(owners);
+    placeNewSessions(owners);
+    requestReplays();
+    releaseStale();
+}
+
+void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
+    // Agents that are gone take their candidates with them.
+    for (auto it = candidates_.begin(); it != candidates_.end();) {
+        it = it->second.writer_alive ? std::next(it) : candidates_.erase(it);
+    }
+    // Flood control: one agent writer (a CameraInfo publication) gets one session placed at a time; its next one
+    // waits until the previous one received frames or was released. A real agent writes one session.
+    std::map<dds_instance_handle_t, const std::string*> next_of_writer;
+    std::set<dds_instance_handle_t> busy_writers;
+    for (const auto& [id, c] : candidates_) {
+        const auto view = owners.find(id);
+        if (view != owners.end()) {
+            const wire::OwnerState st = view->second.data.state;
+            if (view->second.alive && (st == wire::OwnerState::kClaiming || st == wire::OwnerState::kReady)) {
+                busy_writers.insert(c.writer);
+            }
+            continue;  // claimed once: never placed again (a dead owner's session waits for its standby)
+        }
+        if (owned(id) || resumable_.count(id)) continue;
+        const std::string*& first = next_of_writer[c.writer];
+        if (!first || c.order_key < candidates_.at(*first).order_key) first = &id;
+    }
+    std::vector<service::Candidate> eligible;
+    for (const auto& [writer, id] : next_of_writer) {
+        if (!busy_writers.count(writer)) eligible.push_back({*id, candidates_.at(*id).order_key});
+    }
+    if (eligible.empty()) return;
+    const std::vector<ServerLoad> loads = cluster_->liveLoads();
+    const std::map<std::string, std::string> assigned = assignSessions(eligible, loads);
+    const bool responder = cluster_->responder() == params_.server_id;
+    for (const service::Candidate& e : eligible) {
+        const Candidate& c = candidates_.at(e.session_id);
+        const auto target = assigned.find(e.session_id);
+        if (target == assigned.end()) {
+            // No live server has room: the responder says so in the session's status until one has.
+            std::lock_guard lk(sessions_mutex_);
+            if (responder && !refused_.count(e.session_id)) {
+                int capacity = 0;
+                for (const ServerLoad& l : loads) capacity += l.capacity;
+                const std::string detail = "refused: all " + std::to_string(loads.size()) + " server(s) are full (" +
+                                           std::to_string(capacity) + " sessions, --max-sessions " +
+                                           std::to_string(params_.max_sessions) + " here)";
+                refused_[e.session_id] = {detail};
+                std::fprintf(stderr, "facescan-server: session %s %s\n", e.session_id.c_str(), detail.c_str());
+            }
+            continue;
+        }
+        bool claim_now = false;
+        if (target->second == params_.server_id) {
+            claim_now = steadyNowNs() - c.first_seen_ns >= kClaimBatchNs;
+        } else {
+            // The chosen server did not claim it (dead but not yet noticed, or busy): the next in line does.
+            const std::vector<std::string> order = claimOrder(e.session_id, loads);
+            const auto me = std::find(order.begin(), order.end(), params_.server_id);
+            const int64_t rank = me == order.end() ? -1 : static_cast<int64_t>(me - order.begin());
+            claim_now = rank > 0 && steadyNowNs() - c.first_seen_ns >= rank * kFallbackNs;
+        }
+        if (!claim_now) continue;
+        auto o = std::make_shared<OwnedSession>();
+        o->camera = c.camera;
+        o->camera_writer = c.writer;
+        if (const Status s = claimSession(e.session_id, 1, o, {}); !s.isOk()) {
+            std::fprintf(stderr, "facescan-server: cannot claim %s: %s\n", e.session_id.c_str(), s.toString().c_str());
+        }
+    }
+}
+
+Status Server::claimSession(const std::string& session_id, uint32_t epoch, std::shared_ptr<OwnedSession> o,
+                            const wire::SessionOwnerData& previous) {
+    wire::SessionOwnerData record;
+    record.session_id = session_id;
+    record.owner_id = params_.server_id;
+    record.epoch = epoch;
+    record.state = wire::OwnerState::kClaiming;
+    if (o->restore_from) record.resume_seq = record.confirmed_seq = o->restore_from->next_seq;
+    record.failovers = previous.failovers;
+    record.last_takeover_ms = previous.last_takeover_ms;
+    o->id = session_id;
+    o->epoch = epoch;
+    o->claimed_ns = steadyNowNs();
+    ASSIGN_OR_RETURN(o->claim, cluster_->claim(record));
+    {
+        std::lock_guard lk(sessions_mutex_);
+        owned_[session_id] = o;
+        refused_.erase(session_id);
+    }
+    return Status::ok();
+}
+
+void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
+    const int64_t settle_ns = static_cast<int64_t>(params_.claim_settle_s * 1e9);
+    for (const auto& o : ownedSessions()) {
+        const auto it = owners.find(o->id);
+        const OwnerView* view = it == owners.end() ? nullptr : &it->second;
+        const bool ours = view && view->alive && view->data.owner_id == params_.server_id && view->data.epoch == o->epoch;
+        const bool beaten = view && view->alive && !ours &&
+                            (view->data.owner_id != params_.server_id || view->data.epoch > o->epoch);
+        if (o->phase == OwnedSession::Phase::kClaiming) {
+            if (beaten) {
+                yield(o->id, "server '" + view->data.owner_id + "' claimed it too (epoch " +
+                                 std::to_string(view->data.epoch) + ")");
+            } else if (ours && steadyNowNs() - o->claimed_ns >= settle_ns) {
+                if (const Status s = activate(*o); !s.isOk()) {
+                    std::fprintf(stderr, "facescan-server: cannot start session %s: %s\n", o->id.c_str(),
+                                 s.toString().c_str());
+                    o->claim->release();
+                    std::lock_guard lk(sessions_mutex_);
+                    owned_.erase(o->id);
+                }
+            }
+        } else if (beaten) {
+            // A stronger claim: a takeover that happened while this server could not be seen (split brain), or
+            // a claim made at the same moment from another view. The other one continues; this one stops.
+            yield(o->id, "server '" + view->data.owner_id + "' owns it (epoch " + std::to_string(view->data.epoch) +
+                             ", this server's epoch " + std::to_string(o->epoch) + ")");
+        }
+    }
+}
+
+Status Server::activate(OwnedSession& o) {
+    std::string note;
+    ASSIGN_OR_RETURN(o.dir, claimSessionDir(params_.data_dir, o.id, params_.server_id, o.epoch, &note));
+    if (!note.empty()) std::fprintf(stderr, "facescan-server: %s\n", note.c_str());
+    auto session = std::make_shared<Session>(o.id, params_, [this] {
+        if (wake_.valid()) dds_set_guardcondition(wake_.handle(), true);
+    });
+    session->setOwnership(params_.server_id, o.epoch);
+    if (o.restore_from) {
+        RETURN_IF_ERROR(session->restore(*o.restore_from, o.takeover_from_ns));
+    } else {
+        RETURN_IF_ERROR(session->setCamera(*o.camera));
+    }
+    const wire::Qos qos = wire::frameReaderQos();
+    ASSIGN_OR_RETURN(o.frames, wire::boxed(wire::Reader<facescan_wire_RgbdFrame>::create(
+                                   *frame_topic_, &qos, wire::sessionPartition(o.id))));
+    o.frame_condition = dds_create_readcondition(o.frames->handle(),
+                                                 DDS_NOT_READ_SAMPLE_STATE | DDS_ANY_VIEW_STATE | DDS_ANY_INSTANCE_STATE);
+    if (o.frame_condition < 0) return wire::ddsStatus(o.frame_condition, "create read condition");
+    if (const dds_return_t rc = dds_waitset_attach(waitset_.handle(), o.frame_condition, o.frame_condition); rc < 0) {
+        return wire::ddsStatus(rc, "attach read condition");
+    }
+    o.session = session;
+    o.ready_ns = steadyNowNs();
+    o.phase = OwnedSession::Phase::kReady;
+    const uint32_t next = session->nextSeq();
+    o.claim->update([&](wire::SessionOwnerData& r) {
+        r.state = wire::OwnerState::kReady;
+        r.resume_seq = next;
+        r.confirmed_seq = next;
+    });
+    o.restore_from.reset();  // the state lives in the session now
+    std::fprintf(stderr, "facescan-server: owns session %s (epoch %u%s)\n", o.id.c_str(), o.epoch,
+                 next > 0 ? (", resuming at frame " + std::to_string(next)).c_str() : "");
+    return Status::ok();
+}
+
+void Server::yield(const std::string& session_id, const std::string& why) {
+    std::shared_ptr<OwnedSession> o = owned(session_id);
+    if (!o) return;
+    if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
+    o->frames.reset();
+    o->claim.reset();  // withdrawn, not disposed: the stronger claim stays the only one
+    {
+        std::lock_guard lk(sessions_mutex_);
+        owned_.erase(session_id);
+    }
+    const SessionStats st = o->session ? o->session->stats() : SessionStats{};
+    if (o->session && st.frames_integrated > 0 && !o->session->finished()) {
+        // It integrated frames here: keep them, as this server's result, in its own folder (session_store's
+        // owner rule puts them beside the other owner's files when both share a data dir).
+        std::fprintf(stderr, "facescan-server: session %s: gave it up, %s; writing what this server integrated (%u "
+                     "frames) to its data dir\n",
+                     session_id.c_str(), why.c_str(), st.frames_integrated);
+        std::shared_ptr<Session> keep = o->session;
+        keep->requestFinish("superseded: " + why, [keep](const Status&, const MeshResult&) {});
+        return;
+    }
+    std::fprintf(stderr, "facescan-server: session %s: gave it up, %s\n", session_id.c_str(), why.c_str());
+}
+
+void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
+    // 1. Sessions whose owner is gone (its claim lapsed with its liveliness, or it is a dead process of this
+    //    host) and that this server can continue: as their named standby, or from its own data dir after a
+    //    restart. The new claim's epoch is higher, so it beats the old one even before that one lapses.
+    for (const auto& [id, view] : owners) {
+        if (view.disposed || !holding(view.data.state) || owned(id)) continue;
+        const bool stale_self = view.data.owner_id == params_.server_id;  // an earlier process with our id
+        const bool gone = !view.alive || stale_self || !cluster_->serverAlive(view.data.owner_id);
+        if (!gone) continue;
+        std::optional<wire::ReplicaData> copy;
+        if (view.data.standby_id == params_.server_id) copy = replicator_->standbyCopy(id);
+        if (auto r = resumable_.find(id); r != resumable_.end()) {
+            if (!copy || r->second.epoch > copy->epoch ||
+                (r->second.epoch == copy->epoch && r->second.next_seq > copy->next_seq)) {
+                copy = r->second;
+            }
+            resumable_.erase(r);
+        }
+        if (!copy) continue;  // nothing to continue from: the session waits for a server that has its replica
+        if (copy->next_seq < view.data.confirmed_seq) {
+            std::fprintf(stderr, "facescan-server: session %s: this server's replica (frame %u) is older than what "
+                         "the agent still keeps (from frame %u): not taking it over\n",
+                         id.c_str(), copy->next_seq, view.data.confirmed_seq);
+            continue;
+        }
+        auto o = std::make_shared<OwnedSession>();
+        // The takeover time runs from the old owner's last sign of life (an announcement or a replica).
+        const int64_t heard =
+            std::max(replicator_->lastHeardFrom(view.data.owner_id), cluster_->lastHeard(view.data.owner_id));
+        o->takeover_from_ns = heard > 0 ? heard : steadyNowNs();
+        const uint32_t epoch = std::max(view.data.epoch, copy->epoch) + 1;
+        std::fprintf(stderr, "facescan-server: session %s: owner '%s' is gone; taking over at frame %u (epoch %u)\n",
+                     id.c_str(), view.data.owner_id.c_str(), copy->next_seq, epoch);
+        o->restore_from = std::move(copy);
+        if (const Status s = claimSession(id, epoch, o, view.data); !s.isOk()) {
+            std::fprintf(stderr, "facescan-server: cannot take over %s: %s\n", id.c_str(), s.toString().c_str());
+        }
+    }
+    // 2. Replicas in the data dir of sessions with no claim left anywhere (their owner's lapsed long ago, or the
+    //    agent is gone too): resumed. Those that finished, or that another live server continues, stay on disk.
+    for (auto it = resumable_.begin(); it != resumable_.end();) {
+        const auto view = owners.find(it->first);
+        if (view == owners.end()) {
+            auto o = std::make_shared<OwnedSession>();
+            o->takeover_from_ns = steadyNowNs();
+            const uint32_t epoch = it->second.epoch + 1;
+            std::fprintf(stderr, "facescan-server: session %s: resuming from %s at frame %u (epoch %u)\n",
+                         it->first.c_str(), params_.data_dir.c_str(), it->second.next_seq, epoch);
+            o->restore_from = std::move(it->second);
+            wire::SessionOwnerData previous;
+            previous.failovers = o->restore_from->counters.failovers;
+            if (const Status s = claimSession(it->first, epoch, o, previous); !s.isOk()) {
+                std::fprintf(stderr, "facescan-server: cannot resume %s: %s\n", it->first.c_str(), s.toString().c_str());
+            }
+            it = resumable_.erase(it);
+            continue;
+        }
+        std::fprintf(stderr, "facescan-server: session %s is %s on server '%s': the replica in %s stays as it is\n",
+                     it->first.c_str(), wire::ownerStateName(view->second.data.state),
+                     view->second.data.owner_id.c_str(), params_.data_dir.c_str());
+        it = resumable_.erase(it);
+    }
+}
+
+void Server::requestReplays() {
+    for (const auto& o : ownedSessions()) {
+        if (!o->ahead || !o->session || steadyNowNs() - o->last_replay_request_ns < kReplayRepeatNs) continue;
+        o->ahead = false;
+        o->last_replay_request_ns = steadyNowNs();
+        const uint32_t next = o->session->nextSeq();
+        o->claim->update([&](wire::SessionOwnerData& r) {
+            r.resume_seq = next;
+            ++r.replay_request;
+        });
+    }
+}
+
+void Server::releaseStale() {
+    const int64_t first_frame_ns = static_cast<int64_t>(params_.first_frame_timeout_s * 1e9);
+    for (const auto& o : ownedSessions()) {
+        if (o->phase == OwnedSession::Phase::kReady && steadyNowNs() - o->ready_ns > first_frame_ns &&
+            o->session && o->session->stats().frames_received == 0 && o->session->nextSeq() == 0) {
+            std::fprintf(stderr, "facescan-server: session %s: released, no frame came within %.0f s\n", o->id.c_str(),
+                         static_cast<double>(params_.first_frame_timeout_s));
+            if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
+            o->frames.reset();
+            o->claim->release();
+            std::lock_guard lk(sessions_mutex_);
+            owned_.erase(o->id);
+            continue;
+        }
+        if (o->phase != OwnedSession::Phase::kFinished && o->session && o->session->finished()) {
+            // Done: its frames are no longer read, and the claim says FINISHED (standbys drop their copies).
+            if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
+            o->frames.reset();
+            o->frame_condition = 0;
+            o->phase = OwnedSession::Phase::kFinished;
+            o->claim->update([](wire::SessionOwnerData& r) { r.state = wire::OwnerState::kFinished; });
+        }
+    }
+}
+
+void Server::loadResumable() {
+    std::error_code ec;
+    for (const auto& entry : std::filesystem::directory_iterator(params_.data_dir, ec)) {
+        if (!entry.is_directory() || !std::filesystem::exists(entry.path() / "replica.log")) continue;
+        if (std::filesystem::exists(entry.path() / "summary.json")) {
+            removeReplicaLog(entry.path());  // finished after its last replica: nothing to resume
+            continue;
+        }
+        std::string warning;
+        auto replica = loadReplicaLog(entry.path(), &warning);
+        if (!warning.empty()) std::fprintf(stderr, "facescan-server: %s\n", warning.c_str());
+        if (!replica.isOk()) {
+            std::fprintf(stderr, "facescan-server: cannot resume from %s: %s\n", entry.path().c_str(),
+                         replica.status().message().c_str());
+            continue;
+        }
+        std::fprintf(stderr, "facescan-server: found session %s in %s (frame %u, %u frames integrated)\n",
+                     replica->session_id.c_str(), entry.path().c_str(), replica->next_seq,
+                     replica->counters.frames_integrated);
+        resumable_[replica->session_id] = std::move(*replica);
+    }
+}
+
+}  // namespace facescan::service

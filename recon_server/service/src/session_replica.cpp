@@ -1,0 +1,108 @@
+// A session's part in the cluster (issue 13): restoring from a replica, and taking replicas on the worker between
+// two frames. Knows nothing of DDS or files: the server's replication thread encodes, sends and stores them.
+#include <algorithm>
+#include <cstdio>
+#include <future>
+
+#include "service/session.hpp"
+
+namespace facescan::service {
+
+Status Session::restore(const wire::ReplicaData& replica, int64_t takeover_from_ns) {
+    if (!replica.full()) return invalidArgument("a session can only be restored from a full replica");
+    return start(replica.camera, &replica, takeover_from_ns);
+}
+
+void Session::applyReplicaLocked(const wire::ReplicaData& r, int64_t takeover_from_ns) {
+    const wire::SessionCounters& c = r.counters;
+    stats_.frames_received = c.frames_received;
+    stats_.frames_integrated = c.frames_integrated;
+    stats_.frames_rejected = c.frames_rejected;
+    stats_.frames_skipped = c.frames_skipped;
+    stats_.frames_dropped = c.frames_dropped;
+    stats_.snapshot_seq = c.snapshot_seq;
+    stats_.failovers = c.failovers + 1;
+    stats_.last_takeover_ms = c.last_takeover_ms;
+    stats_.frames_digest = c.frames_digest;
+    stats_.state = c.frames_integrated > 0 ? SessionState::kScanning : SessionState::kWaiting;
+    stats_.detail = "resumed at frame " + std::to_string(r.next_seq) + " (" + std::to_string(c.frames_integrated) +
+                    " frames integrated)";
+    processed_before_ = c.frames_processed;
+    duration_before_s_ = c.duration_s;
+    next_seq_ = processed_next_seq_ = r.next_seq;
+    trajectory_ = r.state.trajectory;
+    last_pose_ = r.state.T_world_camera;
+    replica_generation_ = r.state.generation;
+    replica_trajectory_ = r.state.trajectorySize();
+    takeover_from_ns_ = takeover_from_ns;
+}
+
+void Session::noteFirstFrameAfterTakeover(int64_t now_ns) {
+    stats_.last_takeover_ms = static_cast<float>(static_cast<double>(now_ns - takeover_from_ns_) * 1e-6);
+    takeover_from_ns_ = 0;
+    // The wall clock too: tests/bench/cluster.sh measures from the moment it killed the old owner.
+    std::fprintf(stderr,
+                 "facescan-server: session %s: first frame integrated after the takeover (frame %u, %.0f ms after the "
+                 "old owner's last sign of life, at realtime_ns %lld)\n",
+                 id_.c_str(), processed_next_seq_, static_cast<double>(stats_.last_takeover_ms),
+                 static_cast<long long>(realtimeNowNs()));
+}
+
+void Session::setOwnership(const std::string& owner_id, uint32_t epoch) {
+    std::lock_guard lk(mutex_);
+    stats_.owner_id = owner_id;
+    stats_.epoch = epoch;
+}
+
+void Session::setStandby(const std::string& standby_id) {
+    std::lock_guard lk(mutex_);
+    stats_.standby_id = standby_id;
+}
+
+void Session::captureOnWorker(bool full, ReplicaCapture& out) {
+    recon_->captureState(full ? 0 : replica_generation_, full ? 0 : replica_trajectory_, out.state);
+    replica_generation_ = out.state.generation;
+    replica_trajectory_ = out.state.trajectorySize();
+    std::lock_guard lk(mutex_);
+    out.camera = *camera_;
+    out.next_seq = processed_next_seq_;
+    wire::SessionCounters& c = out.counters;
+    // Frames taken but not processed yet are not in the state: the agent resends them to whoever continues.
+    const auto queued = static_cast<uint32_t>(
+        std::count_if(queue_.begin(), queue_.end(), [](const PendingFrame& f) { return !f.end_of_stream; }));
+    c.frames_received = stats_.frames_received - std::min(queued, stats_.frames_received);
+    c.frames_integrated = stats_.frames_integrated;
+    c.frames_rejected = stats_.frames_rejected;
+    c.frames_skipped = stats_.frames_skipped;
+    c.frames_dropped = stats_.frames_dropped;
+    c.snapshot_seq = stats_.snapshot_seq;
+    c.failovers = stats_.failovers;
+    c.last_takeover_ms = stats_.last_takeover_ms;
+    c.frames_processed = processed_before_ + processed_count_;
+    c.duration_s = duration_before_s_ +
+                   (processed_count_ > 0 ? static_cast<double>(last_processed_ns_ - first_processed_ns_) * 1e-9 : 0.0);
+    c.frames_digest = stats_.frames_digest;
+}
+
+Status Session::captureReplica(bool full, ReplicaCapture& out, std::chrono::milliseconds timeout) {
+    auto done = std::make_shared<std::promise<Status>>();
+    auto result = std::make_shared<ReplicaCapture>();
+    std::future<Status> outcome = done->get_future();
+    {
+        std::lock_guard lk(mutex_);
+        if (finishing_ || stats_.state == SessionState::kFinished || !worker_.joinable() || !recon_) {
+            return unavailable("session '" + id_ + "' has no model to replicate");
+        }
+        control_.push_back({Control::kRun, "", [done](const Status& s) { done->set_value(s); }, nullptr,
+                            [this, full, result] { captureOnWorker(full, *result); }});
+    }
+    cv_.notify_all();
+    if (outcome.wait_for(timeout) != std::future_status::ready) {
+        return deadlineExceeded("session '" + id_ + "': the worker did not take the replica in time");
+    }
+    RETURN_IF_ERROR(outcome.get());
+    out = std::move(*result);
+    return Status::ok();
+}
+
+}  // namespace facescan::service
