@@ -27,7 +27,7 @@ cmake --build "$build" --target facescan_fuzzers -j "$jobs"
 
 fuzzers=(fuzz_depth_raw16 fuzz_depth_rvl fuzz_depth_zstd fuzz_depth_rvl_zstd fuzz_depth_delta_zstd fuzz_depth_png
          fuzz_depth_packed_delta_zstd
-         fuzz_colour_jpeg fuzz_mesh_draco)
+         fuzz_colour_jpeg fuzz_mesh_draco fuzz_replica fuzz_cluster_messages)
 seeds="$work/seeds"
 rm -rf "$seeds"
 "$build/tests/fuzz/facescan_fuzz_seeds" "$seeds"

@@ -138,9 +138,9 @@ int runSessions(const CliOptions& options) {
 }
 
 std::string uptimeText(int64_t started_ns) {
-    const auto now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                            std::chrono::system_clock::now().time_since_epoch())
-                            .count();
+    const auto now_ns =
+        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+            .count();
     const int64_t s = std::max<int64_t>(0, (now_ns - started_ns) / 1'000'000'000);
     char buf[32];
     if (s >= 3600) {
@@ -160,12 +160,13 @@ int runServers(const CliOptions& options) {
     if (!servers.isOk()) return fail(exitCodeForRequest(servers.status()), servers.status().message());
     if (options.json) {
         for (const ServerInfo& s : *servers) {
-            std::printf("{\"server\":%s,\"host\":%s,\"pid\":%u,\"open_sessions\":%u,\"max_sessions\":%u,"
-                        "\"standby_sessions\":%u,\"cpu_load\":%.2f,\"started_ns\":%lld,\"joining\":%s,"
-                        "\"protocol\":%u,\"software\":%s}\n",
-                        jsonString(s.server_id).c_str(), jsonString(s.host).c_str(), s.pid, s.open_sessions,
-                        s.max_sessions, s.standby_sessions, s.cpu_load, static_cast<long long>(s.started_ns),
-                        s.joining ? "true" : "false", s.protocol_version, jsonString(s.software).c_str());
+            std::printf(
+                "{\"server\":%s,\"host\":%s,\"pid\":%u,\"open_sessions\":%u,\"max_sessions\":%u,"
+                "\"standby_sessions\":%u,\"cpu_load\":%.2f,\"started_ns\":%lld,\"joining\":%s,"
+                "\"protocol\":%u,\"software\":%s}\n",
+                jsonString(s.server_id).c_str(), jsonString(s.host).c_str(), s.pid, s.open_sessions, s.max_sessions,
+                s.standby_sessions, s.cpu_load, static_cast<long long>(s.started_ns), s.joining ? "true" : "false",
+                s.protocol_version, jsonString(s.software).c_str());
         }
         return kExitOk;
     }

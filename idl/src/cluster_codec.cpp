@@ -25,7 +25,8 @@ Status validateId(const char* what, const std::string& id) {
     for (const char c : id) {
         const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '-' ||
                         c == '_' || c == '.';
-        if (!ok) return invalidArgument(std::string(what) + " '" + id + "' may only use letters, digits, '.', '-', '_'");
+        if (!ok)
+            return invalidArgument(std::string(what) + " '" + id + "' may only use letters, digits, '.', '-', '_'");
     }
     return Status::ok();
 }

@@ -145,7 +145,8 @@ StatusOr<Entity> partitionParent(dds_entity_t participant, const std::string& pa
     dds_qset_partition1(qos.get(), partition.c_str());
     const dds_entity_t h = publisher ? dds_create_publisher(participant, qos.get(), nullptr)
                                      : dds_create_subscriber(participant, qos.get(), nullptr);
-    if (h < 0) return ddsStatus(h, "create " + std::string(publisher ? "publisher" : "subscriber") + " of " + partition);
+    if (h < 0)
+        return ddsStatus(h, "create " + std::string(publisher ? "publisher" : "subscriber") + " of " + partition);
     return Entity(h);
 }
 

@@ -29,9 +29,7 @@ Qos noAutoDispose(Qos q) {
 }
 }  // namespace
 
-Qos serverAnnounceQos() {
-    return noAutoDispose(reliable(DDS_DURABILITY_TRANSIENT_LOCAL, DDS_HISTORY_KEEP_LAST, 1));
-}
+Qos serverAnnounceQos() { return noAutoDispose(reliable(DDS_DURABILITY_TRANSIENT_LOCAL, DDS_HISTORY_KEEP_LAST, 1)); }
 Qos sessionOwnerQos() {
     Qos q = noAutoDispose(reliable(DDS_DURABILITY_TRANSIENT_LOCAL, DDS_HISTORY_KEEP_LAST, 1));
     dds_qset_ownership(q.get(), DDS_OWNERSHIP_EXCLUSIVE);

@@ -1,12 +1,12 @@
 // The replica format (wire/replica_codec.hpp). Little-endian fixed-width fields; every read is bounds-checked.
 #include "wire/replica_codec.hpp"
 
-#include "wire/cluster_codec.hpp"
-
 #include <zstd.h>
 
 #include <cmath>
 #include <cstring>
+
+#include "wire/cluster_codec.hpp"
 
 namespace facescan::wire {
 namespace {
@@ -14,8 +14,8 @@ namespace {
 constexpr uint32_t kMagic = 0x50525346;  // "FSRP"
 constexpr uint16_t kFlagFull = 1;
 constexpr size_t kVoxelBytes = sizeof(recon::Voxel);
-constexpr uint32_t kMaxBlocks = 1u << 21;        // 128^3: every block of the largest cube
-constexpr uint32_t kMaxTrajectory = 1u << 22;    // entries (38 hours at 30 Hz)
+constexpr uint32_t kMaxBlocks = 1u << 21;      // 128^3: every block of the largest cube
+constexpr uint32_t kMaxTrajectory = 1u << 22;  // entries (38 hours at 30 Hz)
 constexpr size_t kMaxStringBytes = 4096;
 
 class ByteWriter {
@@ -83,8 +83,8 @@ class ByteReader {
 void putCamera(ByteWriter& w, const CameraInfoData& c) {
     w.put<uint32_t>(static_cast<uint32_t>(c.intrinsics.width_px));
     w.put<uint32_t>(static_cast<uint32_t>(c.intrinsics.height_px));
-    for (const float f : {c.intrinsics.fx_px, c.intrinsics.fy_px, c.intrinsics.cx_px, c.intrinsics.cy_px,
-                          c.depth_units_m, c.rate_hz}) {
+    for (const float f :
+         {c.intrinsics.fx_px, c.intrinsics.fy_px, c.intrinsics.cx_px, c.intrinsics.cy_px, c.depth_units_m, c.rate_hz}) {
         w.put<float>(f);
     }
     w.put<uint8_t>(c.colour_registered);
@@ -241,21 +241,24 @@ Status encodeReplica(const ReplicaData& r, std::vector<uint8_t>& out, int zstd_l
     putCamera(w, r.camera);
     putCounters(w, r.counters);
     putState(w, r.state, body);
-    if (body.size() > kMaxReplicaBodyBytes) return outOfRange("replica too large");
 
+    return frameReplicaBody(body.data(), body.size(), r.full(), out, zstd_level);
+}
+
+Status frameReplicaBody(const uint8_t* body, size_t size, bool full, std::vector<uint8_t>& out, int zstd_level) {
+    if (size > kMaxReplicaBodyBytes) return outOfRange("replica too large");
     ZSTD_CCtx* cctx = ZSTD_createCCtx();
     if (!cctx) return internalError("zstd: cannot create a context");
     (void)ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, zstd_level);
     (void)ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
-    out.resize(kReplicaHeaderBytes + ZSTD_compressBound(body.size()));
-    const size_t packed = ZSTD_compress2(cctx, out.data() + kReplicaHeaderBytes, out.size() - kReplicaHeaderBytes,
-                                         body.data(), body.size());
+    out.resize(kReplicaHeaderBytes + ZSTD_compressBound(size));
+    const size_t packed =
+        ZSTD_compress2(cctx, out.data() + kReplicaHeaderBytes, out.size() - kReplicaHeaderBytes, body, size);
     ZSTD_freeCCtx(cctx);
     if (ZSTD_isError(packed)) return internalError(std::string("zstd: ") + ZSTD_getErrorName(packed));
     out.resize(kReplicaHeaderBytes + packed);
-    const uint32_t magic = kMagic, body_size = static_cast<uint32_t>(body.size()),
-                   packed_size = static_cast<uint32_t>(packed);
-    const uint16_t version = kReplicaFormatVersion, flags = r.full() ? kFlagFull : 0;
+    const uint32_t magic = kMagic, body_size = static_cast<uint32_t>(size), packed_size = static_cast<uint32_t>(packed);
+    const uint16_t version = kReplicaFormatVersion, flags = full ? kFlagFull : 0;
     const uint64_t reserved = 0;
     std::memcpy(out.data(), &magic, 4);
     std::memcpy(out.data() + 4, &version, 2);
@@ -280,10 +283,10 @@ Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out) {
     std::memcpy(&packed_size, data + 12, 4);
     if (magic != kMagic) return dataLoss("not a facescan replica (bad magic)");
     if (version != kReplicaFormatVersion) {
-        return {StatusCode::kUnimplemented,
-                "replica format version " + std::to_string(version) + " is not compatible with this server (it reads " +
-                    "version " + std::to_string(kReplicaFormatVersion) +
-                    "): run the same facescan version on every server of the domain"};
+        return {StatusCode::kUnimplemented, "replica format version " + std::to_string(version) +
+                                                " is not compatible with this server (it reads " + "version " +
+                                                std::to_string(kReplicaFormatVersion) +
+                                                "): run the same facescan version on every server of the domain"};
     }
     if ((flags & ~kFlagFull) != 0) return dataLoss("replica header has unknown flags");
     if (packed_size != size - kReplicaHeaderBytes) {
@@ -330,7 +333,7 @@ Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out) {
     }
     ZSTD_freeDCtx(dctx);
     if (!error.empty()) return dataLoss("replica corrupt: " + error);
-    if (body.size() != body_size || in.pos != in.size) return dataLoss("replica body incomplete");
+    if (body.size() != body_size || in.pos != in.size) return dataLoss("replica corrupt: its body is incomplete");
 
     ByteReader r(body.data(), body.size());
     ReplicaData d;

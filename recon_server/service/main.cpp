@@ -30,7 +30,7 @@ int main(int argc, char** argv) {
     const service::ServerParams& p = parsed->params;
     auto server = service::Server::create(p);
     if (!server.isOk()) {
-        std::fprintf(stderr, "facescan-server: cannot start: %s\n", server.status().toString().c_str());
+        std::fprintf(stderr, "facescan-server: cannot start: %s\n", server.status().message().c_str());
         return 1;
     }
     std::fprintf(stderr,

@@ -74,7 +74,8 @@ void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expec
     // This test plays the session's owning server: it claims the session (the agent streams only to an owner) and
     // reads its frames in the session's partition, where only the owner listens.
     const wire::Qos qos = wire::frameReaderQos();
-    auto frame_reader = wire::Reader<facescan_wire_RgbdFrame>::create(*frame_topic, &qos, wire::sessionPartition(session));
+    auto frame_reader =
+        wire::Reader<facescan_wire_RgbdFrame>::create(*frame_topic, &qos, wire::sessionPartition(session));
     ASSERT_TRUE(info_reader.isOk() && frame_reader.isOk());
     auto owner_topic = wire::Topic<facescan_wire_SessionOwner>::create(*participant);
     ASSERT_TRUE(owner_topic.isOk());

@@ -6,6 +6,8 @@
 #include <fstream>
 #include <string>
 
+#include "sample_replica.hpp"
+#include "wire/cluster_codec.hpp"
 #include "wire/codecs.hpp"
 
 namespace {
@@ -113,6 +115,25 @@ int main(int argc, char** argv) {
                       drc);
             ++written;
         }
+    }
+    // Replicas: whole (mode 0) and, for the body parser, the uncompressed body (mode 1) of a full and a delta.
+    fs::create_directories(out / "replica");
+    for (const bool full : {true, false}) {
+        const ReplicaData r = facescan::testing::sampleReplica(2, full);
+        std::vector<uint8_t> bytes;
+        if (!encodeReplica(r, bytes).isOk()) return 1;
+        std::vector<uint8_t> whole{0};
+        whole.insert(whole.end(), bytes.begin(), bytes.end());
+        writeFile(out / "replica" / (std::string(full ? "full" : "delta") + "_whole.bin"), whole);
+        written += 1;
+    }
+    // Cluster messages: any bytes drive FuzzedDataProvider; a few fixed patterns start it off.
+    fs::create_directories(out / "cluster_messages");
+    for (int i = 0; i < 4; ++i) {
+        std::vector<uint8_t> seed(64 + 32 * i);
+        for (size_t k = 0; k < seed.size(); ++k) seed[k] = static_cast<uint8_t>("srv-a\0scan-1\0"[k % 14] + i);
+        writeFile(out / "cluster_messages" / ("pattern" + std::to_string(i) + ".bin"), seed);
+        ++written;
     }
     std::printf("wrote %d seeds under %s\n", written, out.c_str());
     return 0;

@@ -69,8 +69,8 @@ StatusOr<std::unique_ptr<TestAgent>> TestAgent::create(uint32_t domain, const st
     ASSIGN_OR_RETURN(m.frame_topic, wire::Topic<facescan_wire_RgbdFrame>::create(*m.participant));
     ASSIGN_OR_RETURN(m.camera_writer, wire::Writer<facescan_wire_CameraInfo>::create(*m.camera_topic));
     const wire::Qos qos = wire::frameWriterQos(every_frame);
-    ASSIGN_OR_RETURN(m.frame_writer,
-                     wire::Writer<facescan_wire_RgbdFrame>::create(*m.frame_topic, &qos, wire::sessionPartition(session_id)));
+    ASSIGN_OR_RETURN(m.frame_writer, wire::Writer<facescan_wire_RgbdFrame>::create(*m.frame_topic, &qos,
+                                                                                   wire::sessionPartition(session_id)));
     return agent;
 }
 

@@ -124,8 +124,9 @@ StatusOr<std::unique_ptr<Agent>> Agent::create(AgentOptions options) {
     ASSIGN_OR_RETURN(impl->info_writer, wire::Writer<facescan_wire_CameraInfo>::create(impl->info_topic));
     ASSIGN_OR_RETURN(impl->frame_topic, wire::Topic<facescan_wire_RgbdFrame>::create(impl->participant));
     const wire::Qos frame_qos = wire::frameWriterQos(agent->everyFrame());
-    ASSIGN_OR_RETURN(impl->frame_writer, wire::Writer<facescan_wire_RgbdFrame>::create(
-                                             impl->frame_topic, &frame_qos, wire::sessionPartition(agent->session_id_)));
+    ASSIGN_OR_RETURN(impl->frame_writer,
+                     wire::Writer<facescan_wire_RgbdFrame>::create(impl->frame_topic, &frame_qos,
+                                                                   wire::sessionPartition(agent->session_id_)));
     ASSIGN_OR_RETURN(impl->link, OwnerLink::create(impl->participant, agent->session_id_));
     const int queue = agent->options_.queue_frames;
     impl->slots.resize(static_cast<size_t>(queue));

@@ -12,8 +12,7 @@ StatusOr<OwnerLink> OwnerLink::create(const wire::Participant& participant, cons
     ASSIGN_OR_RETURN(link.owner_topic_, wire::Topic<facescan_wire_SessionOwner>::create(participant));
     ASSIGN_OR_RETURN(link.announce_topic_, wire::Topic<facescan_wire_ServerAnnounce>::create(participant));
     ASSIGN_OR_RETURN(link.owner_reader_, wire::Reader<facescan_wire_SessionOwner>::create(*link.owner_topic_));
-    ASSIGN_OR_RETURN(link.announce_reader_,
-                     wire::Reader<facescan_wire_ServerAnnounce>::create(*link.announce_topic_));
+    ASSIGN_OR_RETURN(link.announce_reader_, wire::Reader<facescan_wire_ServerAnnounce>::create(*link.announce_topic_));
     return link;
 }
 

@@ -55,6 +55,9 @@ struct ReplicaData {
 
 // Encodes `r` into `out` (cleared first). zstd_level trades CPU for bytes (1 = fastest).
 Status encodeReplica(const ReplicaData& r, std::vector<uint8_t>& out, int zstd_level = 1);
+// The header and the compressed frame around an already serialised body (what encodeReplica does after
+// serialising): for the fuzzer, which feeds bodies straight to the parser behind a valid frame.
+Status frameReplicaBody(const uint8_t* body, size_t size, bool full, std::vector<uint8_t>& out, int zstd_level = 1);
 // Decodes and validates. kUnimplemented for another format version (the message says which), kDataLoss for
 // corrupt or truncated bytes, kInvalidArgument/kOutOfRange for values that make no sense.
 Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out);

@@ -11,7 +11,9 @@ constexpr int kMaxResolutionVox = 1024;  // TsdfParams::validate's limit
 bool finitePose(const Pose& T) { return T.matrix().allFinite(); }
 
 // Block coordinates as one integer key (blocks_per_side <= 128 at the largest resolution).
-int64_t blockKey(const Eigen::Vector3i& c) { return (static_cast<int64_t>(c.z()) << 40) | (int64_t{c.y()} << 20) | c.x(); }
+int64_t blockKey(const Eigen::Vector3i& c) {
+    return (static_cast<int64_t>(c.z()) << 40) | (int64_t{c.y()} << 20) | c.x();
+}
 
 }  // namespace
 
@@ -35,7 +37,8 @@ Status ReconState::validate() const {
         return invalidArgument("state: a full state with " + std::to_string(blocks.count()) + " of " +
                                std::to_string(total_blocks) + " blocks");
     }
-    if (full && (trajectory_begin != 0 || since_generation != 0)) return invalidArgument("state: full state with a base");
+    if (full && (trajectory_begin != 0 || since_generation != 0))
+        return invalidArgument("state: full state with a base");
     if (!full && (trajectory_begin > static_cast<size_t>(frames_integrated) || since_generation > generation)) {
         return invalidArgument("state: delta bounds are not consistent");
     }
@@ -94,7 +97,8 @@ Status mergeState(ReconState& base, const ReconState& delta) {
             base.blocks.coords.push_back(delta.blocks.coords[i]);
             base.blocks.voxels.insert(base.blocks.voxels.end(), src, src + kBlockVoxels);
         } else {
-            std::copy_n(src, kBlockVoxels, base.blocks.voxels.begin() + static_cast<ptrdiff_t>(it->second) * kBlockVoxels);
+            std::copy_n(src, kBlockVoxels,
+                        base.blocks.voxels.begin() + static_cast<ptrdiff_t>(it->second) * kBlockVoxels);
         }
     }
     base.placed = delta.placed;

@@ -49,9 +49,8 @@ wire::SessionOwnerData Claim::record() const {
 bool Claim::changed(const wire::SessionOwnerData& b) const {
     const wire::SessionOwnerData& a = record_;
     return a.owner_id != b.owner_id || a.standby_id != b.standby_id || a.epoch != b.epoch || a.state != b.state ||
-           a.resume_seq != b.resume_seq || a.replay_request != b.replay_request ||
-           a.confirmed_seq != b.confirmed_seq || a.failovers != b.failovers ||
-           a.last_takeover_ms != b.last_takeover_ms;
+           a.resume_seq != b.resume_seq || a.replay_request != b.replay_request || a.confirmed_seq != b.confirmed_seq ||
+           a.failovers != b.failovers || a.last_takeover_ms != b.last_takeover_ms;
 }
 
 void Claim::publishLocked() {
@@ -108,7 +107,8 @@ void Cluster::announce(int open_sessions, int standby_sessions, bool force) {
     }
     const int64_t cpu = processCpuNs();
     if (now - cpu_wall_ns_ > 200'000'000) {  // load over at least 0.2 s
-        self_.cpu_load = static_cast<float>(static_cast<double>(cpu - cpu_last_ns_) / static_cast<double>(now - cpu_wall_ns_));
+        self_.cpu_load =
+            static_cast<float>(static_cast<double>(cpu - cpu_last_ns_) / static_cast<double>(now - cpu_wall_ns_));
         cpu_last_ns_ = cpu;
         cpu_wall_ns_ = now;
     }
@@ -137,7 +137,7 @@ Status Cluster::poll() {
 
 Status Cluster::checkDuplicate(const wire::ServerAnnounceData& other) const {
     if (other.incarnation == self_.incarnation) return Status::ok();  // our own announcement
-    if (deadLocalProcess(other)) return Status::ok();                   // our killed predecessor: its lease lapses
+    if (deadLocalProcess(other)) return Status::ok();                 // our killed predecessor: its lease lapses
     // Whoever started first keeps the id; the other refuses (both see both, so exactly one of them stops).
     const bool other_first = other.started_ns != self_.started_ns ? other.started_ns < self_.started_ns
                                                                   : other.incarnation < self_.incarnation;
@@ -145,11 +145,11 @@ Status Cluster::checkDuplicate(const wire::ServerAnnounceData& other) const {
     const double up_s = static_cast<double>(realtimeNowNs() - other.started_ns) * 1e-9;
     char up[32];
     std::snprintf(up, sizeof(up), "%.0f", std::max(0.0, up_s));
-    return Status(StatusCode::kAlreadyExists,
-                  "another facescan-server named '" + other.server_id + "' is already running on " +
-                      options_.domain.profile + " domain " + std::to_string(options_.domain.domain_id) + " (host " +
-                      other.host + ", pid " + std::to_string(other.pid) + ", up " + up +
-                      " s): give this one another --server-id");
+    return Status(StatusCode::kAlreadyExists, "another facescan-server named '" + other.server_id +
+                                                  "' is already running on " + options_.domain.profile + " domain " +
+                                                  std::to_string(options_.domain.domain_id) + " (host " + other.host +
+                                                  ", pid " + std::to_string(other.pid) + ", up " + up +
+                                                  " s): give this one another --server-id");
 }
 
 Status Cluster::takeAnnouncements() {
@@ -233,7 +233,13 @@ std::vector<PeerView> Cluster::peers() const {
 bool Cluster::serverAlive(const std::string& server_id) const {
     std::lock_guard lk(mutex_);
     const auto it = peers_.find(server_id);
-    return it != peers_.end() && it->second.alive && !deadLocalProcess(it->second.announce);
+    return it != peers_.end() && it->second.alive;
+}
+
+bool Cluster::diedOnThisHost(const std::string& server_id) const {
+    std::lock_guard lk(mutex_);
+    const auto it = peers_.find(server_id);
+    return it != peers_.end() && deadLocalProcess(it->second.announce);
 }
 
 int64_t Cluster::lastHeard(const std::string& server_id) const {
@@ -253,7 +259,7 @@ std::vector<ServerLoad> Cluster::liveLoads() const {
     std::vector<ServerLoad> out;
     for (const auto& [id, p] : peers_) {
         const wire::ServerAnnounceData& a = p.announce;
-        if (!p.alive || a.joining || a.protocol_version != wire::kClusterProtocolVersion || deadLocalProcess(a)) {
+        if (!p.alive || a.joining || a.protocol_version != wire::kClusterProtocolVersion) {
             continue;
         }
         out.push_back({id, static_cast<int>(a.max_sessions), open[id], static_cast<int>(a.standby_sessions)});

@@ -54,8 +54,7 @@ std::string chooseStandby(const std::string& session_id, const std::string& owne
     const ServerLoad* best = nullptr;
     for (const ServerLoad& s : servers) {
         if (s.server_id == owner_id) continue;
-        if (!best || s.standby < best->standby ||
-            (s.standby == best->standby && lessLoaded(s, *best, session_id))) {
+        if (!best || s.standby < best->standby || (s.standby == best->standby && lessLoaded(s, *best, session_id))) {
             best = &s;
         }
     }

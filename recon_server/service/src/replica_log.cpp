@@ -93,7 +93,8 @@ StatusOr<wire::ReplicaData> loadReplicaLog(const std::filesystem::path& dir, std
         ++records;
         at += kRecordHeader + size;
     }
-    if (records == 0) return dataLoss(path.string() + " holds no usable replica" + (problem.empty() ? "" : ": " + problem));
+    if (records == 0)
+        return dataLoss(path.string() + " holds no usable replica" + (problem.empty() ? "" : ": " + problem));
     if (!problem.empty() && warning) {
         *warning = path.string() + ": resuming from round " + std::to_string(state.round) + ", skipped " + problem;
     }

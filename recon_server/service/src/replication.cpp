@@ -17,8 +17,8 @@ double msSince(int64_t t0) { return static_cast<double>(steadyNowNs() - t0) * 1e
 
 struct Replicator::Outgoing {
     uint32_t epoch = 0;
-    uint32_t round = 0;    // the last round made (1, 2, ...)
-    std::string standby;   // empty: none (the data dir alone confirms)
+    uint32_t round = 0;   // the last round made (1, 2, ...)
+    std::string standby;  // empty: none (the data dir alone confirms)
     bool need_full = true;
     int rounds_since_full = 0;
     int64_t next_due_ns = 0;
@@ -86,7 +86,8 @@ void Replicator::loop() {
             out->next_due_ns = steadyNowNs() + interval_ns;
             replicate(*o, *out);
         }
-        for (auto it = outgoing_.begin(); it != outgoing_.end();) it = live.count(it->first) ? std::next(it) : outgoing_.erase(it);
+        for (auto it = outgoing_.begin(); it != outgoing_.end();)
+            it = live.count(it->first) ? std::next(it) : outgoing_.erase(it);
         forgetStaleCopies();
         if (steadyNowNs() >= stats_due_ns) {
             stats_due_ns = steadyNowNs() + kStatsEveryNs;
@@ -216,7 +217,8 @@ void Replicator::takeAcks() {
             if (m.need_full) {
                 out.need_full = true;
                 out.sent.clear();
-                std::fprintf(stderr, "facescan-server: session %s: standby '%s' refused round %u (%s): sending a full "
+                std::fprintf(stderr,
+                             "facescan-server: session %s: standby '%s' refused round %u (%s): sending a full "
                              "replica\n",
                              session.c_str(), standby.c_str(), m.round, wire::fromDds(m.error).c_str());
                 return;
@@ -229,7 +231,8 @@ void Replicator::takeAcks() {
             const uint32_t confirmed = std::min(out.disk_next_seq, out.acked_next_seq);
             for (const auto& o : owned_()) {
                 if (o->id != session || !o->claim) continue;
-                o->claim->update([&](wire::SessionOwnerData& r) { r.confirmed_seq = std::max(r.confirmed_seq, confirmed); });
+                o->claim->update(
+                    [&](wire::SessionOwnerData& r) { r.confirmed_seq = std::max(r.confirmed_seq, confirmed); });
             }
         },
         64);

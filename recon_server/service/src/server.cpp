@@ -1,7 +1,5 @@
 #include "service/server.hpp"
 
-#include "service/replication.hpp"
-
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -11,6 +9,8 @@
 #include <cstdio>
 #include <future>
 #include <thread>
+
+#include "service/replication.hpp"
 
 namespace facescan::service {
 namespace {
@@ -229,9 +229,9 @@ void Server::takeCameraInfos() {
                 return;
             }
             if (candidates_.count(id) == 0 && candidates_.size() >= kMaxCandidates) {
-                auto oldest = std::min_element(candidates_.begin(), candidates_.end(), [](const auto& a, const auto& b) {
-                    return a.second.first_seen_ns < b.second.first_seen_ns;
-                });
+                auto oldest = std::min_element(
+                    candidates_.begin(), candidates_.end(),
+                    [](const auto& a, const auto& b) { return a.second.first_seen_ns < b.second.first_seen_ns; });
                 candidates_.erase(oldest);
             }
             Candidate& c = candidates_[id];
@@ -296,14 +296,14 @@ void Server::takeFramesOf(OwnedSession& o) {
             // Full recording queue: mark what waits as read so that it stops waking the intake; the guard
             // condition wakes us when the worker made room, and the samples are taken then.
             samples[0] = nullptr;
-            const dds_return_t n = dds_read_mask(reader, samples, infos, kBatch, kBatch,
-                                                 DDS_NOT_READ_SAMPLE_STATE | DDS_ANY_VIEW_STATE | DDS_ANY_INSTANCE_STATE);
+            const dds_return_t n =
+                dds_read_mask(reader, samples, infos, kBatch, kBatch,
+                              DDS_NOT_READ_SAMPLE_STATE | DDS_ANY_VIEW_STATE | DDS_ANY_INSTANCE_STATE);
             if (n > 0) dds_return_loan(reader, samples, n);
             return;
         }
         samples[0] = nullptr;
-        const dds_return_t n =
-            dds_take(reader, samples, infos, static_cast<size_t>(room), static_cast<uint32_t>(room));
+        const dds_return_t n = dds_take(reader, samples, infos, static_cast<size_t>(room), static_cast<uint32_t>(room));
         if (n <= 0) return;
         for (int i = 0; i < n; ++i) {
             if (!infos[i].valid_data) {

@@ -130,9 +130,10 @@ void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
     for (const auto& o : ownedSessions()) {
         const auto it = owners.find(o->id);
         const OwnerView* view = it == owners.end() ? nullptr : &it->second;
-        const bool ours = view && view->alive && view->data.owner_id == params_.server_id && view->data.epoch == o->epoch;
-        const bool beaten = view && view->alive && !ours &&
-                            (view->data.owner_id != params_.server_id || view->data.epoch > o->epoch);
+        const bool ours =
+            view && view->alive && view->data.owner_id == params_.server_id && view->data.epoch == o->epoch;
+        const bool beaten =
+            view && view->alive && !ours && (view->data.owner_id != params_.server_id || view->data.epoch > o->epoch);
         if (o->phase == OwnedSession::Phase::kClaiming) {
             if (beaten) {
                 yield(o->id, "server '" + view->data.owner_id + "' claimed it too (epoch " +
@@ -171,8 +172,8 @@ Status Server::activate(OwnedSession& o) {
     const wire::Qos qos = wire::frameReaderQos();
     ASSIGN_OR_RETURN(o.frames, wire::boxed(wire::Reader<facescan_wire_RgbdFrame>::create(
                                    *frame_topic_, &qos, wire::sessionPartition(o.id))));
-    o.frame_condition = dds_create_readcondition(o.frames->handle(),
-                                                 DDS_NOT_READ_SAMPLE_STATE | DDS_ANY_VIEW_STATE | DDS_ANY_INSTANCE_STATE);
+    o.frame_condition = dds_create_readcondition(
+        o.frames->handle(), DDS_NOT_READ_SAMPLE_STATE | DDS_ANY_VIEW_STATE | DDS_ANY_INSTANCE_STATE);
     if (o.frame_condition < 0) return wire::ddsStatus(o.frame_condition, "create read condition");
     if (const dds_return_t rc = dds_waitset_attach(waitset_.handle(), o.frame_condition, o.frame_condition); rc < 0) {
         return wire::ddsStatus(rc, "attach read condition");
@@ -206,7 +207,8 @@ void Server::yield(const std::string& session_id, const std::string& why) {
     if (o->session && st.frames_integrated > 0 && !o->session->finished()) {
         // It integrated frames here: keep them, as this server's result, in its own folder (session_store's
         // owner rule puts them beside the other owner's files when both share a data dir).
-        std::fprintf(stderr, "facescan-server: session %s: gave it up, %s; writing what this server integrated (%u "
+        std::fprintf(stderr,
+                     "facescan-server: session %s: gave it up, %s; writing what this server integrated (%u "
                      "frames) to its data dir\n",
                      session_id.c_str(), why.c_str(), st.frames_integrated);
         std::shared_ptr<Session> keep = o->session;
@@ -222,8 +224,11 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
     //    restart. The new claim's epoch is higher, so it beats the old one even before that one lapses.
     for (const auto& [id, view] : owners) {
         if (view.disposed || !holding(view.data.state) || owned(id)) continue;
-        const bool stale_self = view.data.owner_id == params_.server_id;  // an earlier process with our id
-        const bool gone = !view.alive || stale_self || !cluster_->serverAlive(view.data.owner_id);
+        // Gone: its claim lapsed with its liveliness. A server restarted on the dead owner's data dir need not wait
+        // for the lease when the owner was an earlier process with its id, or a dead process of this host.
+        const bool restart = resumable_.count(id) > 0;
+        const bool stale_self = restart && view.data.owner_id == params_.server_id;
+        const bool gone = !view.alive || stale_self || (restart && cluster_->diedOnThisHost(view.data.owner_id));
         if (!gone) continue;
         std::optional<wire::ReplicaData> copy;
         if (view.data.standby_id == params_.server_id) copy = replicator_->standbyCopy(id);
@@ -236,7 +241,8 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         }
         if (!copy) continue;  // nothing to continue from: the session waits for a server that has its replica
         if (copy->next_seq < view.data.confirmed_seq) {
-            std::fprintf(stderr, "facescan-server: session %s: this server's replica (frame %u) is older than what "
+            std::fprintf(stderr,
+                         "facescan-server: session %s: this server's replica (frame %u) is older than what "
                          "the agent still keeps (from frame %u): not taking it over\n",
                          id.c_str(), copy->next_seq, view.data.confirmed_seq);
             continue;
@@ -268,7 +274,8 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             wire::SessionOwnerData previous;
             previous.failovers = o->restore_from->counters.failovers;
             if (const Status s = claimSession(it->first, epoch, o, previous); !s.isOk()) {
-                std::fprintf(stderr, "facescan-server: cannot resume %s: %s\n", it->first.c_str(), s.toString().c_str());
+                std::fprintf(stderr, "facescan-server: cannot resume %s: %s\n", it->first.c_str(),
+                             s.toString().c_str());
             }
             it = resumable_.erase(it);
             continue;
@@ -296,8 +303,8 @@ void Server::requestReplays() {
 void Server::releaseStale() {
     const int64_t first_frame_ns = static_cast<int64_t>(params_.first_frame_timeout_s * 1e9);
     for (const auto& o : ownedSessions()) {
-        if (o->phase == OwnedSession::Phase::kReady && steadyNowNs() - o->ready_ns > first_frame_ns &&
-            o->session && o->session->stats().frames_received == 0 && o->session->nextSeq() == 0) {
+        if (o->phase == OwnedSession::Phase::kReady && steadyNowNs() - o->ready_ns > first_frame_ns && o->session &&
+            o->session->stats().frames_received == 0 && o->session->nextSeq() == 0) {
             std::fprintf(stderr, "facescan-server: session %s: released, no frame came within %.0f s\n", o->id.c_str(),
                          static_cast<double>(params_.first_frame_timeout_s));
             if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);

@@ -1,7 +1,5 @@
 #include "service/server_params.hpp"
 
-#include "wire/cluster_codec.hpp"
-
 #include <unistd.h>
 
 #include <charconv>
@@ -9,6 +7,8 @@
 #include <fstream>
 #include <functional>
 #include <map>
+
+#include "wire/cluster_codec.hpp"
 
 namespace facescan::service {
 namespace {
@@ -211,11 +211,13 @@ Status ServerParams::validate() const {
     if (data_dir.empty()) return invalidArgument("--data-dir must not be empty");
     if (Status s = wire::validateServerId(server_id); !s.isOk()) return invalidArgument("--server-id: " + s.message());
     if (!(replica_interval_s >= 0.05f && replica_interval_s <= 2.0f)) {
-        return invalidArgument("--replica-interval-s must be in [0.05, 2] seconds (a standby must be at most 2 s behind)");
+        return invalidArgument(
+            "--replica-interval-s must be in [0.05, 2] seconds (a standby must be at most 2 s behind)");
     }
     if (replica_full_every < 1 || replica_full_every > 10000) return invalidArgument("replica_full_every: 1..10000");
     if (replica_zstd_level < 1 || replica_zstd_level > 19) return invalidArgument("replica_zstd_level: 1..19");
-    if (!(join_settle_s >= 0 && join_settle_s <= 60)) return invalidArgument("join_settle_s must be in [0, 60] seconds");
+    if (!(join_settle_s >= 0 && join_settle_s <= 60))
+        return invalidArgument("join_settle_s must be in [0, 60] seconds");
     if (!(claim_settle_s >= 0 && claim_settle_s <= 10)) return invalidArgument("claim_settle_s must be in [0, 10] s");
     if (!(first_frame_timeout_s >= 1 && first_frame_timeout_s <= 3600)) {
         return invalidArgument("first_frame_timeout_s must be in [1, 3600] seconds");

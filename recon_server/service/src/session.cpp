@@ -360,7 +360,7 @@ void Session::processFrame(PendingFrame& pending) {
         stats_.detail = head.depth_only ? "face found (depth only)" : "face found";
         if (!recon_->trajectory().empty()) trajectory_.push_back(recon_->trajectory().back());
         last_pose_ = recon_->lastPose();
-        if (takeover_from_ns_ != 0) noteFirstFrameAfterTakeover(now);
+        if (takeover_from_ns_ != 0) noteFirstFrameAfterTakeover(pending.seq, now);
         recordLatency(static_cast<float>(pose_known_ns - pending.capture_time_ns) * 1e-6f);
         return;
     }

@@ -37,14 +37,14 @@ void Session::applyReplicaLocked(const wire::ReplicaData& r, int64_t takeover_fr
     takeover_from_ns_ = takeover_from_ns;
 }
 
-void Session::noteFirstFrameAfterTakeover(int64_t now_ns) {
+void Session::noteFirstFrameAfterTakeover(uint32_t seq, int64_t now_ns) {
     stats_.last_takeover_ms = static_cast<float>(static_cast<double>(now_ns - takeover_from_ns_) * 1e-6);
     takeover_from_ns_ = 0;
     // The wall clock too: tests/bench/cluster.sh measures from the moment it killed the old owner.
     std::fprintf(stderr,
                  "facescan-server: session %s: first frame integrated after the takeover (frame %u, %.0f ms after the "
                  "old owner's last sign of life, at realtime_ns %lld)\n",
-                 id_.c_str(), processed_next_seq_, static_cast<double>(stats_.last_takeover_ms),
+                 id_.c_str(), seq, static_cast<double>(stats_.last_takeover_ms),
                  static_cast<long long>(realtimeNowNs()));
 }
 

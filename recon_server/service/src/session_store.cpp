@@ -129,8 +129,8 @@ StatusOr<std::filesystem::path> claimSessionDir(const std::filesystem::path& dat
             if (ec) return internalError("cannot create " + dir.string() + ": " + ec.message());
             if (note) {
                 *note = "session " + session_id + ": " + (data_dir / session_id).string() + " belongs to server '" +
-                        current->first + "' (epoch " + std::to_string(current->second) + "); this server's files (epoch " +
-                        std::to_string(epoch) + ") go to " + dir.string();
+                        current->first + "' (epoch " + std::to_string(current->second) +
+                        "); this server's files (epoch " + std::to_string(epoch) + ") go to " + dir.string();
             }
         } else {
             previous = ", \"previous\": {\"server_id\": \"" + current->first +
@@ -139,8 +139,8 @@ StatusOr<std::filesystem::path> claimSessionDir(const std::filesystem::path& dat
     } else if (current && current->second >= epoch) {
         return dir;  // ours already
     }
-    const std::string owner = "{\"server_id\": \"" + jsonEscape(server_id) + "\", \"epoch\": " +
-                              std::to_string(epoch) + previous + "}\n";
+    const std::string owner =
+        "{\"server_id\": \"" + jsonEscape(server_id) + "\", \"epoch\": " + std::to_string(epoch) + previous + "}\n";
     RETURN_IF_ERROR(writeFileAtomic(dir / "owner.json", owner));
     return dir;
 }

@@ -50,7 +50,7 @@ struct AgentStats {
     double ratio = 0;        // raw bytes / compressed bytes so far
     int servers = 0;         // servers alive on the domain
     // The session's owner (issue 13).
-    std::string owner;       // empty: none yet
+    std::string owner;  // empty: none yet
     std::string standby;
     uint32_t epoch = 0;
     uint32_t takeovers = 0;  // owner changes seen while streaming

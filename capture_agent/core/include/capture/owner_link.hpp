@@ -8,8 +8,8 @@
 //                 the owner names. Bounded: when full, the agent waits (a recording loses nothing).
 #pragma once
 
-#include <cstdint>
 #include <atomic>
+#include <cstdint>
 #include <deque>
 #include <functional>
 #include <map>
@@ -82,11 +82,11 @@ struct StreamState {
     std::string owner;  // empty: none yet
     std::string standby;
     uint32_t epoch = 0;
-    uint32_t takeovers = 0;  // owner changes seen while streaming
-    uint32_t replayed = 0;   // frames sent again
-    size_t kept = 0;         // recording frames kept until confirmed
-    std::string waiting;     // why nothing is sent now (empty: streaming)
-    int servers = 0;         // servers alive on the domain
+    uint32_t takeovers = 0;                    // owner changes seen while streaming
+    uint32_t replayed = 0;                     // frames sent again
+    size_t kept = 0;                           // recording frames kept until confirmed
+    std::string waiting;                       // why nothing is sent now (empty: streaming)
+    int servers = 0;                           // servers alive on the domain
     uint64_t digest = wire::kFrameDigestSeed;  // of every frame sent (the first time), as the server digests them
 };
 

@@ -124,13 +124,13 @@ class TsdfVolume {
     TsdfParams params_;
     VoxelBlockGrid grid_;
     bool placed_ = false;
-    uint64_t generation_ = 0;              // integrations so far (monotonic across resets)
-    uint64_t reset_generation_ = 0;        // generation_ at the last reset
+    uint64_t generation_ = 0;                 // integrations so far (monotonic across resets)
+    uint64_t reset_generation_ = 0;           // generation_ at the last reset
     std::vector<uint64_t> block_generation_;  // per pool slot: the generation that last touched it
-    std::vector<uint8_t> block_flag_;  // per block: touched this frame
-    std::vector<int32_t> touched_;     // pool indices of the blocks touched this frame
-    cv::Mat pixel_range_m_;            // CV_32F, metres: distance to the measured surface along each pixel's ray
-    cv::Mat pixel_weight_;             // CV_32F: Algorithm 3 weight of each pixel's measurement, 0 = unusable
+    std::vector<uint8_t> block_flag_;         // per block: touched this frame
+    std::vector<int32_t> touched_;            // pool indices of the blocks touched this frame
+    cv::Mat pixel_range_m_;                   // CV_32F, metres: distance to the measured surface along each pixel's ray
+    cv::Mat pixel_weight_;                    // CV_32F: Algorithm 3 weight of each pixel's measurement, 0 = unusable
 };
 
 }  // namespace facescan::recon

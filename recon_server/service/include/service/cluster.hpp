@@ -92,7 +92,10 @@ class Cluster {
 
     // The view (copies).
     std::vector<PeerView> peers() const;
+    // Alive as DDS liveliness says (a killed server stays alive here until its lease lapses).
     bool serverAlive(const std::string& server_id) const;
+    // A server whose announced process of this host no longer exists: a restart here need not wait for its lease.
+    bool diedOnThisHost(const std::string& server_id) const;
     // Steady clock of the last announcement heard from a server (0: never).
     int64_t lastHeard(const std::string& server_id) const;
     // Live, joined, compatible servers with their load: self included once joined. Open counts come from the
@@ -132,6 +135,5 @@ class Cluster {
     int64_t cpu_last_ns_ = 0;  // CPU time of this process at the last announcement (for cpu_load)
     int64_t cpu_wall_ns_ = 0;
 };
-
 
 }  // namespace facescan::service

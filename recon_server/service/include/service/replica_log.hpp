@@ -24,8 +24,8 @@ class ReplicaLog {
 
     // Appends one encoded round (a full one starts the file over). Synced to disk when it returns ok.
     Status append(const std::vector<uint8_t>& encoded, bool full);
-    uint64_t bytes() const { return bytes_; }            // size of the file now
-    uint64_t fullBytes() const { return full_bytes_; }   // size of its full record
+    uint64_t bytes() const { return bytes_; }           // size of the file now
+    uint64_t fullBytes() const { return full_bytes_; }  // size of its full record
     const std::filesystem::path& dir() const { return dir_; }
 
  private:

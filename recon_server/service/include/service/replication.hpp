@@ -34,12 +34,12 @@ struct OwnedSession;
 struct ReplicationStats {
     uint64_t rounds = 0;
     uint64_t full_rounds = 0;
-    uint64_t bytes_sent = 0;       // replica bytes written to standbys
-    uint64_t bytes_on_disk = 0;    // replica bytes appended to the data dir
-    double capture_ms = 0;         // total: worker time taking the state
-    double encode_ms = 0;          // total: encoding and compressing
-    double disk_ms = 0;            // total: appending and syncing
-    uint64_t rejected = 0;         // replicas received and refused (corrupt, out of order, incompatible)
+    uint64_t bytes_sent = 0;     // replica bytes written to standbys
+    uint64_t bytes_on_disk = 0;  // replica bytes appended to the data dir
+    double capture_ms = 0;       // total: worker time taking the state
+    double encode_ms = 0;        // total: encoding and compressing
+    double disk_ms = 0;          // total: appending and syncing
+    uint64_t rejected = 0;       // replicas received and refused (corrupt, out of order, incompatible)
 };
 
 class Replicator {
@@ -73,8 +73,8 @@ class Replicator {
     void takeReplicas();
     void takeAcks();
     void replicate(OwnedSession& owned, Outgoing& out);
-    void ack(const std::string& session_id, const std::string& owner_id, uint32_t epoch, uint32_t round,
-             bool need_full, const std::string& error);
+    void ack(const std::string& session_id, const std::string& owner_id, uint32_t epoch, uint32_t round, bool need_full,
+             const std::string& error);
     void forgetStaleCopies();
     wire::Writer<facescan_wire_SessionReplica>* replicaWriter(const std::string& standby_id);
     wire::Writer<facescan_wire_ReplicaAck>* ackWriter(const std::string& owner_id);

@@ -48,12 +48,12 @@ struct OwnedSession {
     int64_t ready_ns = 0;
     std::filesystem::path dir;  // its folder in the data dir (owner.json names this server)
     std::shared_ptr<Session> session;
-    std::optional<wire::CameraInfoData> camera;      // a new session: from its CameraInfo
-    std::optional<wire::ReplicaData> restore_from;   // a takeover or a restart: the state to continue from
-    int64_t takeover_from_ns = 0;                    // the old owner's last sign of life (steady clock)
+    std::optional<wire::CameraInfoData> camera;     // a new session: from its CameraInfo
+    std::optional<wire::ReplicaData> restore_from;  // a takeover or a restart: the state to continue from
+    int64_t takeover_from_ns = 0;                   // the old owner's last sign of life (steady clock)
     std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames;
     dds_entity_t frame_condition = 0;
-    bool ahead = false;                // a recording frame after a gap arrived: the agent must resend
+    bool ahead = false;  // a recording frame after a gap arrived: the agent must resend
     int64_t last_replay_request_ns = 0;
     dds_instance_handle_t camera_writer = 0;  // the CameraInfo writer (flood control)
 };
@@ -152,7 +152,7 @@ class Server {
     // Intake thread only.
     std::map<std::string, Candidate> candidates_;
     std::map<std::string, wire::ReplicaData> resumable_;  // from the data dir, waiting for the join to end
-    std::deque<Command> deferred_;                         // commands for sessions being claimed here
+    std::deque<Command> deferred_;                        // commands for sessions being claimed here
 
     std::mutex command_mutex_;
     std::condition_variable command_cv_;

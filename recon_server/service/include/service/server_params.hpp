@@ -30,11 +30,11 @@ struct ServerParams {
     wire::DomainConfig domain{0, "lan"};
     std::string server_id;  // in every reply, status and announcement; default "<hostname>-<pid>"; [A-Za-z0-9._-]
     // The cluster (issue 13).
-    float replica_interval_s = 1.0f;  // seconds between replicas of a session (to the standby and the data dir)
-    int replica_full_every = 30;      // rounds; every this many, a full replica (the data dir's log starts over)
-    int replica_zstd_level = 1;       // 1 (fastest) .. 19
-    float join_settle_s = 2.0f;       // seconds of discovery after start before taking sessions
-    float claim_settle_s = 0.25f;     // seconds a claim must stand before the owner reads frames
+    float replica_interval_s = 1.0f;      // seconds between replicas of a session (to the standby and the data dir)
+    int replica_full_every = 30;          // rounds; every this many, a full replica (the data dir's log starts over)
+    int replica_zstd_level = 1;           // 1 (fastest) .. 19
+    float join_settle_s = 2.0f;           // seconds of discovery after start before taking sessions
+    float claim_settle_s = 0.25f;         // seconds a claim must stand before the owner reads frames
     float first_frame_timeout_s = 10.0f;  // seconds a claimed session may wait for its first frame (then released)
 
     Status validate() const;

@@ -168,7 +168,7 @@ class Session {
     Status start(const wire::CameraInfoData& camera, const wire::ReplicaData* replica, int64_t takeover_from_ns);
     void applyReplicaLocked(const wire::ReplicaData& replica, int64_t takeover_from_ns);
     void captureOnWorker(bool full, ReplicaCapture& out);
-    void noteFirstFrameAfterTakeover(int64_t now_ns);  // mutex_ held
+    void noteFirstFrameAfterTakeover(uint32_t seq, int64_t now_ns);  // mutex_ held
     void workerLoop();
     void processFrame(PendingFrame& pending);
     void copySnapshotIfAsked();
@@ -194,7 +194,7 @@ class Session {
     uint32_t processed_next_seq_ = 0;
     uint64_t replica_generation_ = 0;
     size_t replica_trajectory_ = 0;
-    int64_t takeover_from_ns_ = 0;  // steady clock; 0 = no takeover pending
+    int64_t takeover_from_ns_ = 0;                             // steady clock; 0 = no takeover pending
     std::vector<std::pair<int64_t, recon::Pose>> trajectory_;  // copy of the recon core's, for other threads
     recon::Pose last_pose_ = recon::Pose::Identity();
     std::vector<float> latency_ms_;  // ring of the last kLatencyWindow
@@ -202,7 +202,7 @@ class Session {
     std::deque<int64_t> processed_ns_;  // steady times of recently processed frames (fps)
     int64_t first_processed_ns_ = 0, last_processed_ns_ = 0;
     uint64_t processed_count_ = 0;
-    double duration_before_s_ = 0;  // processing time before a restore (the replica's)
+    double duration_before_s_ = 0;   // processing time before a restore (the replica's)
     uint64_t processed_before_ = 0;  // frames processed before a restore
     recon::StageTimesMs ms_sum_;
     uint64_t ms_count_ = 0;

@@ -1,0 +1,197 @@
+// Failover and restart without loss (issue 13), with the real programs and SIGKILL:
+//   - the owner of a recording killed mid-scan: its standby takes over, every frame is integrated exactly once,
+//     the mesh matches an uninterrupted run's, the trajectory has no jump, the frames arrive bit-exact;
+//   - a lone server killed and restarted on the same data dir resumes the scan without losing a frame;
+//   - a live scan carries on after a takeover, and its status reports the takeover and the gap.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <sstream>
+
+#include "cluster_rig.hpp"
+#include "eval/accuracy.hpp"
+#include "eval/mesh_io.hpp"
+
+namespace facescan::testing {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+constexpr int kFrames = 60;
+
+struct Finished {
+    std::string summary;
+    int integrated = 0, rejected = 0, dropped = 0, received = 0;
+    std::string digest;
+    int failovers = 0;
+};
+
+Finished finishedSession(const fs::path& dir) {
+    Finished f;
+    f.summary = readText(dir / "summary.json");
+    const auto num = [&](const std::string& key) {
+        const std::string v = lastMatch(f.summary, "\"" + key + "\": ([0-9]+)");
+        return v.empty() ? -1 : std::stoi(v);
+    };
+    f.integrated = num("integrated");
+    f.rejected = num("rejected");
+    f.dropped = num("dropped");
+    f.received = num("received");
+    f.failovers = num("failovers");
+    f.digest = jsonField(f.summary, "frames_digest");
+    return f;
+}
+
+std::string agentDigest(const ClusterRig& rig, const std::string& session) {
+    return lastMatch(readText(rig.agentLog(session)), "frames digest ([0-9a-f]{16})");
+}
+
+// TUM lines: timestamp and camera position (the trajectory is in the first camera's frame).
+std::vector<std::pair<std::string, Eigen::Vector3d>> readTrajectory(const fs::path& path) {
+    std::vector<std::pair<std::string, Eigen::Vector3d>> out;
+    std::istringstream in(readText(path));
+    for (std::string line; std::getline(in, line);) {
+        std::istringstream l(line);
+        std::string t;
+        Eigen::Vector3d p;
+        if (l >> t >> p.x() >> p.y() >> p.z()) out.emplace_back(t, p);
+    }
+    return out;
+}
+
+// Runs a recording to its end; the owner is killed once `kill_after` frames were sent (0: never).
+std::string recordAndMaybeKill(ClusterRig& rig, const std::string& session, int kill_after) {
+    rig.startAgent(session, kFrames, "max");
+    const std::string owner = rig.waitForOwner(session, 30s);
+    if (owner.empty() || kill_after == 0) return owner;
+    EXPECT_TRUE(waitUntil([&] { return rig.published(session) >= kill_after; }, 60s))
+        << readText(rig.agentLog(session));
+    rig.server(owner).kill9();
+    return owner;
+}
+
+TEST(Failover, KilledOwnerMidRecordingLosesNoFrameAndMatchesAnUninterruptedRun) {
+    // The uninterrupted run: one server.
+    ClusterRig base("baseline", 41);
+    base.startServer("base");
+    ASSERT_FALSE(recordAndMaybeKill(base, "rec", 0).empty());
+    ASSERT_EQ(base.agent("rec").wait(120s), 0) << readText(base.agentLog("rec"));
+    const fs::path base_dir = base.dataDir("base") / "rec";
+    const Finished expected = finishedSession(base_dir);
+    ASSERT_EQ(expected.integrated + expected.rejected, kFrames) << expected.summary;
+
+    // The same recording on two servers; the owner dies half way through.
+    ClusterRig rig("failover", 42);
+    rig.startServer("srv-a");
+    rig.startServer("srv-b");
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    const std::string owner = recordAndMaybeKill(rig, "rec", kFrames / 2);
+    ASSERT_FALSE(owner.empty());
+    const std::string standby = owner == "srv-a" ? "srv-b" : "srv-a";
+    ASSERT_EQ(rig.agent("rec").wait(120s), 0) << readText(rig.agentLog("rec"));
+    const std::string agent_log = readText(rig.agentLog("rec"));
+    EXPECT_NE(agent_log.find("taken over by '" + standby + "'"), std::string::npos) << agent_log;
+
+    const fs::path dir = rig.dataDir(standby) / "rec";
+    const Finished got = finishedSession(dir);
+    // Every frame integrated (or rejected) exactly once, as in the uninterrupted run; none dropped.
+    EXPECT_EQ(got.received, kFrames) << got.summary;
+    EXPECT_EQ(got.integrated + got.rejected, kFrames) << got.summary;
+    EXPECT_EQ(got.integrated, expected.integrated) << got.summary;
+    EXPECT_EQ(got.dropped, 0);
+    EXPECT_EQ(got.failovers, 1);
+    // Bit-exact: the frames the server integrated are the bytes the agent sent, in order.
+    EXPECT_EQ(got.digest, agentDigest(rig, "rec"));
+    EXPECT_EQ(got.digest, expected.digest);
+    EXPECT_EQ(jsonField(readText(dir / "owner.json"), "server_id"), standby);
+
+    // The mesh: within measurement noise of the uninterrupted run's (both in the first camera's frame).
+    auto mesh = eval::readMesh(dir / "mesh.ply");
+    auto reference = eval::readMesh(base_dir / "mesh.ply");
+    ASSERT_TRUE(mesh.isOk() && reference.isOk());
+    const eval::SurfaceDistance to_reference(*reference);
+    double sum_m = 0;
+    for (const auto& v : mesh->vertices()) {
+        const auto& p = mesh->point(v);
+        sum_m += to_reference.query(Eigen::Vector3f(p[0], p[1], p[2])).distance_m;
+    }
+    const double mean_mm = sum_m / static_cast<double>(mesh->n_vertices()) * 1e3;
+    std::printf("failover mesh vs uninterrupted: mean %.4f mm over %zu vertices (%zu in the reference)\n", mean_mm,
+                mesh->n_vertices(), reference->n_vertices());
+    EXPECT_LT(mean_mm, 0.05);
+
+    // The trajectory: the same frames, no jump at the takeover.
+    const auto traj = readTrajectory(dir / "trajectory.txt");
+    const auto ref = readTrajectory(base_dir / "trajectory.txt");
+    ASSERT_EQ(traj.size(), ref.size());
+    double worst_mm = 0, worst_step_mm = 0, ref_worst_step_mm = 0;
+    for (size_t i = 0; i < traj.size(); ++i) {
+        EXPECT_EQ(traj[i].first, ref[i].first) << "frame " << i;
+        worst_mm = std::max(worst_mm, (traj[i].second - ref[i].second).norm() * 1e3);
+        if (i > 0) {
+            worst_step_mm = std::max(worst_step_mm, (traj[i].second - traj[i - 1].second).norm() * 1e3);
+            ref_worst_step_mm = std::max(ref_worst_step_mm, (ref[i].second - ref[i - 1].second).norm() * 1e3);
+        }
+    }
+    EXPECT_LT(worst_mm, 0.5) << "the trajectory left the uninterrupted run's";
+    EXPECT_LT(worst_step_mm, ref_worst_step_mm + 0.5) << "a jump in the trajectory";
+}
+
+TEST(Failover, LoneServerKilledAndRestartedOnItsDataDirResumesWithoutLosingAFrame) {
+    ClusterRig rig("restart", 43);
+    rig.startServer("solo");
+    const std::string owner = recordAndMaybeKill(rig, "rec", kFrames / 2);
+    ASSERT_EQ(owner, "solo");
+    // The agent waits for a server (and says so) with the frames it has not seen confirmed.
+    ASSERT_TRUE(waitUntil([&] { return readText(rig.agentLog("rec")).find("WAITING") != std::string::npos; }, 10s));
+    const fs::path dir = rig.dataDir("solo") / "rec";
+    EXPECT_TRUE(fs::exists(dir / "replica.log")) << "no replica in the data dir";
+    rig.startServer("solo");  // the same id and data dir, as systemd restarts it
+    ASSERT_EQ(rig.agent("rec").wait(120s), 0) << readText(rig.agentLog("rec"));
+    const Finished got = finishedSession(dir);
+    EXPECT_EQ(got.received, kFrames) << got.summary;
+    EXPECT_EQ(got.integrated + got.rejected, kFrames) << got.summary;
+    EXPECT_GE(got.integrated, kFrames - 5) << got.summary;
+    EXPECT_EQ(got.dropped, 0);
+    EXPECT_EQ(got.failovers, 1);
+    EXPECT_EQ(got.digest, agentDigest(rig, "rec"));
+    EXPECT_EQ(readTrajectory(dir / "trajectory.txt").size(), static_cast<size_t>(got.integrated));
+    EXPECT_FALSE(fs::exists(dir / "replica.log")) << "a finished session keeps no replica";
+    const std::string log = readText(rig.serverLog("solo").string() + ".2");
+    EXPECT_NE(log.find("resuming"), std::string::npos) << log;
+}
+
+TEST(Failover, LiveScanCarriesOnAfterATakeoverAndItsStatusReportsIt) {
+    ClusterRig rig("live", 44);
+    rig.startServer("srv-a");
+    rig.startServer("srv-b");
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    // A nearly still head: the live frames of the takeover gap (~4 s) are lost by design and tracking goes on from
+    // where the head is then; a head that turned further than registration follows in that time is lost like
+    // after any gap (tests/core/recon_state_test.cpp shows the restore itself costs nothing; re-acquiring a head
+    // that moved far is issue 18's).
+    rig.startAgent("live", 90, "10", ",period=4000");
+    const std::string owner = rig.waitForOwner("live", 30s);
+    ASSERT_FALSE(owner.empty());
+    const std::string standby = owner == "srv-a" ? "srv-b" : "srv-a";
+    ASSERT_TRUE(waitUntil([&] { return rig.published("live") >= 25; }, 30s));
+    rig.server(owner).kill9();
+    ASSERT_TRUE(waitUntil([&] { return readText(rig.agentLog("live")).find("taken over") != std::string::npos; }, 30s))
+        << readText(rig.agentLog("live"));
+    const auto status = rig.cli("status live --json");
+    ASSERT_EQ(status.exit_code, 0) << status.out;
+    EXPECT_EQ(jsonField(status.out, "owner"), standby) << status.out;
+    EXPECT_EQ(jsonField(status.out, "failovers"), "1") << status.out;
+    const double takeover_ms = std::stod(jsonField(status.out, "last_takeover_ms"));
+    EXPECT_GT(takeover_ms, 100.0);
+    EXPECT_LT(takeover_ms, 15000.0);
+    ASSERT_EQ(rig.agent("live").wait(60s), 0);
+    const Finished got = finishedSession(rig.dataDir(standby) / "live");
+    EXPECT_EQ(got.failovers, 1);
+    EXPECT_GT(got.dropped, 0) << "the frames of the takeover gap are counted as dropped: " << got.summary;
+    EXPECT_GT(got.integrated, 40) << "the new owner goes on integrating: " << got.summary;
+}
+
+}  // namespace
+}  // namespace facescan::testing
