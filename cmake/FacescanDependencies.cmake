@@ -38,6 +38,10 @@ facescan_require(TurboJpeg_FOUND "libjpeg-turbo (TurboJPEG API)" "libturbojpeg0-
 
 find_package(Threads REQUIRED)
 
+# The client's GLB export (glTF 2.0 binary).
+find_package(TinyGLTF QUIET)
+facescan_require(TinyGLTF_FOUND "TinyGLTF" "libtinygltf-dev")
+
 if(FACESCAN_BUILD_TESTS)
     find_package(GTest QUIET)
     facescan_require(GTest_FOUND "GoogleTest" "libgtest-dev")

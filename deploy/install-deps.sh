@@ -11,6 +11,8 @@ PACKAGES=(
     libopenni2-dev
     # codecs and nearest-neighbour search
     libzstd-dev libturbojpeg0-dev libnanoflann-dev
+    # the client's GLB export (glTF 2.0)
+    libtinygltf-dev
     # tests, benchmarks, fuzzers, formatting
     libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format
 )

@@ -48,7 +48,7 @@ const std::vector<CommandSpec>& commandSpecs() {
          0,
          1,
          {"--save", "--save-format"},
-         "Usage: facescan watch [SESSION] [--save DIR [--save-format ply|obj|stl|off|drc]]\n"
+         "Usage: facescan watch [SESSION] [--save DIR [--save-format ply|obj|stl|off|drc|glb]]\n"
          "Follows one scan live until it is finished (Ctrl-C stops watching; the scan goes on).\n"
          "Without SESSION it follows the newest live scan, waiting for one to start.\n"
          "On a terminal it redraws a small panel; into a pipe or log it prints one line per second.\n"
@@ -70,7 +70,9 @@ const std::vector<CommandSpec>& commandSpecs() {
          "Usage: facescan mesh SESSION -o FILE [--finish]\n"
          "Fetches the full-resolution mesh (the final one, or the current model while scanning) and writes it\n"
          "atomically. The format follows the extension: .ply (binary, colours), .obj and .off (colours),\n"
-         ".stl (no colours), .drc (Draco, colours). Positions are in metres.\n"
+         ".stl (no colours), .drc (Draco, colours), .glb (glTF 2.0 binary, vertex colours). Positions are in\n"
+         "metres, in the first camera's frame (x right, y down, z away from the camera); .glb uses glTF's axes\n"
+         "(y up, the face looking along +z), the same mesh turned 180 degrees about x.\n"
          "  -o FILE         output file (required)\n"
          "  --finish        end the scan first (the server writes it to its data folder)\n"},
         {Command::kPreview,
@@ -149,7 +151,8 @@ std::string usageText(const std::string& command) {
                "  sessions                       the live sessions on the domain, with state and frames\n"
                "  watch [SESSION]                follow a scan live (--save DIR keeps every snapshot)\n"
                "  status SESSION                 state, frame counts and timings of one session\n"
-               "  mesh SESSION -o FILE           the mesh as .ply .obj .stl .off or .drc (--finish ends the scan)\n"
+               "  mesh SESSION -o FILE           the mesh as .ply .obj .stl .off .drc or .glb (--finish ends the "
+               "scan)\n"
                "  preview SESSION -o FILE.png    a shaded picture of the current model\n"
                "  trajectory SESSION [-o FILE]   the camera trajectory (TUM text)\n"
                "  finish SESSION                 end a scan now\n"
@@ -259,7 +262,7 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
         } else if (option == "--save-format") {
             options.save_format = value;
             if (!meshFormatFor("x." + value).isOk()) {
-                return invalidArgument("--save-format must be ply, obj, stl, off or drc, got '" + value + "'");
+                return invalidArgument("--save-format must be ply, obj, stl, off, drc or glb, got '" + value + "'");
             }
         } else if (option == "--json") {
             options.json = true;
@@ -272,7 +275,7 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
     if (n > 0) options.session = positional[0];
 
     if (options.command == Command::kMesh) {
-        if (options.output.empty()) return invalidArgument("'mesh' needs -o FILE (.ply .obj .stl .off .drc)");
+        if (options.output.empty()) return invalidArgument("'mesh' needs -o FILE (.ply .obj .stl .off .drc .glb)");
         if (Status s = meshFormatFor(options.output).status(); !s.isOk()) return s;
     }
     if (options.command == Command::kPreview) {

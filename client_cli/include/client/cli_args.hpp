@@ -32,7 +32,7 @@ struct CliOptions {
     std::string output;                         // -o FILE (mesh, preview; trajectory: empty = stdout)
     bool finish = false;                        // mesh --finish: end the scan first
     std::string save_dir;                       // watch --save DIR: write each snapshot there
-    std::string save_format = "ply";            // watch --save-format: ply|obj|stl|off|drc
+    std::string save_format = "ply";            // watch --save-format: ply|obj|stl|off|drc|glb
     bool json = false;                          // sessions/status --json: one JSON object per line
     wire::DomainConfig domain{0, "lan"};        // --domain N, --profile loopback|lan|FILE.xml
     std::chrono::milliseconds timeout{10'000};  // --timeout SECONDS: how long to wait for a server
