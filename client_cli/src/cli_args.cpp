@@ -8,6 +8,7 @@
 #include <set>
 
 #include "client/mesh_file.hpp"
+#include "client/view_server.hpp"
 #include "wire/messages.hpp"
 
 namespace facescan::client {
@@ -31,7 +32,8 @@ constexpr const char* kGlobalOptions =
 
 constexpr const char* kExitCodes =
     "Exit codes: 0 ok, 1 the server refused (unknown session, bad request), 2 usage error,\n"
-    "            3 no server answered in time, 4 the output file cannot be written, 130 interrupted.\n";
+    "            3 no server answered in time, 4 the output file cannot be written,\n"
+    "            5 view cannot serve (port taken, web files missing), 130 interrupted.\n";
 
 const std::vector<CommandSpec>& commandSpecs() {
     static const std::vector<CommandSpec> specs = {
@@ -99,6 +101,20 @@ const std::vector<CommandSpec>& commandSpecs() {
          {},
          "Usage: facescan finish SESSION\n"
          "Ends the scan now: the server makes the final mesh and writes the session to its data folder.\n"},
+        {Command::kView,
+         "view",
+         0,
+         0,
+         {"--port", "--bind", "--open"},
+         "Usage: facescan view [--port 8080] [--bind 127.0.0.1] [--open]\n"
+         "Serves a web page that shows every scan on the domain live: the sessions with state, frames, fps and\n"
+         "server; a 3D view of a session's latest snapshot (drag to turn, wheel to zoom, right-drag to pan) that\n"
+         "updates as the scan grows; progress and the server's messages; and downloads of the mesh as PLY, OBJ,\n"
+         "STL and GLB. Browsers decode the snapshots themselves (three.js, served from this machine: no internet\n"
+         "needed). Runs until Ctrl-C.\n"
+         "  --port N        TCP port (default 8080; 0 picks a free one, printed at start)\n"
+         "  --bind ADDRESS  IP address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: the LAN)\n"
+         "  --open          open the page in this desktop's browser\n"},
         {Command::kReset,
          "reset",
          1,
@@ -118,8 +134,8 @@ const CommandSpec* findSpec(const std::string& name) {
 }
 
 bool takesValue(const std::string& option) {
-    static const std::set<std::string> kValued = {"--profile", "--domain", "--timeout",
-                                                  "-o",        "--save",   "--save-format"};
+    static const std::set<std::string> kValued = {"--profile", "--domain",      "--timeout", "-o",
+                                                  "--save",    "--save-format", "--port",    "--bind"};
     return kValued.count(option) > 0;
 }
 
@@ -157,6 +173,7 @@ std::string usageText(const std::string& command) {
                "  trajectory SESSION [-o FILE]   the camera trajectory (TUM text)\n"
                "  finish SESSION                 end a scan now\n"
                "  reset SESSION                  clear a scan's model and start again\n"
+               "  view [--port N] [--open]       watch every scan in a web browser (live 3D, downloads)\n"
                "\n") +
            kGlobalOptions + "\n" + kExitCodes + "\n'facescan COMMAND --help' describes one command.\n";
 }
@@ -266,6 +283,14 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
             }
         } else if (option == "--json") {
             options.json = true;
+        } else if (option == "--port") {
+            if (!parseNumber(value, options.view_port)) {
+                return invalidArgument("--port must be a TCP port 0..65535, got '" + value + "'");
+            }
+        } else if (option == "--bind") {
+            options.view_bind = value;
+        } else if (option == "--open") {
+            options.view_open = true;
         }
     }
 
@@ -283,6 +308,11 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
         std::string ext = std::filesystem::path(options.output).extension().string();
         std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
         if (ext != ".png") return invalidArgument("the preview is a PNG picture: -o must end in .png");
+    }
+    if (options.command == Command::kView) {
+        ViewServerConfig server;
+        server.bind = options.view_bind;
+        if (Status s = server.validate(); !s.isOk()) return s;
     }
     if (!values.count("--save") && values.count("--save-format")) {
         return invalidArgument("--save-format needs --save DIR");
