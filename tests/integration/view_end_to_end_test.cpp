@@ -23,12 +23,9 @@ using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 using facescan::testing::ChildProcess;
 using facescan::testing::httpRequest;
+using facescan::testing::readText;
 using facescan::testing::WsClient;
 
-std::string readText(const fs::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 TEST(ViewEndToEnd, FollowsARealScanAndServesItsMeshes) {
