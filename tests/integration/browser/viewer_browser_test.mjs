@@ -119,6 +119,16 @@ try {
   assert.ok(geometry.attributes.position.count > 1000);
   assert.ok(geometry.attributes.color, 'the GLB has no vertex colours (COLOR_0)');
 
+  // A URL naming a session nobody scans: the page says so (and offers the list).
+  const lost = await browser.newPage();
+  lost.on('pageerror', (error) => problems.push(`page error (unknown session page): ${error.message}`));
+  await lost.goto(`${url}?session=nobody-${process.pid}`);
+  await lost.waitForFunction(() => !document.getElementById('message').hidden, null, { timeout: 10000 });
+  const text = await lost.textContent('#message');
+  log(`unknown session page: "${text}"`);
+  assert.match(text, /Unknown session 'nobody-\d+'/);
+  await lost.close();
+
   const stats = await page.evaluate(() => window.facescanStats.snapshots);
   fs.writeFileSync(path.join(outDir, 'stats.json'), JSON.stringify(stats, null, 1));
   const latencies = stats.map((s) => s.latency_ms).sort((x, y) => x - y);
