@@ -23,7 +23,7 @@ PACKAGES=(
     # codecs and nearest-neighbour search
     libzstd-dev libturbojpeg0-dev libnanoflann-dev
     # the client: GLB export (glTF 2.0) and the web viewer's HTTP/WebSocket server
-    libtinygltf-dev libcivetweb-dev
+    libtinygltf-dev libcivetweb-dev zlib1g-dev
     # tests, benchmarks, fuzzers, formatting
     libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format
 )
