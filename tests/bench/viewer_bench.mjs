@@ -55,6 +55,7 @@ async function waitForFile(file, timeoutMs) {
   await waitForFile(path.join(dir, 'data', session, 'summary.json'), 30000);
   await sleep(1500);  // the final snapshot
   const snaps = await page.evaluate(() => window.facescanStats.snapshots);
+  const software = await page.evaluate(() => window.facescanStats.softwareRenderer);
   fs.writeFileSync(path.join(dir, 'snapshots.json'), JSON.stringify(snaps, null, 1));
   await browser.close();
   await stop(viewer);
@@ -66,16 +67,19 @@ async function waitForFile(file, timeoutMs) {
     wire_ms_p50: quantile(snaps.map((s) => s.received_ms - s.created_ms), 0.5),
     decode_ms: { p50: quantile(snaps.map((s) => s.decode_ms), 0.5), p95: quantile(snaps.map((s) => s.decode_ms), 0.95) },
     draw_ms_p50: quantile(snaps.map((s) => s.drawn_ms - s.received_ms - s.decode_ms), 0.5),
+    render_ms_p50: quantile(snaps.map((s) => s.render_ms), 0.5),
     snapshot_kb_p50: quantile(snaps.map((s) => s.bytes / 1024), 0.5),
     triangles_last: snaps.length ? snaps[snaps.length - 1].triangles : 0,
-    transfer,
+    transfer, software_renderer: software,
   };
-  console.log(`live scan, ${frames} frames at 30 Hz, 1 browser (load ${results.live.load}):`);
+  console.log(`live scan, ${frames} frames at 30 Hz, 1 browser (${software ? 'software WebGL: no multisampling' : 'GPU'}; ` +
+              `load ${results.live.load}):`);
   console.log(`  snapshots drawn ${snaps.length}; snapshot-to-screen latency p50 ${results.live.latency_ms.p50.toFixed(0)} ms, ` +
               `p95 ${results.live.latency_ms.p95.toFixed(0)} ms, max ${results.live.latency_ms.max.toFixed(0)} ms`);
   console.log(`  of which server->browser (DDS, viewer, WebSocket) p50 ${results.live.wire_ms_p50.toFixed(1)} ms, ` +
               `Draco decode p50 ${results.live.decode_ms.p50.toFixed(1)} ms (p95 ${results.live.decode_ms.p95.toFixed(1)}), ` +
-              `draw to next frame p50 ${results.live.draw_ms_p50.toFixed(1)} ms`);
+              `draw to next frame p50 ${results.live.draw_ms_p50.toFixed(1)} ms ` +
+              `(of which WebGL render call p50 ${results.live.render_ms_p50.toFixed(1)} ms, SwiftShader)`);
   console.log(`  snapshots ${results.live.snapshot_kb_p50.toFixed(0)} kB Draco (p50), ${results.live.triangles_last} triangles in the last`);
   console.log(`  first load: ${transfer.requests} requests, ${(transfer.bytes / 1024).toFixed(0)} kB transferred ` +
               `(${(transfer.body_bytes / 1024).toFixed(0)} kB bodies), before the first snapshot`);
