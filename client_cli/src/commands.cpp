@@ -7,6 +7,7 @@
 #include <iostream>
 
 #include "client/mesh_file.hpp"
+#include "client/status_json.hpp"
 #include "command_util.hpp"
 #include "wire/mesh_codec.hpp"
 
@@ -59,55 +60,6 @@ namespace {
 
 using namespace detail;
 
-std::string jsonString(const std::string& s) {
-    std::string out = "\"";
-    for (const char c : s) {
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += c;
-        } else if (static_cast<unsigned char>(c) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof(buf), "\\u%04x", c);
-            out += buf;
-        } else {
-            out += c;
-        }
-    }
-    return out + "\"";
-}
-
-// The owner from the claims (what every server and agent follows); the status's server when no claim arrived.
-struct Ownership {
-    std::string owner, standby;
-    uint32_t epoch = 0;
-    bool alive = true;
-};
-Ownership ownershipOf(const SessionStatus& s, const std::map<std::string, OwnerInfo>& owners) {
-    Ownership o{s.server_id, s.standby_id, s.owner_epoch, true};
-    if (const auto it = owners.find(s.session_id); it != owners.end()) {
-        o = {it->second.owner_id, it->second.standby_id, it->second.epoch, it->second.alive};
-    }
-    return o;
-}
-
-std::string statusJson(const SessionStatus& s, const Ownership& o) {
-    char numbers[768];
-    std::snprintf(numbers, sizeof(numbers),
-                  "\"frames_received\":%u,\"frames_integrated\":%u,\"frames_rejected\":%u,\"frames_skipped\":%u,"
-                  "\"frames_dropped\":%u,\"every_frame\":%s,\"fps\":%.2f,\"ms\":{\"detect\":%.3f,\"segment\":%.3f,"
-                  "\"filter\":%.3f,\"icp\":%.3f,\"integrate\":%.3f,\"raycast\":%.3f,\"mesh\":%.3f},"
-                  "\"latency_p95_ms\":%.2f,\"snapshot_seq\":%u,\"epoch\":%u,\"owner_alive\":%s,\"failovers\":%u,"
-                  "\"last_takeover_ms\":%.1f",
-                  s.frames_received, s.frames_integrated, s.frames_rejected, s.frames_skipped, s.frames_dropped,
-                  s.every_frame ? "true" : "false", s.fps, s.ms_detect, s.ms_segment, s.ms_filter, s.ms_icp,
-                  s.ms_integrate, s.ms_raycast, s.ms_mesh, s.latency_p95_ms, s.snapshot_seq, o.epoch,
-                  o.alive ? "true" : "false", s.failovers, s.last_takeover_ms);
-    return "{\"session\":" + jsonString(s.session_id) + ",\"server\":" + jsonString(s.server_id) +
-           ",\"owner\":" + jsonString(o.owner) + ",\"standby\":" + jsonString(o.standby) +
-           ",\"state\":" + jsonString(scanStateName(s.state)) + ",\"detail\":" + jsonString(s.detail) + "," + numbers +
-           "}";
-}
-
 int runSessions(const CliOptions& options) {
     int code = kExitOk;
     auto client = connectOrFail(options, code);
@@ -117,7 +69,10 @@ int runSessions(const CliOptions& options) {
     auto owners = client->owners(std::chrono::milliseconds(200));
     if (!owners.isOk()) return fail(exitCodeForRequest(owners.status()), owners.status().message());
     if (options.json) {
-        for (const SessionStatus& s : *sessions) std::printf("%s\n", statusJson(s, ownershipOf(s, *owners)).c_str());
+        for (const SessionStatus& s : *sessions) {
+            const Ownership o = ownershipOf(s, *owners);
+            std::printf("%s\n", statusJson(s, false, &o).c_str());
+        }
         return kExitOk;
     }
     if (sessions->empty()) {
@@ -209,7 +164,7 @@ int runStatus(const CliOptions& options) {
     auto owners = client->owners(std::chrono::milliseconds(100));
     const Ownership o = ownershipOf(s, owners.isOk() ? *owners : std::map<std::string, OwnerInfo>{});
     if (options.json) {
-        std::printf("%s\n", statusJson(s, o).c_str());
+        std::printf("%s\n", statusJson(s, false, &o).c_str());
         return kExitOk;
     }
     std::printf("session     %s\n", s.session_id.c_str());
@@ -341,6 +296,7 @@ int runCommand(const CliOptions& options) {
         case Command::kTrajectory: return runPayloadCommand(options, facescan_wire_CMD_GET_TRAJECTORY);
         case Command::kFinish: return runSimpleCommand(options, facescan_wire_CMD_FINISH);
         case Command::kReset: return runSimpleCommand(options, facescan_wire_CMD_RESET);
+        case Command::kView: return runView(options);
         case Command::kServers: return runServers(options);
     }
     return kExitUsage;

@@ -22,11 +22,6 @@
 
 namespace facescan::testing {
 
-inline std::string readText(const std::filesystem::path& path) {
-    std::ifstream in(path);
-    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
-
 // The last match of `pattern`'s first group in `text` (empty when none).
 inline std::string lastMatch(const std::string& text, const std::string& pattern) {
     const std::regex re(pattern);

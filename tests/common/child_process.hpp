@@ -1,5 +1,6 @@
-// A real program of ours run as a child process for a test, its output in a log file: SIGTERM and reaped on
-// destruction; kill9() for the failover tests (no clean exit, no last word on the network).
+// A real program of ours as a child process for integration tests, with its output in a log file; stopped with
+// SIGTERM (SIGKILL after 10 s) and reaped on destruction; kill9() for the failover tests (no clean exit, no last
+// word on the network).
 #pragma once
 
 #include <fcntl.h>
@@ -9,6 +10,8 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <thread>
 #include <vector>
@@ -35,28 +38,33 @@ class ChildProcess {
     ~ChildProcess() { stop(); }
     ChildProcess(const ChildProcess&) = delete;
     ChildProcess& operator=(const ChildProcess&) = delete;
-
     pid_t pid() const { return pid_; }
     bool running() const { return pid_ > 0; }
-    // Waits for the program to end by itself; its exit code (128 + signal when killed), or -1 on timeout.
-    int wait(std::chrono::milliseconds timeout) {
+    // Sends `signal` (e.g. SIGINT, as Ctrl-C would) without waiting.
+    void signal(int signal) {
+        if (pid_ > 0) ::kill(pid_, signal);
+    }
+    // Waits for the program to end by itself; its exit code, or -1 on timeout.
+    int wait(std::chrono::seconds timeout) {
         const auto deadline = std::chrono::steady_clock::now() + timeout;
-        while (pid_ > 0) {
+        while (pid_ > 0 && std::chrono::steady_clock::now() < deadline) {
             int status = 0;
             if (::waitpid(pid_, &status, WNOHANG) == pid_) {
                 pid_ = 0;
                 return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
             }
-            if (std::chrono::steady_clock::now() >= deadline) return -1;
-            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
         }
         return -1;
     }
-    // A clean stop: SIGTERM, then SIGKILL after 10 s.
     void stop() {
         if (pid_ <= 0) return;
         ::kill(pid_, SIGTERM);
-        if (wait(std::chrono::seconds(10)) < 0) kill9();
+        if (wait(std::chrono::seconds(10)) < 0) {
+            ::kill(pid_, SIGKILL);
+            ::waitpid(pid_, nullptr, 0);
+        }
+        pid_ = 0;
     }
     // As a crash or a power cut looks to the others: SIGKILL, reaped.
     void kill9() {
@@ -69,5 +77,11 @@ class ChildProcess {
  private:
     pid_t pid_ = 0;
 };
+
+// The whole content of a file (a child's log); empty when it cannot be read.
+inline std::string readText(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
 
 }  // namespace facescan::testing

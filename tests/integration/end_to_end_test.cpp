@@ -34,11 +34,7 @@ using CliRun = facescan::testing::CommandRun;
 CliRun runCli(const std::string& args) { return facescan::testing::runCommand(std::string(FACESCAN_CLI) + " " + args); }
 
 using facescan::testing::ChildProcess;
-
-std::string readText(const fs::path& path) {
-    std::ifstream in(path);
-    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+using facescan::testing::readText;
 
 bool contains(const std::string& text, const std::string& needle) { return text.find(needle) != std::string::npos; }
 
