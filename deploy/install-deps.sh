@@ -26,6 +26,8 @@ PACKAGES=(
     libtinygltf-dev libcivetweb-dev zlib1g-dev
     # tests, benchmarks, fuzzers, formatting
     libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format
+    # the cross-machine cluster test: network namespaces, a bridge and veths (ip), packet loss (nft numgen)
+    iproute2 nftables
 )
 
 # The viewer's three.js comes from npm (client_cli/web/package-lock.json): node and npm, from Debian unless the

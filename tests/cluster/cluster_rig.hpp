@@ -56,6 +56,7 @@ class ClusterRig {
         std::filesystem::create_directories(dir_);
     }
     ~ClusterRig() {
+        for (auto& [session, agent] : agents_) agent->signal(SIGINT);  // all at once: each finishes its scan
         agents_.clear();
         servers_.clear();  // SIGTERM: they finish and exit
         // The logs and data dirs stay for a failed test (the failure messages name them).

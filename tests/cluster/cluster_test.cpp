@@ -38,13 +38,14 @@ TEST(Cluster, SixSessionsOnThreeServersAreEachProcessedOnceAndSpreadTwoTwoTwo) {
     ClusterRig rig("spread", 31);
     const std::vector<std::string> servers = {"srv-a", "srv-b", "srv-c"};
     for (const std::string& id : servers) rig.startServer(id);
-    // Live scans (10 Hz) long enough to be open together; each starts once the previous one has its owner, so
-    // the owners' loads are known when the next is placed.
+    // Live scans (10 Hz) that stay open until the test stops them; each starts once the previous one has its
+    // owner, so the owners' loads are known when the next is placed.
+    ASSERT_TRUE(rig.waitForServers(3, 30s));
     std::map<std::string, int> per_server;
     std::map<std::string, std::string> owner_of;
     for (int i = 0; i < 6; ++i) {
         const std::string session = "spread-" + std::to_string(i);
-        rig.startAgent(session, 60, "10");
+        rig.startAgent(session, 3000, "10");
         const std::string owner = rig.waitForOwner(session, 30s);
         ASSERT_FALSE(owner.empty()) << readText(rig.agentLog(session));
         owner_of[session] = owner;
@@ -67,8 +68,10 @@ TEST(Cluster, SixSessionsOnThreeServersAreEachProcessedOnceAndSpreadTwoTwoTwo) {
         EXPECT_NE(servers_json.out.find("\"server\":\"" + id + "\""), std::string::npos) << servers_json.out;
     }
 
-    for (const auto& [session, owner] : owner_of) EXPECT_EQ(rig.agent(session).wait(90s), 0) << session;
     for (const std::string& id : servers) EXPECT_EQ(per_server[id], 2) << id << " owned " << per_server[id];
+    // Ctrl-C on every agent: each tells its owner the stream ended and waits until the scan is finished.
+    for (const auto& [session, owner] : owner_of) rig.agent(session).signal(SIGINT);
+    for (const auto& [session, owner] : owner_of) EXPECT_EQ(rig.agent(session).wait(60s), 0) << session;
     // Exactly once: each session lives in its owner's data dir only, finished there, recorded as its owner's.
     for (const auto& [session, owner] : owner_of) {
         EXPECT_EQ(holders(rig, servers, session), std::vector<std::string>{owner}) << session;
@@ -83,22 +86,16 @@ TEST(Cluster, ALateServerTakesTheNextSessionAndClientsAgreeOnOwners) {
     ClusterRig rig("late", 32);
     rig.startServer("srv-a");
     rig.startServer("srv-b");
-    rig.startAgent("late-1", 90, "10");
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    rig.startAgent("late-1", 3000, "10");
     const std::string first = rig.waitForOwner("late-1", 30s);
-    rig.startAgent("late-2", 90, "10");
+    rig.startAgent("late-2", 3000, "10");
     const std::string second = rig.waitForOwner("late-2", 30s);
     ASSERT_FALSE(first.empty() || second.empty());
     EXPECT_NE(first, second) << "two idle servers: one session each";
 
     rig.startServer("srv-late");
-    ASSERT_TRUE(waitUntil(
-        [&] {
-            const auto r = rig.cli("servers --json");
-            return r.out.find("\"server\":\"srv-late\"") != std::string::npos &&
-                   lastMatch(r.out, "\"server\":\"srv-late\"[^}]*\"joining\":(true|false)") == "false";
-        },
-        30s))
-        << "the late server never joined";
+    ASSERT_TRUE(rig.waitForServers(3, 30s)) << "the late server never joined";
     rig.startAgent("late-3", 30, "10");
     EXPECT_EQ(rig.waitForOwner("late-3", 30s), "srv-late") << readText(rig.agentLog("late-3"));
 

@@ -93,7 +93,13 @@ Status TestAgent::sendFrame(uint32_t seq, const wire::EncodedFrame& f) {
     facescan_wire_RgbdFrame msg = wire::toMessage(impl_->session_id, f);
     msg.seq = seq;
     msg.capture_time_ns = wallNowNs();
-    return impl_->frame_writer->write(msg);
+    // A recording's writer blocks while the server's queue is full and times out after 5 s; like the real agent, try
+    // again (a loaded test machine can keep a server busy that long), for up to a minute.
+    Status written = impl_->frame_writer->write(msg);
+    for (int retry = 0; retry < 12 && written.code() == StatusCode::kDeadlineExceeded; ++retry) {
+        written = impl_->frame_writer->write(msg);
+    }
+    return written;
 }
 
 Status TestAgent::sendRawDepth(uint32_t seq, const std::vector<uint8_t>& depth_bytes) {

@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "service/server.hpp"
+#include "service/session_store.hpp"
 
 namespace facescan::service {
 namespace {
@@ -72,9 +73,9 @@ void Replicator::loop() {
         std::map<std::string, bool> live;
         for (const auto& o : owned_()) {
             const OwnedSession::Phase phase = o->phase;
-            if (!o->session || phase == OwnedSession::Phase::kClaiming || phase == OwnedSession::Phase::kFinished) {
-                continue;
-            }
+            // Only sessions that receive frames: a claimed session that never gets one (a bogus id) leaves no
+            // replica and no folder behind.
+            if (!o->session || phase != OwnedSession::Phase::kActive) continue;
             live[o->id] = true;
             std::unique_ptr<Outgoing>& out = outgoing_[o->id];
             if (!out || out->epoch != o->epoch) {
@@ -155,8 +156,17 @@ void Replicator::replicate(OwnedSession& o, Outgoing& out) {
 
     // The data dir first: a restart resumes from it, and with no standby it alone confirms the frames.
     t0 = steadyNowNs();
-    if (!out.log) out.log = std::make_unique<ReplicaLog>(o.dir);
-    status = out.log->append(bytes, r.full());
+    if (!out.log) {
+        std::string note;
+        auto dir = claimSessionDir(params_.data_dir, o.id, params_.server_id, o.epoch, &note);
+        if (!note.empty()) std::fprintf(stderr, "facescan-server: %s\n", note.c_str());
+        if (dir.isOk()) {
+            o.dir = *dir;
+            out.log = std::make_unique<ReplicaLog>(o.dir);
+        }
+        status = dir.status();
+    }
+    if (out.log) status = out.log->append(bytes, r.full());
     const double disk_ms = msSince(t0);
     if (status.isOk()) {
         out.disk_next_seq = r.next_seq;

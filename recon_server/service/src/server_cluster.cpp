@@ -157,9 +157,6 @@ void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
 }
 
 Status Server::activate(OwnedSession& o) {
-    std::string note;
-    ASSIGN_OR_RETURN(o.dir, claimSessionDir(params_.data_dir, o.id, params_.server_id, o.epoch, &note));
-    if (!note.empty()) std::fprintf(stderr, "facescan-server: %s\n", note.c_str());
     auto session = std::make_shared<Session>(o.id, params_, [this] {
         if (wake_.valid()) dds_set_guardcondition(wake_.handle(), true);
     });

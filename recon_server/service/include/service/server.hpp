@@ -46,7 +46,7 @@ struct OwnedSession {
     std::atomic<Phase> phase{Phase::kClaiming};
     int64_t claimed_ns = 0;  // steady clock
     int64_t ready_ns = 0;
-    std::filesystem::path dir;  // its folder in the data dir (owner.json names this server)
+    std::filesystem::path dir;  // its folder in the data dir, made at its first replica (owner.json names us)
     std::shared_ptr<Session> session;
     std::optional<wire::CameraInfoData> camera;     // a new session: from its CameraInfo
     std::optional<wire::ReplicaData> restore_from;  // a takeover or a restart: the state to continue from
