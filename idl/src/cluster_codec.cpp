@@ -3,6 +3,7 @@
 #include "wire/cluster_codec.hpp"
 
 #include <cmath>
+#include <cstring>
 
 #include "wire/messages.hpp"
 
@@ -119,14 +120,18 @@ StatusOr<SessionOwnerData> fromMessage(const facescan_wire_SessionOwner& m) {
     o.standby_id = str(m.standby_id);
     if (!o.standby_id.empty()) RETURN_IF_ERROR(validateServerId(o.standby_id));
     if (m.epoch == 0 || m.epoch > 0x7fff) return invalidArgument("owner of '" + o.session_id + "': bad epoch");
-    if (static_cast<uint32_t>(m.state) > static_cast<uint32_t>(facescan_wire_OWNER_RELEASED)) {
-        return invalidArgument("owner of '" + o.session_id + "': unknown state " + std::to_string(m.state));
+    // Read as the 32 bits that arrived: a value outside the enum must be refused, not loaded as the enum type.
+    uint32_t state = 0;
+    static_assert(sizeof(state) == sizeof(m.state));
+    std::memcpy(&state, &m.state, sizeof(state));
+    if (state > static_cast<uint32_t>(facescan_wire_OWNER_RELEASED)) {
+        return invalidArgument("owner of '" + o.session_id + "': unknown state " + std::to_string(state));
     }
     if (!std::isfinite(m.last_takeover_ms) || m.last_takeover_ms < 0) {
         return invalidArgument("owner of '" + o.session_id + "': bad takeover time");
     }
     o.epoch = m.epoch;
-    o.state = static_cast<OwnerState>(m.state);
+    o.state = static_cast<OwnerState>(state);
     o.resume_seq = m.resume_seq;
     o.replay_request = m.replay_request;
     o.confirmed_seq = m.confirmed_seq;

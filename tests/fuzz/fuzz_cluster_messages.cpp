@@ -5,6 +5,7 @@
 // than its capacity or pick a standby that is the owner.
 #include <fuzzer/FuzzedDataProvider.h>
 
+#include <cstring>
 #include <map>
 
 #include "service/placement.hpp"
@@ -50,6 +51,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
             if (!back.isOk() || back->server_id != a->server_id || back->max_sessions != a->max_sessions) {
                 __builtin_trap();
             }
+            // One entry per server, the latest announcement (as Cluster::liveLoads keeps them).
+            std::erase_if(loads, [&](const service::ServerLoad& l) { return l.server_id == a->server_id; });
             loads.push_back({a->server_id, static_cast<int>(a->max_sessions), static_cast<int>(a->open_sessions),
                              static_cast<int>(a->standby_sessions)});
         } else {
@@ -58,7 +61,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
             m.owner_id = const_cast<char*>(text(in, owner));
             m.standby_id = const_cast<char*>(text(in, standby));
             m.epoch = in.ConsumeIntegral<uint32_t>();
-            m.state = static_cast<facescan_wire_OwnerState>(in.ConsumeIntegral<uint32_t>());
+            const uint32_t state = in.ConsumeIntegral<uint32_t>();  // any 32 bits, as they could arrive
+            std::memcpy(&m.state, &state, sizeof(state));
             m.resume_seq = in.ConsumeIntegral<uint32_t>();
             m.replay_request = in.ConsumeIntegral<uint32_t>();
             m.confirmed_seq = in.ConsumeIntegral<uint32_t>();

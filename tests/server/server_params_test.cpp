@@ -8,6 +8,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include "sample_replica.hpp"
+#include "service/replica_log.hpp"
 #include "service/session_store.hpp"
 
 namespace facescan::service {
@@ -117,6 +119,76 @@ TEST(SessionStore, WritesAtomicallyAndLeavesNoTemporaryFiles) {
 
 TEST(SessionStore, JsonEscapesQuotesAndControlCharacters) {
     EXPECT_EQ(jsonEscape("a\"b\\c\nd\x01"), "a\\\"b\\\\c\\nd\\u0001");
+}
+
+// Split brain (issue 13): two servers that could not see each other both owned a session, and their data dirs
+// are one (a shared folder). Neither may write over the other's files; owner.json says whose they are.
+TEST(SessionStore, TwoOwnersOfOneSessionNeverShareAFolder) {
+    const auto data = tempDir("owners");
+    std::string note;
+    auto a = claimSessionDir(data, "s", "srv-a", 1, &note);
+    ASSERT_TRUE(a.isOk());
+    EXPECT_EQ(*a, data / "s");
+    EXPECT_TRUE(note.empty());
+    // The standby took over (epoch 2): the folder is its own now, and owner.json remembers the previous owner.
+    auto b = claimSessionDir(data, "s", "srv-b", 2, &note);
+    ASSERT_TRUE(b.isOk());
+    EXPECT_EQ(*b, data / "s");
+    const auto owner = readSessionOwner(data / "s");
+    ASSERT_TRUE(owner);
+    EXPECT_EQ(owner->first, "srv-b");
+    EXPECT_EQ(owner->second, 2u);
+    // The old owner, cut off, writes its result later (epoch 1): beside the new owner's files, and says so.
+    auto stale = claimSessionDir(data, "s", "srv-a", 1, &note);
+    ASSERT_TRUE(stale.isOk());
+    EXPECT_EQ(*stale, data / "s" / "srv-a.e1");
+    EXPECT_NE(note.find("belongs to server 'srv-b'"), std::string::npos) << note;
+    EXPECT_EQ(readSessionOwner(data / "s")->first, "srv-b") << "the new owner's record must stay";
+    EXPECT_EQ(readSessionOwner(*stale)->first, "srv-a");
+    // The same epoch from another server (two claims that met): beside as well.
+    auto twin = claimSessionDir(data, "s", "srv-c", 2, &note);
+    ASSERT_TRUE(twin.isOk());
+    EXPECT_EQ(*twin, data / "s" / "srv-c.e2");
+}
+
+// Restart recovery: the data dir's replica log resumes from its last complete round, whatever a crash tore.
+TEST(ReplicaLog, ATornTailIsSkippedAndTheRoundsBeforeItAreResumed) {
+    const auto dir = tempDir("replica-log");
+    ReplicaLog log(dir);
+    wire::ReplicaData full = testing::sampleReplica(3, true);
+    full.owner_id = "srv-a";
+    wire::ReplicaData delta = testing::sampleReplica(1, false);
+    delta.owner_id = "srv-a";
+    delta.round = 2;
+    delta.base_round = 1;
+    delta.state.since_generation = full.state.generation;
+    delta.state.generation = full.state.generation + 5;
+    delta.state.trajectory_begin = full.state.trajectorySize();
+    delta.state.total_blocks = 4;
+    delta.state.blocks.coords[0] = Eigen::Vector3i(30, 30, 30);  // a new block
+    delta.next_seq = 90;
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(wire::encodeReplica(full, bytes).isOk());
+    ASSERT_TRUE(log.append(bytes, true).isOk());
+    ASSERT_TRUE(wire::encodeReplica(delta, bytes).isOk());
+    ASSERT_TRUE(log.append(bytes, false).isOk());
+    std::string warning;
+    auto back = loadReplicaLog(dir, &warning);
+    ASSERT_TRUE(back.isOk()) << back.status().toString();
+    EXPECT_TRUE(warning.empty()) << warning;
+    EXPECT_EQ(back->round, 2u);
+    EXPECT_EQ(back->next_seq, 90u);
+    EXPECT_EQ(back->state.blocks.count(), 4u);
+    // A crash in the middle of the next append: half a record at the end.
+    {
+        std::ofstream torn(dir / "replica.log", std::ios::binary | std::ios::app);
+        torn.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size() / 2));
+    }
+    back = loadReplicaLog(dir, &warning);
+    ASSERT_TRUE(back.isOk());
+    EXPECT_EQ(back->round, 2u) << "the complete rounds are kept";
+    EXPECT_NE(warning.find("resuming from round 2"), std::string::npos) << warning;
+    EXPECT_EQ(loadReplicaLog(tempDir("no-log"), nullptr).status().code(), StatusCode::kNotFound);
 }
 
 }  // namespace

@@ -78,6 +78,7 @@ Status Server::start() {
     }
     loadResumable();
     RETURN_IF_ERROR(join());
+    joined_ = true;
     replicator_->start();
     intake_ = std::thread([this] { intakeLoop(); });
     command_ = std::thread([this] { commandLoop(); });
@@ -146,7 +147,8 @@ void Server::shutdown() {
             });
         }
     }
-    if (cluster_) cluster_->withdraw();
+    // A server that refused to start (its id is taken) must not withdraw the other server's announcement.
+    if (cluster_ && joined_) cluster_->withdraw();
     (void)status_writer_->waitForAcks(std::chrono::milliseconds(1000));
     (void)snapshot_writer_->waitForAcks(std::chrono::milliseconds(1000));
     (void)reply_writer_->waitForAcks(std::chrono::milliseconds(1000));

@@ -162,6 +162,7 @@ class Server {
     std::condition_variable sleep_cv_;
     std::atomic<bool> stopping_{false};
     bool shut_down_ = false;
+    bool joined_ = false;  // the join completed (this server's id is its own)
     std::thread intake_, command_, snapshot_, status_;
 };
 
