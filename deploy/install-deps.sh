@@ -11,6 +11,8 @@ PACKAGES=(
     libopenni2-dev
     # codecs and nearest-neighbour search
     libzstd-dev libturbojpeg0-dev libnanoflann-dev
+    # DDS Security: identity checks (OpenSSL), the site script (openssl); the plugins come with cyclonedds-dev
+    libssl-dev openssl
     # tests, benchmarks, fuzzers, formatting
     libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format
 )

@@ -36,6 +36,7 @@ int exitCodeForRequest(const Status& status) {
     switch (status.code()) {
         case StatusCode::kDeadlineExceeded:
         case StatusCode::kUnavailable: return kExitNoServer;
+        case StatusCode::kPermissionDenied: return kExitNotAllowed;
         default: return kExitServerError;
     }
 }
@@ -46,9 +47,12 @@ std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_c
     config.timeout = options.timeout;
     auto client = ScanClient::connect(config);
     if (client.isOk()) return std::move(client).value();
-    // A profile that does not exist or does not parse is the user's command line; anything else is DDS.
+    // A profile or identity that does not exist or does not parse is the user's command line; a refused identity
+    // (DDS Security) is not allowed; anything else is DDS.
     const StatusCode code = client.status().code();
-    exit_code = fail(code == StatusCode::kNotFound || code == StatusCode::kInvalidArgument ? kExitUsage : kExitNoServer,
+    exit_code = fail(code == StatusCode::kNotFound || code == StatusCode::kInvalidArgument ? kExitUsage
+                     : code == StatusCode::kPermissionDenied                               ? kExitNotAllowed
+                                                                                           : kExitNoServer,
                      client.status().message());
     return nullptr;
 }

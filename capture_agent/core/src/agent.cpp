@@ -11,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "wire/dds_options.hpp"
 #include "wire/messages.hpp"
 
 namespace facescan::capture {
@@ -150,18 +151,26 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
     RETURN_IF_ERROR(s.info_writer.write(wire::toMessage(camera)));
 
     // Nothing is read from the source until a server listens, so a recording loses no frame while we wait.
-    const std::string where =
-        "domain " + std::to_string(options_.dds.domain_id) + " (profile " + options_.dds.profile + ")";
+    const std::string where = options_.dds.describe();
     if (!s.frame_writer.waitForReaders(1, 300ms)) {
         on_event("waiting for a facescan-server on " + where + " ...");
-        const auto deadline = Clock::now() + std::chrono::duration<float>(options_.wait_for_server_s);
+        const auto waiting_since = Clock::now();
+        const auto deadline = waiting_since + std::chrono::duration<float>(options_.wait_for_server_s);
+        bool hinted = false;
         while (!s.frame_writer.waitForReaders(1, 200ms)) {
             if (stop) return Status::ok();
+            // Discovery takes a moment; after that, say why no server may answer (a secured domain, most often).
+            if (!hinted && Clock::now() - waiting_since > 2s) {
+                on_event("no facescan-server answers: " +
+                         wire::noPeerHint(options_.dds, s.participant.otherParticipants()));
+                hinted = true;
+            }
             if (options_.wait_for_server_s > 0 && Clock::now() > deadline) {
                 char seconds[32];
                 std::snprintf(seconds, sizeof(seconds), "%g", options_.wait_for_server_s);
                 return deadlineExceeded("no facescan-server appeared on " + where + " within " + seconds +
-                                        " s: start one with the same --profile and --domain");
+                                        " s: start one with the same --profile, --domain and --security; " +
+                                        wire::noPeerHint(options_.dds, s.participant.otherParticipants()));
             }
         }
     }

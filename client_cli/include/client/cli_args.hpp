@@ -18,6 +18,7 @@ enum ExitCode : int {
     kExitUsage = 2,          // wrong command line
     kExitNoServer = 3,       // no server answered in time, or the server went away
     kExitCannotWrite = 4,    // the output file cannot be written
+    kExitNotAllowed = 5,     // DDS Security: a bad identity file, or the identity's role may not do this
     kExitInterrupted = 130,  // Ctrl-C (128 + SIGINT, the shell convention)
 };
 
@@ -34,7 +35,7 @@ struct CliOptions {
     std::string save_dir;                       // watch --save DIR: write each snapshot there
     std::string save_format = "ply";            // watch --save-format: ply|obj|stl|off|drc
     bool json = false;                          // sessions/status --json: one JSON object per line
-    wire::DomainConfig domain{0, "lan"};        // --domain N, --profile loopback|lan|FILE.xml
+    wire::DomainConfig domain{0, "lan"};        // --domain N, --profile P, --security DIR/NAME
     std::chrono::milliseconds timeout{10'000};  // --timeout SECONDS: how long to wait for a server
 
     Status validate() const;

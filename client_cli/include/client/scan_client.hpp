@@ -1,6 +1,7 @@
 // The client side of the scan protocol (notes/protocol.md): commands with replies collected from every server,
-// the live ScanStatus of all sessions, and MeshSnapshots. One DDS participant; readers are made on first use so
-// that `facescan mesh` never pulls the durable snapshots of every session.
+// the live ScanStatus of all sessions, and MeshSnapshots. One DDS participant; endpoints are made on first use so
+// that `facescan mesh` never pulls the durable snapshots of every session, and a read-only identity (DDS Security
+// role viewer) can watch without the command topics it may not touch.
 #pragma once
 
 #include <chrono>
@@ -56,7 +57,7 @@ struct MeshSnapshotData {
 const char* scanStateName(facescan_wire_ScanState state);  // "WAITING", "SCANNING", ...
 const char* commandKindName(facescan_wire_CommandKind kind);
 
-// "no server answered on domain N (profile P): is facescan-server running?"
+// "no server answered on domain N (profile P): is facescan-server running?" and why that may be (DDS Security)
 std::string noServerMessage(const wire::DomainConfig& domain);
 
 class ScanClient {
@@ -70,13 +71,14 @@ class ScanClient {
 
     const ClientConfig& config() const { return config_; }
 
-    // Waits until at least one server is discovered (a ScanCommand reader), up to the timeout.
-    // DeadlineExceeded with noServerMessage() when none is.
+    // Waits until at least one server is discovered (its ScanStatus writer), up to the timeout.
+    // DeadlineExceeded with noServerMessage() when none is. Needs only the right to read ScanStatus.
     Status waitForServer();
 
     // Sends one command and collects replies with its request id (notes/protocol.md): the first ok reply wins;
     // after an error reply, other servers get `grace` to answer ok. Errors: DeadlineExceeded (no server),
-    // NotFound ("unknown session 'X'", the server's text), InvalidArgument (any other refusal).
+    // NotFound ("unknown session 'X'", the server's text), InvalidArgument (any other refusal),
+    // PermissionDenied (DDS Security: this identity's role may not send commands).
     StatusOr<CommandReply> request(const std::string& session_id, facescan_wire_CommandKind kind);
 
     // The ScanStatus of every session on the domain, as far as it has arrived: waits for a server, then up to
@@ -91,6 +93,8 @@ class ScanClient {
  private:
     explicit ScanClient(ClientConfig config);
     Status ensureStatusReader();
+    Status ensureCommandEndpoints();
+    Status waitForCommandServer();
     Status ensureSnapshotReader();
     Status takeStatuses(std::map<std::string, SessionStatus>& statuses);
     std::string nextRequestId();
