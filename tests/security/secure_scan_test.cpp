@@ -30,7 +30,7 @@ using ft::CommandRun;
 using ft::readText;
 using ft::TempSite;
 
-constexpr int kFrames = 45;
+constexpr int kFrames = 30;
 
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
