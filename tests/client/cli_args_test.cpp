@@ -51,7 +51,7 @@ TEST(CliArgs, WatchSessionIsOptionalAndSaveTakesAFormat) {
 }
 
 TEST(CliArgs, EveryMeshExtensionIsAcceptedCaseInsensitively) {
-    for (const char* file : {"a.ply", "a.obj", "a.stl", "a.off", "a.drc", "A.PLY", "dir/b.Obj"}) {
+    for (const char* file : {"a.ply", "a.obj", "a.stl", "a.off", "a.drc", "a.glb", "A.PLY", "dir/b.Obj"}) {
         EXPECT_TRUE(parse({"mesh", "s", "-o", file}).isOk()) << file;
     }
     expectUsageError({"mesh", "s", "-o", "a.xyz"}, "unknown mesh format");

@@ -1,5 +1,6 @@
-// A real program of ours as a child process (servers and agents in integration tests), its output in a log file.
-// Safe to start from a test process that already runs threads (DDS): nothing allocates between fork and exec.
+// A real program of ours as a child process for integration tests, with its output in a log file; stopped with
+// SIGTERM (SIGKILL after 10 s) and reaped on destruction. Safe to start from a test process that already runs
+// threads (DDS): nothing allocates between fork and exec.
 #pragma once
 
 #include <fcntl.h>
@@ -38,9 +39,12 @@ class ChildProcess {
     ~ChildProcess() { stop(); }
     ChildProcess(const ChildProcess&) = delete;
     ChildProcess& operator=(const ChildProcess&) = delete;
-
+    // Sends `signal` (e.g. SIGINT, as Ctrl-C would) without waiting.
+    void signal(int signal) {
+        if (pid_ > 0) ::kill(pid_, signal);
+    }
     // Waits for the program to end by itself; its exit code (128 + signal when killed), or -1 on timeout.
-    int wait(std::chrono::milliseconds timeout) {
+    int wait(std::chrono::seconds timeout) {
         const auto deadline = std::chrono::steady_clock::now() + timeout;
         while (pid_ > 0) {
             int status = 0;
@@ -53,13 +57,9 @@ class ChildProcess {
         }
         return -1;
     }
-    bool running() const { return pid_ > 0; }
-    // SIGTERM (SIGKILL after 10 s), reaped.
-    void stop() { signal(SIGTERM); }
-    // Sends `sig` and reaps the process (SIGKILL when it has not ended 10 s after a softer signal).
-    void signal(int sig) {
+    void stop() {
         if (pid_ <= 0) return;
-        ::kill(pid_, sig);
+        ::kill(pid_, SIGTERM);
         if (wait(std::chrono::seconds(10)) < 0) {
             ::kill(pid_, SIGKILL);
             ::waitpid(pid_, nullptr, 0);
@@ -72,6 +72,7 @@ class ChildProcess {
     pid_t pid_ = 0;
 };
 
+// A program's log (or any file) as text; empty when it cannot be read.
 inline std::string readText(const std::filesystem::path& path) {
     std::ifstream in(path, std::ios::binary);
     return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

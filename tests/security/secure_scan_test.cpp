@@ -160,7 +160,7 @@ TEST(SecureScan, IsPrivateEachRoleDoesOnlyItsJobAndTheAccuracyIsThatOfAnUnsecure
                                     << readText(dir / "secure_server.log") << readText(dir / "secure_agent.log");
     for (const char* command : {"reset", "finish"}) {
         const CommandRun refused = cli(std::string(command) + " " + session + as_viewer);
-        EXPECT_EQ(refused.exit_code, 5) << refused.out;
+        EXPECT_EQ(refused.exit_code, 6) << refused.out;
         EXPECT_TRUE(contains(refused.out, "DDS Security access control refused")) << refused.out;
         EXPECT_TRUE(contains(refused.out, "may not send commands")) << refused.out;
     }
@@ -260,7 +260,7 @@ TEST(SecurePrograms, ABadIdentityStopsEveryProgramAtStartWithOneLineNamingTheFil
     const std::vector<Case> cases = {
         {agent, site.identity("old-agent"), 1, "identity.pem: the certificate expired on 2021-01-01 00:00 UTC"},
         {server, site.identity("old-server"), 1, "identity.pem: the certificate expired on 2021-01-01 00:00 UTC"},
-        {client, site.identity("old-client"), 5, "identity.pem: the certificate expired on 2021-01-01 00:00 UTC"},
+        {client, site.identity("old-client"), 6, "identity.pem: the certificate expired on 2021-01-01 00:00 UTC"},
         {server, site.identity("mixed"), 1, "identity.key: is not the private key of"},
         {agent, site.root() / "nowhere", 1, "nowhere: no such identity folder"},
     };
