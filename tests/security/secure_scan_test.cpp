@@ -148,34 +148,37 @@ TEST(SecureScan, IsPrivateEachRoleDoesOnlyItsJobAndTheAccuracyIsThatOfAnUnsecure
     // and finish the session and sends it frames of its own.
     ft::Heard heard;
     std::thread listener([&] { heard = (*eve)->listen(5s, session, /*until_all_heard=*/false); });
+    // The viewer follows the scan from its start and saves the snapshots it reads.
+    ChildProcess watch(
+        {FACESCAN_CLI, "watch", session, "--save", (dir / "viewer_snaps").string(), "--profile", "loopback", "--domain",
+         std::to_string(secure_domain), "--security", site.identity("viewer").string(), "--timeout", "60"},
+        dir / "viewer_watch.log");
     ChildProcess agent =
         startAgent(secure_domain, site.identity("agent"), session, kFrames, 30, dir / "secure_agent.log");
 
-    // The viewer reads the live status; its reset and finish are refused by access control; the scan goes on.
-    int integrated_before = -1;
-    for (int i = 0; i < 40 && integrated_before <= 0; ++i) {
-        integrated_before = integratedFrames(cli("sessions --json" + as_viewer).out, session, "SCANNING");
+    // The viewer reads the status; its reset and finish are refused by access control; the scan goes on.
+    int integrated_seen = -1;
+    for (int i = 0; i < 30 && integrated_seen < 0; ++i) {
+        integrated_seen = integratedFrames(cli("sessions --json" + as_viewer).out, session, "[A-Z]+");
     }
-    EXPECT_GT(integrated_before, 0) << "the viewer never saw the scan's status\n"
-                                    << readText(dir / "secure_server.log") << readText(dir / "secure_agent.log");
+    EXPECT_GE(integrated_seen, 0) << "the viewer never saw the scan's status\n"
+                                  << readText(dir / "secure_server.log") << readText(dir / "secure_agent.log");
     for (const char* command : {"reset", "finish"}) {
         const CommandRun refused = cli(std::string(command) + " " + session + as_viewer);
         EXPECT_EQ(refused.exit_code, 6) << refused.out;
         EXPECT_TRUE(contains(refused.out, "DDS Security access control refused")) << refused.out;
         EXPECT_TRUE(contains(refused.out, "may not send commands")) << refused.out;
     }
-    // The viewer follows the scan to its end and saves the snapshots it reads.
-    const CommandRun watch =
-        cli("watch " + session + " --save " + (dir / "viewer_snaps").string() + as_viewer + " --timeout 30");
-    EXPECT_EQ(watch.exit_code, 0) << watch.out;
-    EXPECT_TRUE(contains(watch.out, "scan " + session + " finished")) << watch.out;
+    EXPECT_EQ(watch.wait(60s), 0) << readText(dir / "viewer_watch.log");
+    EXPECT_TRUE(contains(readText(dir / "viewer_watch.log"), "scan " + session + " finished"))
+        << readText(dir / "viewer_watch.log");
     int snapshots = 0;
     for (const auto& entry : fs::directory_iterator(dir / "viewer_snaps")) {
         recon::Mesh snap;
         EXPECT_TRUE(OpenMesh::IO::read_mesh(snap, entry.path().string())) << entry.path();
         ++snapshots;
     }
-    EXPECT_GE(snapshots, 1) << "the viewer reads snapshots";
+    EXPECT_GE(snapshots, 1) << "the viewer reads snapshots\n" << readText(dir / "viewer_watch.log");
     EXPECT_EQ(agent.wait(60s), 0) << readText(dir / "secure_agent.log");
     listener.join();
 

@@ -42,8 +42,8 @@ void writePatternSequence(const fs::path& dir) {
     for (int y = 0; y < kHeight; ++y) {
         for (int x = 0; x < kWidth; ++x) {
             const size_t i = (static_cast<size_t>(x) * 2) % kPattern.size();
-            depth.at<uint16_t>(y, x) = static_cast<uint16_t>(static_cast<uint8_t>(kPattern[i]) |
-                                                             (static_cast<uint8_t>(kPattern[i + 1]) << 8));
+            depth.at<uint16_t>(y, x) =
+                static_cast<uint16_t>(static_cast<uint8_t>(kPattern[i]) | (static_cast<uint8_t>(kPattern[i + 1]) << 8));
         }
     }
     std::ofstream list(dir / "depth.txt");
@@ -104,10 +104,12 @@ class LoopbackCapture {
             if (!inRange(src) && !inRange(dst)) continue;
             const size_t udp_len = std::min<size_t>(ntohs(udp->len), static_cast<size_t>(n) - ip_len);
             if (udp_len < sizeof(udphdr)) continue;
-            const std::string_view payload(reinterpret_cast<const char*>(udp) + sizeof(udphdr), udp_len - sizeof(udphdr));
+            const std::string_view payload(reinterpret_cast<const char*>(udp) + sizeof(udphdr),
+                                           udp_len - sizeof(udphdr));
             bytes_ += payload.size();
             ++datagrams_;
-            for (size_t at = payload.find(kPattern); at != std::string_view::npos; at = payload.find(kPattern, at + 1)) {
+            for (size_t at = payload.find(kPattern); at != std::string_view::npos;
+                 at = payload.find(kPattern, at + 1)) {
                 ++hits_;
             }
         }
@@ -139,10 +141,18 @@ WireRun streamPattern(uint32_t domain, const fs::path& sequence, const fs::path&
     }
     std::vector<std::string> dds{"--profile", "loopback", "--domain", std::to_string(domain)};
     std::vector<std::string> server_args{FACESCAN_SERVER_BIN, "--data-dir", (dir / (tag + "_data")).string()};
-    std::vector<std::string> agent_args{FACESCAN_AGENT_BIN, "--source",   "tum:" + sequence.string(),
-                                        "--depth-codec",    "raw16",      "--no-colour",
-                                        "--rate",           "max",        "--wait-for-server",
-                                        "30",               "--session",  tag + "-" + std::to_string(::getpid())};
+    std::vector<std::string> agent_args{FACESCAN_AGENT_BIN,
+                                        "--source",
+                                        "tum:" + sequence.string(),
+                                        "--depth-codec",
+                                        "raw16",
+                                        "--no-colour",
+                                        "--rate",
+                                        "max",
+                                        "--wait-for-server",
+                                        "30",
+                                        "--session",
+                                        tag + "-" + std::to_string(::getpid())};
     server_args.insert(server_args.end(), dds.begin(), dds.end());
     agent_args.insert(agent_args.end(), dds.begin(), dds.end());
     if (site) {
@@ -186,9 +196,10 @@ TEST(SecureWire, AKnownFramePatternAppearsInClearWithoutSecurityAndNeverWithIt) 
     EXPECT_NE(secure.agent_log.find("server found"), std::string::npos) << secure.agent_log;
     EXPECT_GE(secure.bytes, kFrames * frame_bytes) << "the (encrypted) frames were not captured";
     EXPECT_EQ(secure.hits, 0u) << "the pattern was seen in clear with DDS Security on";
-    std::printf("on the wire: without security %zu datagrams, %zu bytes, pattern seen %zu times; with security %zu "
-                "datagrams, %zu bytes, pattern seen %zu times\n",
-                plain.datagrams, plain.bytes, plain.hits, secure.datagrams, secure.bytes, secure.hits);
+    std::printf(
+        "on the wire: without security %zu datagrams, %zu bytes, pattern seen %zu times; with security %zu "
+        "datagrams, %zu bytes, pattern seen %zu times\n",
+        plain.datagrams, plain.bytes, plain.hits, secure.datagrams, secure.bytes, secure.hits);
 }
 
 }  // namespace
