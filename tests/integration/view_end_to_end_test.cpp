@@ -22,8 +22,8 @@ using namespace facescan;
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 using facescan::testing::ChildProcess;
-using facescan::testing::readText;
 using facescan::testing::httpRequest;
+using facescan::testing::readText;
 using facescan::testing::WsClient;
 
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
