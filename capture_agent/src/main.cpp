@@ -142,7 +142,7 @@ int main(int argc, char** argv) {
     getrusage(RUSAGE_SELF, &usage);
     const double cpu_s =
         usage.ru_utime.tv_sec + usage.ru_utime.tv_usec * 1e-6 + usage.ru_stime.tv_sec + usage.ru_stime.tv_usec * 1e-6;
-    std::printf("facescan-agent: %s; cpu %.1f s\n",
+    std::printf("facescan-agent: %s; cpu %.2f s\n",
                 g_stop ? "stopped (Ctrl-C), server told the stream ended" : "stream ended", cpu_s);
     if (!status.isOk()) {
         std::fprintf(stderr, "facescan-agent: %s\n", status.toString().c_str());
