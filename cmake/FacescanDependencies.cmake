@@ -55,6 +55,8 @@ find_package(TinyGLTF QUIET)
 facescan_require(TinyGLTF_FOUND "TinyGLTF" "libtinygltf-dev")
 # Not through civetweb's CMake config: Debian's (1.15+dfsg-4) also names the civetweb program, which is in another
 # package (civetweb), and stops configure when that is absent. The header and the library are all we use.
+find_package(ZLIB QUIET)  # the viewer gzips its page once at start
+facescan_require(ZLIB_FOUND "zlib" "zlib1g-dev")
 find_path(CIVETWEB_INCLUDE_DIR civetweb.h)
 find_library(CIVETWEB_LIBRARY civetweb)
 facescan_require(CIVETWEB_LIBRARY "CivetWeb (HTTP and WebSocket server)" "libcivetweb-dev")

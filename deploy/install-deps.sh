@@ -25,7 +25,7 @@ PACKAGES=(
     # DDS Security: identity checks (OpenSSL), the site script (openssl); the plugins come with cyclonedds-dev
     libssl-dev openssl
     # the client: GLB export (glTF 2.0) and the web viewer's HTTP/WebSocket server
-    libtinygltf-dev libcivetweb-dev
+    libtinygltf-dev libcivetweb-dev zlib1g-dev
     # tests, benchmarks, fuzzers, formatting
     libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format
 )

@@ -6,6 +6,7 @@
 
 #include <cstdio>
 #include <mutex>
+#include <thread>
 
 #include "client/view_hub.hpp"
 #include "client/view_server.hpp"
@@ -22,7 +23,9 @@ void openInBrowser(const std::string& url) {
     const char* argv[] = {"xdg-open", url.c_str(), nullptr};
     if (::posix_spawnp(&pid, "xdg-open", nullptr, nullptr, const_cast<char* const*>(argv), environ) != 0) {
         std::fprintf(stderr, "facescan view: cannot run xdg-open; open %s in a browser\n", url.c_str());
+        return;
     }
+    std::thread([pid] { ::waitpid(pid, nullptr, 0); }).detach();  // reaped when it is done, never a zombie
 }
 
 }  // namespace

@@ -6,7 +6,6 @@
 #include <civetweb.h>
 #include <unistd.h>
 
-#include <cstdlib>
 #include <cstring>
 #include <map>
 #include <mutex>
@@ -18,22 +17,18 @@
 #include "wire/messages.hpp"
 
 namespace facescan::client {
-namespace fs = std::filesystem;
 
 namespace {
-
-constexpr const char* kInstallHint =
-    "run deploy/install-deps.sh (it installs three.js with `npm ci` in client_cli/web), or `cmake --install` "
-    "facescan, or point FACESCAN_WEB_DIR at a folder with the viewer's files";
 
 std::string jsonError(const std::string& message) { return "{\"error\":" + jsonString(message) + "}"; }
 
 // One response with a body (none for HEAD). CivetWeb writes the status line and headers.
+// API answers are live data: no-store unless told (assets bring their own caching headers).
 void respond(mg_connection* conn, int status, const char* mime, std::string_view body,
-             const std::vector<std::pair<std::string, std::string>>& headers = {}) {
+             const std::vector<std::pair<std::string, std::string>>& headers = {}, bool no_store = true) {
     mg_response_header_start(conn, status);
     mg_response_header_add(conn, "Content-Type", mime, -1);
-    mg_response_header_add(conn, "Cache-Control", "no-store", -1);
+    if (no_store) mg_response_header_add(conn, "Cache-Control", "no-store", -1);
     mg_response_header_add(conn, "Content-Length", std::to_string(body.size()).c_str(), -1);
     for (const auto& [name, value] : headers) mg_response_header_add(conn, name.c_str(), value.c_str(), -1);
     mg_response_header_send(conn);
@@ -59,58 +54,6 @@ Status ViewServerConfig::validate() const {
     return Status::ok();
 }
 
-const std::vector<WebAsset>& webAssets() {
-    static const std::vector<WebAsset> assets = {
-        {"/", "index.html", "text/html; charset=utf-8"},
-        {"/index.html", "index.html", "text/html; charset=utf-8"},
-        {"/viewer.js", "viewer.js", "text/javascript; charset=utf-8"},
-        {"/style.css", "style.css", "text/css; charset=utf-8"},
-        {"/vendor/three.module.js", "node_modules/three/build/three.module.js", "text/javascript; charset=utf-8"},
-        {"/vendor/three.core.js", "node_modules/three/build/three.core.js", "text/javascript; charset=utf-8"},
-        {"/vendor/addons/controls/OrbitControls.js", "node_modules/three/examples/jsm/controls/OrbitControls.js",
-         "text/javascript; charset=utf-8"},
-        {"/vendor/addons/loaders/DRACOLoader.js", "node_modules/three/examples/jsm/loaders/DRACOLoader.js",
-         "text/javascript; charset=utf-8"},
-        {"/vendor/draco/draco_wasm_wrapper.js", "node_modules/three/examples/jsm/libs/draco/draco_wasm_wrapper.js",
-         "text/javascript; charset=utf-8"},
-        {"/vendor/draco/draco_decoder.wasm", "node_modules/three/examples/jsm/libs/draco/draco_decoder.wasm",
-         "application/wasm"},
-    };
-    return assets;
-}
-
-Status checkWebRoot(const fs::path& root) {
-    std::error_code ec;
-    for (const WebAsset& asset : webAssets()) {
-        if (!fs::is_regular_file(root / asset.path, ec)) {
-            return notFound("the viewer's file '" + (root / asset.path).string() + "' is missing: " + kInstallHint);
-        }
-    }
-    return Status::ok();
-}
-
-StatusOr<fs::path> findWebRoot() {
-    std::vector<fs::path> candidates;
-    if (const char* env = std::getenv("FACESCAN_WEB_DIR"); env && *env) {
-        RETURN_IF_ERROR(checkWebRoot(env));
-        return fs::path(env);
-    }
-    std::error_code ec;
-    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-    if (!ec) candidates.push_back(exe.parent_path() / ".." / "share" / "facescan" / "web");
-#ifdef FACESCAN_WEB_SOURCE_DIR
-    candidates.emplace_back(FACESCAN_WEB_SOURCE_DIR);
-#endif
-    Status first_missing = notFound(std::string("no folder with the viewer's files: ") + kInstallHint);
-    for (const fs::path& dir : candidates) {
-        if (!fs::is_directory(dir, ec)) continue;
-        const Status s = checkWebRoot(dir);
-        if (s.isOk()) return fs::weakly_canonical(dir, ec);
-        first_missing = s;
-    }
-    return first_missing;
-}
-
 // One browser's WebSocket: its cursor in the hub and the thread that sends it what is new.
 struct Browser {
     mg_connection* conn = nullptr;
@@ -120,6 +63,7 @@ struct Browser {
 
 struct ViewServer::Impl {
     ViewServerConfig config;
+    std::vector<LoadedAsset> assets;
     ViewHub* hub = nullptr;
     MeshFetcher fetch_mesh;
     mg_context* ctx = nullptr;
@@ -128,6 +72,7 @@ struct ViewServer::Impl {
 
     int handleRequest(mg_connection* conn);
     int handleApi(mg_connection* conn, std::string_view rest);
+    int sendAsset(mg_connection* conn, const LoadedAsset& asset);
     int sendMesh(mg_connection* conn, const std::string& session, const std::string& extension);
 
     // Writes one WebSocket message; false once the browser is gone.
@@ -158,14 +103,30 @@ int ViewServer::Impl::handleRequest(mg_connection* conn) {
         return 405;
     }
     if (uri == "/api/sessions" || uri.starts_with("/api/sessions/")) return handleApi(conn, uri.substr(13));
-    for (const WebAsset& asset : webAssets()) {
-        if (uri == asset.url) {
-            // CivetWeb sends the file (length, Last-Modified, ETag, ranges); the type is ours (it lacks wasm).
-            mg_send_mime_file2(conn, (config.web_root / asset.path).c_str(), asset.mime, nullptr);
-            return 200;
-        }
+    for (const LoadedAsset& asset : assets) {
+        if (uri == asset.url) return sendAsset(conn, asset);
     }
     return respondError(conn, 404, "no such page: " + std::string(uri));
+}
+
+// From memory: gzipped when the browser accepts it, 304 when it has this version (no-cache: it always asks, so a
+// new viewer's page is never stale).
+int ViewServer::Impl::sendAsset(mg_connection* conn, const LoadedAsset& asset) {
+    const char* if_none_match = mg_get_header(conn, "If-None-Match");
+    if (if_none_match && asset.etag == if_none_match) {
+        mg_response_header_start(conn, 304);
+        mg_response_header_add(conn, "ETag", asset.etag.c_str(), -1);
+        mg_response_header_add(conn, "Cache-Control", "no-cache", -1);
+        mg_response_header_send(conn);
+        return 304;
+    }
+    const char* accept = mg_get_header(conn, "Accept-Encoding");
+    const bool gzip = accept && std::string_view(accept).find("gzip") != std::string_view::npos;
+    std::vector<std::pair<std::string, std::string>> headers = {
+        {"ETag", asset.etag}, {"Cache-Control", "no-cache"}, {"Vary", "Accept-Encoding"}};
+    if (gzip) headers.emplace_back("Content-Encoding", "gzip");
+    respond(conn, 200, asset.mime.c_str(), gzip ? asset.gzip : asset.identity, headers, /*no_store=*/false);
+    return 200;
 }
 
 int ViewServer::Impl::handleApi(mg_connection* conn, std::string_view rest) {
@@ -306,7 +267,7 @@ int onLog(const mg_connection*, const char* message) {
 StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& config, ViewHub& hub,
                                                         MeshFetcher fetch_mesh) {
     RETURN_IF_ERROR(config.validate());
-    RETURN_IF_ERROR(checkWebRoot(config.web_root));
+    ASSIGN_OR_RETURN(std::vector<LoadedAsset> assets, loadWebAssets(config.web_root));
     static std::once_flag init_once;
     std::call_once(init_once, [] { mg_init_library(0); });
 
@@ -314,6 +275,7 @@ StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& 
     server->impl_ = std::make_unique<Impl>();
     Impl& impl = *server->impl_;
     impl.config = config;
+    impl.assets = std::move(assets);
     impl.hub = &hub;
     impl.fetch_mesh = std::move(fetch_mesh);
 

@@ -11,7 +11,19 @@ const nowMs = () => performance.timeOrigin + performance.now();  // epoch ms, su
 
 // --- the 3D view ------------------------------------------------------------------------------------------------
 const canvas = $('canvas');
-const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+// Multisampling doubles the cost of a frame on a software renderer (SwiftShader, llvmpipe: a VM, a remote desktop,
+// a machine without a GPU) and costs nothing noticeable on a GPU: only there is it on.
+function softwareRenderer() {
+  const gl = document.createElement('canvas').getContext('webgl2');
+  if (!gl) return false;
+  // RENDERER is often masked ("WebKit WebGL"); the debug extension gives the real name where it is offered.
+  const info = gl.getExtension('WEBGL_debug_renderer_info');
+  const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+  gl.getExtension('WEBGL_lose_context')?.loseContext();
+  return /swiftshader|llvmpipe|software/i.test(name);
+}
+stats.softwareRenderer = softwareRenderer();
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: !stats.softwareRenderer, preserveDrawingBuffer: true });
 renderer.setPixelRatio(window.devicePixelRatio);
 const scene = new THREE.Scene();
 scene.background = new THREE.Color(0x16181d);
@@ -42,7 +54,9 @@ function requestRender(callback) {
   requestAnimationFrame(() => {
     renderPending = false;
     resize();
+    const t0 = performance.now();
     renderer.render(scene, camera);
+    stats.lastRenderMs = performance.now() - t0;
     const done = afterDraw;
     afterDraw = [];
     // The frame is on screen at the next animation frame: that is when "drawn" is measured.
@@ -58,6 +72,8 @@ function resize() {
   }
 }
 controls.addEventListener('change', () => requestRender());
+// Where the camera looks from, relative to the point it turns around (tests check turning and reset view with it).
+stats.viewDirection = () => camera.position.clone().sub(controls.target).normalize().toArray();
 window.addEventListener('resize', () => requestRender());
 
 function frameFace() {
@@ -108,7 +124,8 @@ function decode(snap) {
       const record = {
         seq: snap.header.seq, bytes: snap.size, vertices: snap.header.vertex_count,
         triangles: snap.header.triangle_count, created_ms: snap.header.created_ms, received_ms: snap.received,
-        decode_ms: decodeMs, drawn_ms: drawnMs, latency_ms: drawnMs - snap.header.created_ms,
+        decode_ms: decodeMs, render_ms: stats.lastRenderMs, drawn_ms: drawnMs,
+        latency_ms: drawnMs - snap.header.created_ms,
       };
       stats.snapshots.push(record);
       stats.drawn = stats.snapshots.length;

@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>
+#include <zlib.h>
 
 #include <atomic>
 #include <cmath>
@@ -139,7 +140,37 @@ TEST_F(ViewServerTest, ServesThePageAndEveryThreeJsFileWithItsType) {
         EXPECT_EQ(r.body, expected);
     }
     EXPECT_TRUE(contains(httpRequest(port_, "/").body, "<script type=\"importmap\">"));
+    EXPECT_EQ(httpRequest(port_, "/", "HEAD").body, "");
     EXPECT_EQ(httpRequest(port_, "/vendor/draco/draco_decoder.wasm").body.substr(0, 4), std::string("\0asm", 4));
+}
+
+// A browser that accepts gzip gets the compressed bytes (they inflate to the file), and a reload with the ETag
+// it has gets 304 and no body.
+TEST_F(ViewServerTest, AssetsAreGzippedForBrowsersAndRevalidatedByEtag) {
+    const auto plain = httpRequest(port_, "/vendor/three.core.js");
+    const auto packed = httpRequest(port_, "/vendor/three.core.js", "GET", "Accept-Encoding: gzip, deflate, br\r\n");
+    ASSERT_EQ(packed.status, 200);
+    EXPECT_EQ(packed.header("Content-Encoding"), "gzip");
+    EXPECT_EQ(plain.header("Content-Encoding"), "");
+    EXPECT_LT(packed.body.size() * 3, plain.body.size()) << "gzip should shrink three.js at least 3x";
+    std::string inflated(plain.body.size() + 16, '\0');
+    z_stream z{};
+    ASSERT_EQ(inflateInit2(&z, 15 + 16), Z_OK);
+    z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(packed.body.data()));
+    z.avail_in = static_cast<uInt>(packed.body.size());
+    z.next_out = reinterpret_cast<Bytef*>(inflated.data());
+    z.avail_out = static_cast<uInt>(inflated.size());
+    EXPECT_EQ(inflate(&z, Z_FINISH), Z_STREAM_END);
+    inflated.resize(z.total_out);
+    inflateEnd(&z);
+    EXPECT_EQ(inflated, plain.body);
+
+    const std::string etag = plain.header("ETag");
+    ASSERT_FALSE(etag.empty());
+    const auto again = httpRequest(port_, "/vendor/three.core.js", "GET", "If-None-Match: " + etag + "\r\n");
+    EXPECT_EQ(again.status, 304);
+    EXPECT_TRUE(again.body.empty());
+    EXPECT_EQ(httpRequest(port_, "/vendor/three.core.js", "GET", "If-None-Match: \"stale\"\r\n").status, 200);
 }
 
 TEST_F(ViewServerTest, SessionsAndStatusAsJson) {

@@ -72,7 +72,7 @@ class ChildProcess {
     pid_t pid_ = 0;
 };
 
-// A program's log (or any file) as text; empty when it cannot be read.
+// The whole content of a file (a child's log); empty when it cannot be read.
 inline std::string readText(const std::filesystem::path& path) {
     std::ifstream in(path, std::ios::binary);
     return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

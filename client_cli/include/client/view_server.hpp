@@ -4,6 +4,7 @@
 //
 //   GET /                                      the page (client_cli/web/index.html)
 //   GET /viewer.js /style.css /vendor/...      our script and style; three.js and Draco's wasm decoder from npm
+//                                              (client/web_assets.hpp: from memory, gzipped when accepted, ETags)
 //   GET /api/sessions                          {"type":"sessions","sessions":[status, ...]}
 //   GET /api/sessions/ID                       one session's status; 404 when unknown
 //   GET /api/sessions/ID/snapshot.drc          the latest MeshSnapshot's Draco bytes, as received; 404 when none
@@ -23,6 +24,7 @@
 #include <vector>
 
 #include "client/view_hub.hpp"
+#include "client/web_assets.hpp"
 #include "recon/status.hpp"
 
 namespace facescan::client {
@@ -35,21 +37,6 @@ struct ViewServerConfig {
 
     Status validate() const;
 };
-
-// The files the viewer serves, relative to the web root: our page and the parts of three.js it loads. The same
-// layout in the source tree (client_cli/web, after `npm ci` there) and installed (<prefix>/share/facescan/web).
-struct WebAsset {
-    const char* url;
-    const char* path;
-    const char* mime;
-};
-const std::vector<WebAsset>& webAssets();
-
-// The asset folder: $FACESCAN_WEB_DIR, else <exe>/../share/facescan/web, else the source tree's client_cli/web.
-// NotFound, saying what to run, when none holds every asset (three.js is installed by deploy/install-deps.sh).
-StatusOr<std::filesystem::path> findWebRoot();
-// Whether `root` holds every asset; NotFound naming the first missing one and what to run.
-Status checkWebRoot(const std::filesystem::path& root);
 
 // The full-resolution mesh of a session as Draco bytes (ScanClient::request(GET_MESH) in the real viewer).
 // NotFound: unknown session; DeadlineExceeded or Unavailable: no server answered.

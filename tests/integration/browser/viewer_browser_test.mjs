@@ -47,9 +47,9 @@ try {
   log(`WebGL renderer: ${webgl}`);
   assert.ok(webgl, 'WebGL is not available in this chromium (SwiftShader flags?)');
 
-  // Pixels of the 3D view's centre half (the WebGL canvas keeps its drawing buffer): how many differ from the
-  // background, and a copy to compare later pictures with.
-  const sample = () => page.evaluate(() => {
+  // Pixels of the 3D view's centre half (the WebGL canvas keeps its drawing buffer), kept in the page under a
+  // name: the share that differs from the background, and later the share that differs between two samples.
+  const sample = (name) => page.evaluate((key) => {
     const source = document.getElementById('canvas');
     const copy = document.createElement('canvas');
     copy.width = source.width; copy.height = source.height;
@@ -57,37 +57,67 @@ try {
     ctx.drawImage(source, 0, 0);
     const x = Math.floor(source.width / 4), y = Math.floor(source.height / 4);
     const { data } = ctx.getImageData(x, y, Math.floor(source.width / 2), Math.floor(source.height / 2));
-    const bg = [0x16, 0x18, 0x1d];
+    (window.testSamples ||= {})[key] = data;
     let face = 0;
-    const pixels = [];
     for (let i = 0; i < data.length; i += 4) {
-      const differs = Math.abs(data[i] - bg[0]) + Math.abs(data[i + 1] - bg[1]) + Math.abs(data[i + 2] - bg[2]) > 24;
-      if (differs) face++;
-      pixels.push(data[i], data[i + 1], data[i + 2]);
+      if (Math.abs(data[i] - 0x16) + Math.abs(data[i + 1] - 0x18) + Math.abs(data[i + 2] - 0x1d) > 24) face++;
     }
-    return { share: face / (data.length / 4), pixels };
-  });
+    return { name: key, share: face / (data.length / 4) };
+  }, name);
+  const differs = (p, q) => page.evaluate(([k1, k2]) => {
+    const x = window.testSamples[k1], y = window.testSamples[k2];
+    let n = 0;
+    for (let i = 0; i < x.length; i += 4) {
+      if (Math.abs(x[i] - y[i]) + Math.abs(x[i + 1] - y[i + 1]) + Math.abs(x[i + 2] - y[i + 2]) > 24) n++;
+    }
+    return n / (x.length / 4);
+  }, [p.name, q.name]);
   const drawn = () => page.evaluate(() => window.facescanStats.drawn);
 
   await page.waitForFunction(() => window.facescanStats.drawn >= 1, null, { timeout: 40000 });
   const first = await drawn();
   await sleep(300);
   await page.screenshot({ path: path.join(outDir, 'viewer-1.png') });
-  const a = await sample();
+  const a = await sample('first');
   log(`snapshot drawn (${first}); face covers ${(100 * a.share).toFixed(1)}% of the view's centre`);
   await page.waitForFunction((n) => window.facescanStats.drawn >= n + 3, first, { timeout: 30000 });
   await sleep(300);
   await page.screenshot({ path: path.join(outDir, 'viewer-2.png') });
-  const b = await sample();
-  let changed = 0;
-  for (let i = 0; i < a.pixels.length; i += 3) {
-    const d = Math.abs(a.pixels[i] - b.pixels[i]) + Math.abs(a.pixels[i + 1] - b.pixels[i + 1]) + Math.abs(a.pixels[i + 2] - b.pixels[i + 2]);
-    if (d > 24) changed++;
-  }
-  const changedShare = changed / (a.pixels.length / 3);
+  const b = await sample('second');
+  const changedShare = await differs(a, b);
   log(`3 snapshots later: face covers ${(100 * b.share).toFixed(1)}%, ${(100 * changedShare).toFixed(1)}% of the centre changed`);
   assert.ok(a.share > 0.1 && b.share > 0.1, `the face is not drawn: ${a.share}, ${b.share} of the centre`);
   assert.ok(changedShare > 0.005, `the picture did not change between snapshots (${changedShare})`);
+
+  // The view's controls, by a person's gestures: wireframe, turning (drag), zooming (wheel), reset view.
+  const settle = () => sleep(250);
+  await page.check('#wireframe'); await settle();
+  const wire = await sample('wire');
+  await page.screenshot({ path: path.join(outDir, 'viewer-wireframe.png') });
+  await page.uncheck('#wireframe'); await settle();
+  const box = await page.locator('#canvas').boundingBox();
+  const cx = box.x + box.width / 2, cy = box.y + box.height / 2;
+  const before = await sample('before');
+  await page.mouse.move(cx, cy); await page.mouse.down();
+  await page.mouse.move(cx + 250, cy, { steps: 10 }); await page.mouse.up(); await settle();
+  const turned = await sample('turned');
+  const turnedDirection = await page.evaluate(() => window.facescanStats.viewDirection());
+  await page.screenshot({ path: path.join(outDir, 'viewer-turned.png') });
+  await page.click('#reset-view'); await settle();
+  const reset = await sample('reset');
+  const resetDirection = await page.evaluate(() => window.facescanStats.viewDirection());
+  await page.mouse.move(cx, cy); await page.mouse.wheel(0, -600); await settle();
+  const zoomed = await sample('zoomed');
+  await page.click('#reset-view'); await settle();
+  const [dWire, dTurned] = [await differs(before, wire), await differs(before, turned)];
+  const fmt = (v) => v.map((x) => x.toFixed(2)).join(', ');
+  log(`controls: wireframe changed ${(100 * dWire).toFixed(0)}%, turning ${(100 * dTurned).toFixed(0)}% ` +
+      `(view from ${fmt(turnedDirection)}; after reset ${fmt(resetDirection)}); ` +
+      `zoom in: face ${(100 * reset.share).toFixed(0)}% -> ${(100 * zoomed.share).toFixed(0)}%`);
+  assert.ok(dWire > 0.05, 'the wireframe toggle changed nothing');
+  assert.ok(dTurned > 0.15 && turnedDirection[2] < 0.95, 'dragging did not turn the face');
+  assert.ok(resetDirection[2] > 0.999, 'reset view did not bring back the front view');
+  assert.ok(zoomed.share > reset.share + 0.05, 'the wheel did not zoom in');
 
   const progress = await page.evaluate(() => ({
     state: document.getElementById('state').textContent,
@@ -118,6 +148,16 @@ try {
       `${geometry.index.count / 3} triangles, colours: ${Boolean(geometry.attributes.color)}`);
   assert.ok(geometry.attributes.position.count > 1000);
   assert.ok(geometry.attributes.color, 'the GLB has no vertex colours (COLOR_0)');
+
+  // A URL naming a session nobody scans: the page says so (and offers the list).
+  const lost = await browser.newPage();
+  lost.on('pageerror', (error) => problems.push(`page error (unknown session page): ${error.message}`));
+  await lost.goto(`${url}?session=nobody-${process.pid}`);
+  await lost.waitForFunction(() => !document.getElementById('message').hidden, null, { timeout: 10000 });
+  const text = await lost.textContent('#message');
+  log(`unknown session page: "${text}"`);
+  assert.match(text, /Unknown session 'nobody-\d+'/);
+  await lost.close();
 
   const stats = await page.evaluate(() => window.facescanStats.snapshots);
   fs.writeFileSync(path.join(outDir, 'stats.json'), JSON.stringify(stats, null, 1));
