@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # What DDS Security costs (issue 14): the same live scan with and without it, in one run, alternating the two
 # (plain, secure, plain, secure, ...) so that the machine's load falls on both alike. facescan-server and one
-# agent streaming a TUM folder at 30 Hz (like a real camera's capture PC: it only decodes PNGs) over loopback DDS
+# agent streaming a TUM folder at 30 Hz (RATE; like a real camera's capture PC: it only decodes PNGs) over loopback DDS
 # in a private domain; the secured runs use a fresh site from deploy/security/site.sh.
 # Per run: discovery time (agent joins the domain -> a server matched; secured: authentication handshakes and key
 # exchange included), agent and server CPU (seconds, % of one core over the stream, and the server's ms per
@@ -11,12 +11,14 @@
 # CPU and latency DDS Security adds to each side without the recon's noise, and its flat-out throughput.
 #   usage: tests/bench/security_overhead.sh [ROUNDS (default 3)] [FRAMES (default 300)]
 #   env:   BUILD_DIR (default ./build), TUM_DIR (default: rendered once from the real head scan, or the built-in
-#          head when ../shared/data is absent, with facescan-bench synth --tum)
+#          head when ../shared/data is absent, with facescan-bench synth --tum), RATE (frames per second the agent
+#          sends, default 30: the camera's rate; a lower one keeps a busy machine's server from falling behind)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
 rounds=${1:-3}
 frames=${2:-300}
+rate=${RATE:-30}
 BUILD_DIR=${BUILD_DIR:-$root/build}
 server_bin=$BUILD_DIR/recon_server/service/facescan-server
 agent_bin=$BUILD_DIR/capture_agent/core/facescan-agent
@@ -60,7 +62,7 @@ run() {
     pids+=("$server_pid")
     sleep 1
     "$agent_bin" --source "tum:$tum" --frames "$frames" --profile loopback --domain "$domain" --session "s$n" \
-        --rate real "${sec_agent[@]}" >"$dir/agent.log" 2>&1 ||
+        --rate "$rate" "${sec_agent[@]}" >"$dir/agent.log" 2>&1 ||
         { echo "security_overhead: the agent failed (logs in $dir)" >&2; return 1; }
     for _ in $(seq 1 100); do [ -f "$dir/data/s$n/summary.json" ] && break; sleep 0.2; done
     local server_cpu
@@ -90,7 +92,7 @@ for r in $(seq 1 "$rounds"); do
     done
 done
 
-echo "security_overhead: $rounds rounds x 2 modes x $frames frames at 30 Hz (TUM: depth and colour), domain $domain, load $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "security_overhead: $rounds rounds x 2 modes x $frames frames at $rate Hz (TUM: depth and colour), domain $domain, load $(cut -d' ' -f1-3 /proc/loadavg)"
 awk '
     { n[$1]++; d[$1]+=$2; a[$1]+=$3; s[$1]+=$4; f[$1]+=$6; p[$1]+=$7; q[$1]+=$8; k[$1]+=1000*$4/$9
       printf "%-7s discovery %5.3f s | agent cpu %5.2f s (%4.1f %%) | server cpu %5.2f s (%4.1f %%), %5.1f ms/frame | %4.1f fps | latency p50 %5.1f ms p95 %5.1f ms\n",
