@@ -23,6 +23,9 @@ struct ClientConfig {
     std::chrono::milliseconds grace{500};       // after an error reply, wait this long for another server's ok
     // After the first server is discovered, wait this long for more (each server answers for its own sessions).
     std::chrono::milliseconds discovery_settle{250};
+    // false: status and snapshots only, no ScanCommand writer or ScanReply reader (a live feed never sends
+    // commands, and a read-only viewer identity may not); request() and waitForServer() are then Unavailable.
+    bool commands = true;
 
     Status validate() const;
 };
@@ -97,6 +100,7 @@ class ScanClient {
     Status ensureStatusReader();
     Status ensureSnapshotReader();
     Status takeStatuses(std::map<std::string, SessionStatus>& statuses);
+    Status readOnly() const;
     std::string nextRequestId();
 
     struct Endpoints;
