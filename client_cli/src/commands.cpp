@@ -42,10 +42,16 @@ int exitCodeForRequest(const Status& status) {
     }
 }
 
-std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_code) {
+ClientConfig clientConfig(const CliOptions& options) {
     ClientConfig config;
     config.domain = options.domain;
     config.timeout = options.timeout;
+    return config;
+}
+
+std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_code, bool commands) {
+    ClientConfig config = clientConfig(options);
+    config.commands = commands;
     auto client = ScanClient::connect(config);
     if (client.isOk()) return std::move(client).value();
     // A profile or identity that does not exist or does not parse is the user's command line; a refused identity

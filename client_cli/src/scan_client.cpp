@@ -71,7 +71,8 @@ struct ScanClient::Endpoints {
 
     // Declared first so that it is destroyed last (deleting a participant deletes its children).
     wire::Participant participant;
-    // Made on first use: a read-only identity (DDS Security role viewer) may not even create the command topics.
+    // Made on first request (never in a client that only reads: ClientConfig::commands): a read-only identity
+    // (DDS Security role viewer) may not even create the command topics, yet watches.
     std::optional<wire::Topic<facescan_wire_ScanCommand>> command_topic;
     std::optional<wire::Topic<facescan_wire_ScanReply>> reply_topic;
     std::optional<wire::Writer<facescan_wire_ScanCommand>> command_writer;
@@ -102,6 +103,10 @@ StatusOr<std::unique_ptr<ScanClient>> ScanClient::connect(const ClientConfig& co
     return client;
 }
 
+Status ScanClient::readOnly() const {
+    return unavailable("this client only reads status and snapshots (it has no command endpoints)");
+}
+
 std::string ScanClient::nextRequestId() { return client_id_ + ":" + std::to_string(++request_counter_); }
 
 Status ScanClient::waitForServer() {
@@ -117,9 +122,10 @@ Status ScanClient::waitForServer() {
     return Status::ok();
 }
 
-Status ScanClient::ensureCommandEndpoints() {
+Status ScanClient::enableCommands() {
     Endpoints& e = *endpoints_;
     if (e.command_writer && e.reply_reader) return Status::ok();
+    if (!config_.commands) return readOnly();
     Status made = [&]() -> Status {
         ASSIGN_OR_RETURN(auto command_topic, wire::Topic<facescan_wire_ScanCommand>::create(e.participant));
         e.command_topic.emplace(std::move(command_topic));
@@ -140,7 +146,7 @@ Status ScanClient::ensureCommandEndpoints() {
 
 Status ScanClient::waitForCommandServer() {
     Endpoints& e = *endpoints_;
-    RETURN_IF_ERROR(ensureCommandEndpoints());
+    RETURN_IF_ERROR(enableCommands());
     if (e.command_server_seen) return Status::ok();
     // Every server reads ScanCommand and writes ScanReply: both directions must be matched before a command is
     // sent, or the (volatile) command or its reply would go to nobody.

@@ -122,6 +122,29 @@ TEST(ClientProtocol, UnknownSessionIsNotFoundAfterTheGracePeriodNotTheTimeout) {
     EXPECT_LT(took, 3s);
 }
 
+// A client that only reads (the viewer's live feed): no command endpoints, so a server sees no command from it,
+// and a command is refused at once instead of waiting for a server.
+TEST(ClientProtocol, AReadOnlyClientSendsNoCommands) {
+    const uint32_t domain = privateDomain(5);
+    ProtocolPeer peer(domain, "only", "scan-1", 0ms);
+    ClientConfig config;
+    config.domain = {domain, "loopback"};
+    config.commands = false;
+    auto client = ScanClient::connect(config);
+    ASSERT_TRUE(client.isOk()) << client.status().toString();
+    const auto start = Clock::now();
+    auto reply = (*client)->request("scan-1", facescan_wire_CMD_RESET);
+    EXPECT_LT(Clock::now() - start, 100ms);
+    ASSERT_FALSE(reply.isOk());
+    EXPECT_EQ(reply.status().code(), StatusCode::kUnavailable);
+    EXPECT_NE(reply.status().message().find("only reads"), std::string::npos) << reply.status().message();
+    std::map<std::string, SessionStatus> statuses;
+    std::vector<MeshSnapshotData> snapshots;
+    EXPECT_TRUE((*client)->poll(10ms, statuses, kAllSessions, &snapshots).isOk());
+    std::this_thread::sleep_for(300ms);
+    EXPECT_EQ(peer.commandsSeen(), 0);
+}
+
 TEST(ClientProtocol, NoServerIsDeadlineExceededWithTheDomainAndProfile) {
     const uint32_t domain = privateDomain(3);
     auto client = makeClient(domain, 700ms);

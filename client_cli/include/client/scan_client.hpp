@@ -24,6 +24,9 @@ struct ClientConfig {
     std::chrono::milliseconds grace{500};       // after an error reply, wait this long for another server's ok
     // After the first server is discovered, wait this long for more (each server answers for its own sessions).
     std::chrono::milliseconds discovery_settle{250};
+    // false: status and snapshots only, no ScanCommand writer or ScanReply reader (a live feed never sends
+    // commands, and a read-only viewer identity may not); request() is then Unavailable at once.
+    bool commands = true;
 
     Status validate() const;
 };
@@ -78,6 +81,10 @@ class ScanClient {
     // DeadlineExceeded with noServerMessage() when none is. Needs only the right to read ScanStatus.
     Status waitForServer();
 
+    // Makes the command endpoints now rather than at the first request: PermissionDenied when this identity's role
+    // may not send commands (DDS Security), Unavailable for a client that only reads. Safe to call again.
+    Status enableCommands();
+
     // Sends one command and collects replies with its request id (notes/protocol.md): the first ok reply wins;
     // after an error reply, other servers get `grace` to answer ok. Errors: DeadlineExceeded (no server),
     // NotFound ("unknown session 'X'", the server's text), InvalidArgument (any other refusal),
@@ -97,10 +104,10 @@ class ScanClient {
  private:
     explicit ScanClient(ClientConfig config);
     Status ensureStatusReader();
-    Status ensureCommandEndpoints();
     Status waitForCommandServer();
     Status ensureSnapshotReader();
     Status takeStatuses(std::map<std::string, SessionStatus>& statuses);
+    Status readOnly() const;
     std::string nextRequestId();
 
     struct Endpoints;
