@@ -1,6 +1,7 @@
 // JSON of the client's outputs (client/status_json.hpp).
 #include "client/status_json.hpp"
 
+#include <cmath>
 #include <cstdio>
 
 namespace facescan::client {
@@ -22,6 +23,11 @@ std::string jsonString(const std::string& s) {
     return out + "\"";
 }
 
+namespace {
+// JSON has no NaN or infinity: a value a peer sent as such reads as 0.
+double finite(float x) { return std::isfinite(x) ? x : 0.0; }
+}  // namespace
+
 Ownership ownershipOf(const SessionStatus& s, const std::map<std::string, OwnerInfo>& owners) {
     Ownership o{s.server_id, s.standby_id, s.owner_epoch, s.alive};
     if (const auto it = owners.find(s.session_id); it != owners.end()) {
@@ -40,9 +46,10 @@ std::string statusJson(const SessionStatus& s, bool with_alive, const Ownership*
                   "\"latency_p95_ms\":%.2f,\"snapshot_seq\":%u,\"epoch\":%u,\"owner_alive\":%s,\"failovers\":%u,"
                   "\"last_takeover_ms\":%.1f",
                   s.frames_received, s.frames_integrated, s.frames_rejected, s.frames_skipped, s.frames_dropped,
-                  s.every_frame ? "true" : "false", s.fps, s.ms_detect, s.ms_segment, s.ms_filter, s.ms_icp,
-                  s.ms_integrate, s.ms_raycast, s.ms_mesh, s.latency_p95_ms, s.snapshot_seq, o.epoch,
-                  o.alive ? "true" : "false", s.failovers, static_cast<double>(s.last_takeover_ms));
+                  s.every_frame ? "true" : "false", finite(s.fps), finite(s.ms_detect), finite(s.ms_segment),
+                  finite(s.ms_filter), finite(s.ms_icp), finite(s.ms_integrate), finite(s.ms_raycast),
+                  finite(s.ms_mesh), finite(s.latency_p95_ms), s.snapshot_seq, o.epoch, o.alive ? "true" : "false",
+                  s.failovers, finite(s.last_takeover_ms));
     return "{\"session\":" + jsonString(s.session_id) + ",\"server\":" + jsonString(s.server_id) +
            ",\"owner\":" + jsonString(o.owner) + ",\"standby\":" + jsonString(o.standby) +
            ",\"state\":" + jsonString(scanStateName(s.state)) + ",\"detail\":" + jsonString(s.detail) + "," + numbers +

@@ -119,6 +119,10 @@ async function recording(variant, round) {
   await waitForFile(summaryPath, 60000);
   const wall_s = (Date.now() - t0) / 1000;
   const summary = JSON.parse(fs.readFileSync(summaryPath, 'utf8'));
+  // The server's CPU time (user + system, clock ticks of 10 ms): what watching adds to the server's own work,
+  // unlike fps, which on a shared machine also counts what the watchers take from it.
+  const stat = fs.readFileSync(`/proc/${server.pid}/stat`, 'utf8').split(') ')[1].split(' ');
+  const server_cpu_s = (Number(stat[11]) + Number(stat[12])) / 100;
   let drawn = null;
   if (browser) {
     drawn = [];
@@ -129,26 +133,33 @@ async function recording(variant, round) {
   for (const ws of sockets) ws.close();
   if (viewer) await stop(viewer);
   await stop(server);
-  return { fps: summary.fps, wall_s, load: load(), drawn, wsReceived };
+  return { fps: summary.fps, wall_s, load: load(), drawn, wsReceived, cpu_ms_per_frame: 1000 * server_cpu_s / frames };
 }
 
 const variants = ['none', 'ws', 'browsers'];
 const fps = Object.fromEntries(variants.map((v) => [v, []]));
+const cpu = Object.fromEntries(variants.map((v) => [v, []]));
 console.log(`\nrecording of ${frames} frames (--rate max: every frame, as fast as the server goes), ${rounds} rounds:`);
 for (let round = 1; round <= rounds; ++round) {
   for (const variant of round % 2 ? variants : [...variants].reverse()) {
     const r = await recording(variant, round);
     fps[variant].push(r.fps);
+    cpu[variant].push(r.cpu_ms_per_frame);
     const watchersText = variant === 'none' ? 'no viewer' : variant === 'ws' ? `viewer + ${watchers} WebSocket clients`
       : `viewer + ${watchers} chromium pages`;
     const extra = r.drawn ? `, snapshots drawn per page ${r.drawn.join('/')}` :
       r.wsReceived.length ? `, snapshots received per client ${r.wsReceived.join('/')}` : '';
-    console.log(`  round ${round} ${watchersText.padEnd(32)} fps ${r.fps.toFixed(2)} (wall ${r.wall_s.toFixed(1)} s, load ${r.load})${extra}`);
+    console.log(`  round ${round} ${watchersText.padEnd(32)} fps ${r.fps.toFixed(2)}, server CPU ${r.cpu_ms_per_frame.toFixed(1)} ms/frame ` +
+                `(wall ${r.wall_s.toFixed(1)} s, load ${r.load})${extra}`);
   }
 }
 const mean = (v) => v.reduce((a, b) => a + b, 0) / v.length;
 results.fps = Object.fromEntries(variants.map((v) => [v, mean(fps[v])]));
+results.server_cpu_ms_per_frame = Object.fromEntries(variants.map((v) => [v, mean(cpu[v])]));
 console.log(`  mean fps: none ${results.fps.none.toFixed(2)}, ${watchers} ws ${results.fps.ws.toFixed(2)} ` +
             `(${(100 * results.fps.ws / results.fps.none).toFixed(0)}%), ${watchers} browsers ${results.fps.browsers.toFixed(2)} ` +
             `(${(100 * results.fps.browsers / results.fps.none).toFixed(0)}%)`);
+const c = results.server_cpu_ms_per_frame;
+console.log(`  mean server CPU per frame: none ${c.none.toFixed(1)} ms, ${watchers} ws ${c.ws.toFixed(1)} ms, ` +
+            `${watchers} browsers ${c.browsers.toFixed(1)} ms`);
 console.log(JSON.stringify(results));

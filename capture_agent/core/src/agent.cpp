@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "capture/owner_link.hpp"
+#include "wire/dds_options.hpp"
 #include "wire/messages.hpp"
 
 namespace facescan::capture {
@@ -91,6 +92,7 @@ std::string newSessionId() {
 
 struct Agent::Impl {
     wire::Participant participant;
+    Clock::time_point joined;  // when the participant was created (discovery time is measured from here)
     wire::Topic<facescan_wire_CameraInfo> info_topic;
     wire::Writer<facescan_wire_CameraInfo> info_writer;
     wire::Topic<facescan_wire_RgbdFrame> frame_topic;
@@ -120,6 +122,7 @@ StatusOr<std::unique_ptr<Agent>> Agent::create(AgentOptions options) {
 
     auto impl = std::make_unique<Impl>();
     ASSIGN_OR_RETURN(impl->participant, wire::Participant::create(agent->options_.dds));
+    impl->joined = Clock::now();
     ASSIGN_OR_RETURN(impl->info_topic, wire::Topic<facescan_wire_CameraInfo>::create(impl->participant));
     ASSIGN_OR_RETURN(impl->info_writer, wire::Writer<facescan_wire_CameraInfo>::create(impl->info_topic));
     ASSIGN_OR_RETURN(impl->frame_topic, wire::Topic<facescan_wire_RgbdFrame>::create(impl->participant));
@@ -157,12 +160,26 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
     RETURN_IF_ERROR(s.info_writer.write(wire::toMessage(camera)));
 
     // Nothing is read from the source until a server owns the session, so a recording loses no frame while we wait.
-    const std::string where =
-        "domain " + std::to_string(options_.dds.domain_id) + " (profile " + options_.dds.profile + ")";
+    const std::string where = options_.dds.describe();
     SessionStream stream(std::move(*s.link), s.frame_writer, session_id_, every_frame,
                          static_cast<size_t>(options_.keep_frames), where, on_event);
-    RETURN_IF_ERROR(stream.waitUntilServed(stop, options_.wait_for_server_s));
+    // After a moment with no server at all, say why none may answer (a secured domain, most often).
+    stream.onNoServer([&] { return wire::noPeerHint(options_.dds, s.participant.otherParticipants()); });
+    if (const Status served = stream.waitUntilServed(stop, options_.wait_for_server_s); !served.isOk()) {
+        char seconds[32];
+        std::snprintf(seconds, sizeof(seconds), "%g", options_.wait_for_server_s);
+        return deadlineExceeded("no facescan-server appeared on " + where + " within " + seconds +
+                                " s to take session " + session_id_ +
+                                ": start one with the same --profile, --domain and --security; " +
+                                wire::noPeerHint(options_.dds, s.participant.otherParticipants()));
+    }
     if (stop) return Status::ok();
+    // Discovery time from joining the domain (with DDS Security: authentication handshakes and key exchange too).
+    char found_after[48];
+    std::snprintf(found_after, sizeof(found_after), "server found %.2f s after joining the domain",
+                  std::chrono::duration<double>(Clock::now() - s.joined).count());
+    on_event(std::string(found_after) + ": streaming session " + session_id_ +
+             (every_frame ? " (every frame)" : " (live)"));
 
     // The camera thread: reads frames, paces recordings, never waits on the network in live mode.
     const bool paced = options_.rate == RateMode::kFixed || (options_.rate == RateMode::kReal && info.is_recording);

@@ -85,6 +85,13 @@ bool SessionStream::follow(const std::atomic<bool>& stop) {
         const std::string kept = every_frame_ ? " (" + std::to_string(kept_.size()) + " frames kept)" : "";
         if (state_.servers == 0) {
             say("no facescan-server alive on " + where_ + ": waiting for one" + kept);
+            const int64_t now =
+                std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+            if (no_server_since_ns_ == 0) no_server_since_ns_ = now;
+            if (!hinted_ && no_server_hint_ && now - no_server_since_ns_ > 2'000'000'000) {
+                on_event_("no facescan-server answers: " + no_server_hint_());
+                hinted_ = true;
+            }
         } else if (o && !o->alive && !o->finished()) {
             say("server '" + o->data.owner_id + "' is gone: waiting for its standby to take over" + kept);
         } else if (!o || !o->finished()) {
@@ -93,6 +100,7 @@ bool SessionStream::follow(const std::atomic<bool>& stop) {
         }
         return false;
     }
+    no_server_since_ns_ = 0;
     if (writer_.matchedReaders() == 0) return false;  // the owner's reader is not discovered yet
     const wire::SessionOwnerData& d = o->data;
     if (every_frame_) kept_.dropBefore(d.confirmed_seq);

@@ -9,6 +9,7 @@
 #include <map>
 
 #include "wire/cluster_codec.hpp"
+#include "wire/dds_options.hpp"
 
 namespace facescan::service {
 namespace {
@@ -135,18 +136,13 @@ const std::map<std::string, Setter>& setters() {
              p.data_dir = value;
              return Status::ok();
          }},
-        {"domain",
-         [](ServerParams& p, const std::string& key, const std::string& value) -> Status {
-             ASSIGN_OR_RETURN(const int v, parseInt(key, value));
-             if (v < 0) return invalidArgument("domain must be >= 0");
-             p.domain.domain_id = static_cast<uint32_t>(v);
-             return Status::ok();
-         }},
-        {"profile",
-         [](ServerParams& p, const std::string&, const std::string& value) -> Status {
-             p.domain.profile = value;
-             return Status::ok();
-         }},
+        // The DDS options every program shares (wire/dds_options.hpp), also as config keys.
+        {"domain", [](ServerParams& p, const std::string&,
+                      const std::string& value) { return wire::applyDdsOption(p.domain, "--domain", value); }},
+        {"profile", [](ServerParams& p, const std::string&,
+                       const std::string& value) { return wire::applyDdsOption(p.domain, "--profile", value); }},
+        {"security", [](ServerParams& p, const std::string&,
+                        const std::string& value) { return wire::applyDdsOption(p.domain, "--security", value); }},
         {"server_id",
          [](ServerParams& p, const std::string&, const std::string& value) -> Status {
              p.server_id = value;
@@ -267,6 +263,7 @@ StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args) {
                                                               {"--data-dir", "data_dir"},
                                                               {"--profile", "profile"},
                                                               {"--domain", "domain"},
+                                                              {"--security", "security"},
                                                               {"--server-id", "server_id"},
                                                               {"--replica-interval-s", "replica_interval_s"},
                                                               {"--preset", "preset"},
@@ -334,10 +331,9 @@ std::string serverUsage() {
            "  --idle-timeout-s S      finish a session after S seconds without frames (default 60)\n"
            "  --data-dir DIR          sessions go to DIR/SESSION/ (default ./facescan-data): their replica while\n"
            "                          scanning, the results when finished; DIR/SESSION/owner.json names the owner\n"
-           "  --profile P             DDS profile: loopback | lan | FILE.xml (default lan)\n"
-           "  --domain N              DDS domain id (default 0)\n"
            "  --server-id ID          this server's name on the domain, unique (default HOST-PID)\n"
-           "  --replica-interval-s S  seconds between replicas of a scan to its standby and data dir (default 1)\n"
+           "  --replica-interval-s S  seconds between replicas of a scan to its standby and data dir (default 1)\n" +
+           wire::ddsOptionsHelp(26) +
            "  --help                  this text\n\n"
            "config keys:\n" +
            keys;

@@ -110,6 +110,8 @@ class SessionStream {
     StreamState state() const;
     // Called about every 20 ms while the stream waits (the agent reports its status line from it).
     void onWait(std::function<void()> tick) { on_wait_ = std::move(tick); }
+    // Why no server may answer (e.g. a secured domain): said once when no server was seen for 2 s.
+    void onNoServer(std::function<std::string()> hint) { no_server_hint_ = std::move(hint); }
 
  private:
     // Follows the owner: forgets confirmed frames, resends to a new owner or on request. False: not served.
@@ -127,6 +129,9 @@ class SessionStream {
     StreamState state_;
     uint32_t replay_seen_ = 0;
     std::function<void()> on_wait_;
+    std::function<std::string()> no_server_hint_;
+    int64_t no_server_since_ns_ = 0;  // steady clock; 0 while servers are seen
+    bool hinted_ = false;
 };
 
 }  // namespace facescan::capture
