@@ -190,7 +190,8 @@ TEST(Failover, LiveScanCarriesOnAfterATakeoverAndItsStatusReportsIt) {
     const Finished got = finishedSession(rig.dataDir(standby) / "live");
     EXPECT_EQ(got.failovers, 1);
     EXPECT_GT(got.dropped, 0) << "the frames of the takeover gap are counted as dropped: " << got.summary;
-    EXPECT_GT(got.integrated, 40) << "the new owner goes on integrating: " << got.summary;
+    // At most 25 frames were sent before the kill: more integrated means the new owner went on integrating.
+    EXPECT_GT(got.integrated, 30) << "the new owner goes on integrating: " << got.summary;
 }
 
 }  // namespace
