@@ -37,8 +37,8 @@ class Eavesdropper {
         ASSIGN_OR_RETURN(e->info_reader_, wire::Reader<facescan_wire_CameraInfo>::create(*e->info_topic_));
         // Frames travel in each session's own partition (wire::sessionPartition): a listener takes them all with
         // a wildcard, as anyone on the LAN could.
-        ASSIGN_OR_RETURN(e->frame_reader_, wire::Reader<facescan_wire_RgbdFrame>::create(
-                                               *e->frame_topic_, nullptr, wire::sessionPartition("*")));
+        ASSIGN_OR_RETURN(e->frame_reader_, wire::Reader<facescan_wire_RgbdFrame>::create(*e->frame_topic_, nullptr,
+                                                                                         wire::sessionPartition("*")));
         ASSIGN_OR_RETURN(e->status_reader_, wire::Reader<facescan_wire_ScanStatus>::create(*e->status_topic_));
         ASSIGN_OR_RETURN(e->snapshot_reader_, wire::Reader<facescan_wire_MeshSnapshot>::create(*e->snapshot_topic_));
         ASSIGN_OR_RETURN(e->reply_reader_, wire::Reader<facescan_wire_ScanReply>::create(*e->reply_topic_));
