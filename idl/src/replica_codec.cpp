@@ -145,6 +145,13 @@ void putState(ByteWriter& w, const recon::ReconState& s, std::vector<uint8_t>& b
     w.pose(s.T_world_camera);
     w.pose(s.T_world_model);
     for (const int v : {s.model_roi.x, s.model_roi.y, s.model_roi.width, s.model_roi.height}) w.put<int32_t>(v);
+    w.put<uint8_t>(s.region.valid);
+    for (int a = 0; a < 3; ++a) w.put<float>(s.region.centre_world[a]);
+    for (int a = 0; a < 3; ++a) w.put<float>(s.region.down_world[a]);
+    for (const float f : {s.region.below_centre_m, s.region.radius_m, s.region.centre_behind_m, s.visible_ref_px}) {
+        w.put<float>(f);
+    }
+    w.put<uint8_t>(s.verify_next);
     w.put<uint64_t>(s.trajectory_begin);
     w.put<uint32_t>(static_cast<uint32_t>(s.trajectory.size()));
     for (const auto& [t_ns, T] : s.trajectory) {
@@ -189,6 +196,20 @@ Status getState(ByteReader& r, recon::ReconState& s) {
         if (!r.get(v)) return truncated;
     }
     s.model_roi = cv::Rect(roi[0], roi[1], roi[2], roi[3]);
+    uint8_t region_valid = 0, verify_next = 0;
+    if (!r.get(region_valid)) return truncated;
+    for (int a = 0; a < 3; ++a) {
+        if (!r.get(s.region.centre_world[a])) return truncated;
+    }
+    for (int a = 0; a < 3; ++a) {
+        if (!r.get(s.region.down_world[a])) return truncated;
+    }
+    for (float* f : {&s.region.below_centre_m, &s.region.radius_m, &s.region.centre_behind_m, &s.visible_ref_px}) {
+        if (!r.get(*f)) return truncated;
+    }
+    if (!r.get(verify_next)) return truncated;
+    s.region.valid = region_valid != 0;
+    s.verify_next = verify_next != 0;
     uint64_t begin = 0;
     uint32_t n_traj = 0;
     if (!r.get(begin) || !r.get(n_traj)) return truncated;

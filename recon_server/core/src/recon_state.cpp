@@ -26,6 +26,11 @@ Status ReconState::validate() const {
     }
     if (!origin_world.allFinite()) return invalidArgument("state: volume origin is not finite");
     if (!finitePose(T_world_camera) || !finitePose(T_world_model)) return invalidArgument("state: pose not finite");
+    if (!region.centre_world.allFinite() || !region.down_world.allFinite() || !std::isfinite(region.radius_m) ||
+        !std::isfinite(region.below_centre_m) || !std::isfinite(region.centre_behind_m) ||
+        !(visible_ref_px >= 0 && visible_ref_px < 1e8f)) {
+        return invalidArgument("state: head region or visibility not finite");
+    }
     if (frames_integrated < 0 || consecutive_failures < 0 || total_blocks < 0) {
         return invalidArgument("state: negative counter");
     }
@@ -111,6 +116,9 @@ Status mergeState(ReconState& base, const ReconState& delta) {
     base.T_world_camera = delta.T_world_camera;
     base.T_world_model = delta.T_world_model;
     base.model_roi = delta.model_roi;
+    base.region = delta.region;
+    base.visible_ref_px = delta.visible_ref_px;
+    base.verify_next = delta.verify_next;
     base.trajectory.insert(base.trajectory.end(), delta.trajectory.begin(), delta.trajectory.end());
     return Status::ok();
 }

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "recon/camera.hpp"
+#include "recon/model_segmenter.hpp"
 #include "recon/status.hpp"
 #include "recon/tsdf_volume.hpp"
 
@@ -50,6 +51,9 @@ struct ReconState {
     Pose T_world_camera = Pose::Identity();
     Pose T_world_model = Pose::Identity();  // where the model was last ray cast from
     cv::Rect model_roi;                     // the last ray cast's pixels (restore casts them again)
+    HeadRegion region;                      // where the head can be, fixed at the first frame
+    float visible_ref_px = 0;               // running mean of the head's pixels over fused frames
+    bool verify_next = false;               // the next fit must be verified before it is fused
 
     // Trajectory entries [trajectory_begin, trajectory_begin + trajectory.size()): timestamp (ns) and pose.
     size_t trajectory_begin = 0;
