@@ -2,6 +2,7 @@
 //   - the owner of a recording killed mid-scan: its standby takes over, every frame is integrated exactly once,
 //     the mesh matches an uninterrupted run's, the trajectory has no jump, the frames arrive bit-exact;
 //   - a lone server killed and restarted on the same data dir resumes the scan without losing a frame;
+//   - an owner killed before its first replica: the other server starts over from the agent's kept frames;
 //   - a live scan carries on after a takeover, and its status reports the takeover and the gap.
 #include <gtest/gtest.h>
 
@@ -60,13 +61,18 @@ std::vector<std::pair<std::string, Eigen::Vector3d>> readTrajectory(const fs::pa
     return out;
 }
 
-// Runs a recording to its end; the owner is killed once `kill_after` frames were sent (0: never).
-std::string recordAndMaybeKill(ClusterRig& rig, const std::string& session, int kill_after) {
+// Runs a recording to its end; the owner is killed once `kill_after` frames were sent (0: never) and, when
+// `replica` is given, once that replica file exists (on a loaded machine 30 frames can go before the first one).
+std::string recordAndMaybeKill(ClusterRig& rig, const std::string& session, int kill_after,
+                               const fs::path& replica = {}) {
     rig.startAgent(session, kFrames, "max");
     const std::string owner = rig.waitForOwner(session, 30s);
     if (owner.empty() || kill_after == 0) return owner;
     EXPECT_TRUE(waitUntil([&] { return rig.published(session) >= kill_after; }, 60s))
         << readText(rig.agentLog(session));
+    if (!replica.empty()) {
+        EXPECT_TRUE(waitUntil([&] { return fs::exists(replica); }, 30s)) << "no replica in time";
+    }
     rig.server(owner).kill9();
     return owner;
 }
@@ -141,11 +147,11 @@ TEST(Failover, KilledOwnerMidRecordingLosesNoFrameAndMatchesAnUninterruptedRun) 
 TEST(Failover, LoneServerKilledAndRestartedOnItsDataDirResumesWithoutLosingAFrame) {
     ClusterRig rig("restart", 43);
     rig.startServer("solo");
-    const std::string owner = recordAndMaybeKill(rig, "rec", kFrames / 2);
+    const fs::path dir = rig.dataDir("solo") / "rec";
+    const std::string owner = recordAndMaybeKill(rig, "rec", kFrames / 2, dir / "replica.log");
     ASSERT_EQ(owner, "solo");
     // The agent waits for a server (and says so) with the frames it has not seen confirmed.
     ASSERT_TRUE(waitUntil([&] { return readText(rig.agentLog("rec")).find("WAITING") != std::string::npos; }, 10s));
-    const fs::path dir = rig.dataDir("solo") / "rec";
     EXPECT_TRUE(fs::exists(dir / "replica.log")) << "no replica in the data dir";
     rig.startServer("solo");  // the same id and data dir, as systemd restarts it
     ASSERT_EQ(rig.agent("rec").wait(120s), 0) << readText(rig.agentLog("rec"));
@@ -160,6 +166,33 @@ TEST(Failover, LoneServerKilledAndRestartedOnItsDataDirResumesWithoutLosingAFram
     EXPECT_FALSE(fs::exists(dir / "replica.log")) << "a finished session keeps no replica";
     const std::string log = readText(rig.serverLog("solo").string() + ".2");
     EXPECT_NE(log.find("resuming"), std::string::npos) << log;
+}
+
+TEST(Failover, OwnerKilledBeforeItsFirstReplicaLosesNoFrame) {
+    // The owner dies before any replica left it (replicas every 2 s; killed as soon as the agent knows it): no
+    // server holds the scan's state, but the agent still keeps every frame, so the other server starts over from
+    // the first frame instead of leaving the session waiting for a replica that does not exist.
+    ClusterRig rig("early", 45);
+    rig.startServer("srv-a", {"--replica-interval-s", "2"});
+    rig.startServer("srv-b", {"--replica-interval-s", "2"});
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    rig.startAgent("rec", kFrames, "max");
+    const std::string first = rig.waitForOwner("rec", 30s);
+    ASSERT_FALSE(first.empty());
+    rig.server(first).kill9();
+    const std::string other = first == "srv-a" ? "srv-b" : "srv-a";
+    ASSERT_EQ(rig.agent("rec").wait(120s), 0) << readText(rig.agentLog("rec"));
+    EXPECT_NE(readText(rig.serverLog(other)).find("left no replica"), std::string::npos)
+        << readText(rig.serverLog(other));
+    const fs::path dir = rig.dataDir(other) / "rec";
+    const Finished got = finishedSession(dir);
+    EXPECT_EQ(got.received, kFrames) << got.summary;
+    EXPECT_EQ(got.integrated + got.rejected, kFrames) << got.summary;
+    EXPECT_GE(got.integrated, kFrames - 5) << got.summary;
+    EXPECT_EQ(got.dropped, 0);
+    EXPECT_EQ(got.failovers, 1);
+    EXPECT_EQ(got.digest, agentDigest(rig, "rec"));
+    EXPECT_EQ(readTrajectory(dir / "trajectory.txt").size(), static_cast<size_t>(got.integrated));
 }
 
 TEST(Failover, LiveScanCarriesOnAfterATakeoverAndItsStatusReportsIt) {

@@ -165,6 +165,7 @@ Status Server::activate(OwnedSession& o) {
         RETURN_IF_ERROR(session->restore(*o.restore_from, o.takeover_from_ns));
     } else {
         RETURN_IF_ERROR(session->setCamera(*o.camera));
+        if (o.takeover_from_ns != 0) session->noteTakeoverFromFirstFrame(o.failovers_before, o.takeover_from_ns);
     }
     const wire::Qos qos = wire::frameReaderQos();
     ASSIGN_OR_RETURN(o.frames, wire::boxed(wire::Reader<facescan_wire_RgbdFrame>::create(
@@ -236,7 +237,13 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             }
             resumable_.erase(r);
         }
-        if (!copy) continue;  // nothing to continue from: the session waits for a server that has its replica
+        if (!copy) {
+            // Nobody holds a replica (the owner died before its first one reached a standby or its disk). While
+            // the agent still keeps every frame from the first, the scan starts over from there and loses
+            // nothing; otherwise it waits for a server that has its replica.
+            if (view.data.confirmed_seq == 0) takeOverFromFirstFrame(id, view);
+            continue;
+        }
         if (copy->next_seq < view.data.confirmed_seq) {
             std::fprintf(stderr,
                          "facescan-server: session %s: this server's replica (frame %u) is older than what "
@@ -281,6 +288,39 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                      it->first.c_str(), wire::ownerStateName(view->second.data.state),
                      view->second.data.owner_id.c_str(), params_.data_dir.c_str());
         it = resumable_.erase(it);
+    }
+}
+
+void Server::takeOverFromFirstFrame(const std::string& session_id, const OwnerView& view) {
+    const auto c = candidates_.find(session_id);
+    if (c == candidates_.end()) return;  // its agent is gone too: nothing to start from
+    // One server takes it: its named standby while that one lives (its replica may be on the way), else the
+    // first in claim order, and the next in line after kFallbackNs per rank (as in placement).
+    const int64_t now = steadyNowNs();
+    const std::string& standby = view.data.standby_id;
+    if (!standby.empty() && cluster_->serverAlive(standby)) {
+        if (standby != params_.server_id) return;
+    } else {
+        const std::vector<std::string> order = claimOrder(session_id, cluster_->liveLoads());
+        const auto me = std::find(order.begin(), order.end(), params_.server_id);
+        if (me == order.end()) return;  // no room here
+        const int64_t since = orphaned_since_ns_.try_emplace(session_id, now).first->second;
+        if (now - since < static_cast<int64_t>(me - order.begin()) * kFallbackNs) return;
+    }
+    orphaned_since_ns_.erase(session_id);
+    auto o = std::make_shared<OwnedSession>();
+    o->camera = c->second.camera;
+    o->camera_writer = c->second.writer;
+    const int64_t heard = cluster_->lastHeard(view.data.owner_id);
+    o->takeover_from_ns = heard > 0 ? heard : now;
+    o->failovers_before = view.data.failovers;
+    const uint32_t epoch = view.data.epoch + 1;
+    std::fprintf(stderr,
+                 "facescan-server: session %s: owner '%s' is gone and left no replica; its agent keeps every frame: "
+                 "starting over from the first (epoch %u)\n",
+                 session_id.c_str(), view.data.owner_id.c_str(), epoch);
+    if (const Status s = claimSession(session_id, epoch, o, view.data); !s.isOk()) {
+        std::fprintf(stderr, "facescan-server: cannot take over %s: %s\n", session_id.c_str(), s.toString().c_str());
     }
 }
 

@@ -37,6 +37,12 @@ void Session::applyReplicaLocked(const wire::ReplicaData& r, int64_t takeover_fr
     takeover_from_ns_ = takeover_from_ns;
 }
 
+void Session::noteTakeoverFromFirstFrame(uint32_t failovers_before, int64_t takeover_from_ns) {
+    std::lock_guard lk(mutex_);
+    stats_.failovers = failovers_before + 1;
+    takeover_from_ns_ = takeover_from_ns;
+}
+
 void Session::noteFirstFrameAfterTakeover(uint32_t seq, int64_t now_ns) {
     stats_.last_takeover_ms = static_cast<float>(static_cast<double>(now_ns - takeover_from_ns_) * 1e-6);
     takeover_from_ns_ = 0;

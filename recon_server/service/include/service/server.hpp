@@ -51,6 +51,7 @@ struct OwnedSession {
     std::optional<wire::CameraInfoData> camera;     // a new session: from its CameraInfo
     std::optional<wire::ReplicaData> restore_from;  // a takeover or a restart: the state to continue from
     int64_t takeover_from_ns = 0;                   // the old owner's last sign of life (steady clock)
+    uint32_t failovers_before = 0;                  // a takeover from the first frame: the claim's count until then
     std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames;
     dds_entity_t frame_condition = 0;
     bool ahead = false;  // a recording frame after a gap arrived: the agent must resend
@@ -117,6 +118,8 @@ class Server {
     void placeNewSessions(const std::map<std::string, OwnerView>& owners);
     void settleClaims(const std::map<std::string, OwnerView>& owners);
     void takeOverOrphans(const std::map<std::string, OwnerView>& owners);
+    // A dead owner's session that nobody holds a replica of, while its agent still keeps every frame.
+    void takeOverFromFirstFrame(const std::string& session_id, const OwnerView& view);
     void requestReplays();
     void releaseStale();
     Status claimSession(const std::string& session_id, uint32_t epoch, std::shared_ptr<OwnedSession> owned,
@@ -152,6 +155,7 @@ class Server {
     // Intake thread only.
     std::map<std::string, Candidate> candidates_;
     std::map<std::string, wire::ReplicaData> resumable_;  // from the data dir, waiting for the join to end
+    std::map<std::string, int64_t> orphaned_since_ns_;    // takeOverFromFirstFrame: when its owner was seen gone
     std::deque<Command> deferred_;                        // commands for sessions being claimed here
 
     std::mutex command_mutex_;

@@ -136,6 +136,9 @@ class Session {
     // (steady clock) is the owner's last sign of life: the takeover time runs from there to the first frame
     // integrated here.
     Status restore(const wire::ReplicaData& replica, int64_t takeover_from_ns);
+    // After setCamera: the session starts over from its first frame because its dead owner left no replica (the
+    // agent still keeps every frame); it counts as a failover, timed like one.
+    void noteTakeoverFromFirstFrame(uint32_t failovers_before, int64_t takeover_from_ns);
     // Who owns it (the summary and the data dir record it) and where its replicas go.
     void setOwnership(const std::string& owner_id, uint32_t epoch);
     void setStandby(const std::string& standby_id);
