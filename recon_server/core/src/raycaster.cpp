@@ -28,46 +28,41 @@ bool clipToCube(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float n_max,
     return s0 < s1;
 }
 
-bool blockAllocated(const VoxelBlockGrid& g, const Eigen::Vector3f& p_vox) {
-    const int x = static_cast<int>(p_vox.x() + 0.5f), y = static_cast<int>(p_vox.y() + 0.5f),
-              z = static_cast<int>(p_vox.z() + 0.5f);
-    if (x < 0 || y < 0 || z < 0 || x >= g.resolution_vox || y >= g.resolution_vox || z >= g.resolution_vox)
-        return false;
-    return g.block_index[(static_cast<size_t>(z >> 3) * g.blocks_per_side + (y >> 3)) * g.blocks_per_side + (x >> 3)] >=
-           0;
-}
-
 // Marches one ray (eq. 4.27) in voxel coordinates between s_begin and s_end (units: voxels along the unit ray
 // direction dir_vox); returns the interpolated zero crossing (eq. 4.28) or a negative value when there is none.
+// normal: the unit surface normal there (eq. 4.30), the gradient of D of the trilinear cell of the refinement step
+// below (within a voxel of the crossing); zero when that cell has no gradient.
 float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox, float s_begin,
-               float s_end, float step_vox) {
+               float s_end, float step_vox, Eigen::Vector3f& normal) {
+    using Cell = VoxelBlockGrid::Cell;
     float s = s_begin;
     float prev_d = 0.0f, prev_s = 0.0f;
     bool have_prev = false;
     const float block_skip = static_cast<float>(kBlockSide) * 0.5f;
+    const float free_step_per_d = g.trunc_dist_m / g.voxel_size_m;  // voxels of free space per unit of D
     while (s <= s_end) {
-        const Eigen::Vector3f p = o_vox + dir_vox * s;
-        if (!blockAllocated(g, p)) {
-            have_prev = false;
-            s += block_skip;  // empty space: half a block at a time so thin allocated shells are not jumped
-            continue;
-        }
         float d;
-        if (!g.interpolate(p, d)) {
+        const Cell cell = g.sample(o_vox + dir_vox * s, d);
+        if (cell != Cell::kOk) {
             have_prev = false;
-            s += step_vox;
+            // Empty space: half a block at a time so thin allocated shells are not jumped.
+            s += cell == Cell::kUnallocated ? block_skip : step_vox;
             continue;
         }
         if (have_prev && prev_d > 0.0f && d <= 0.0f) {
             float s_hit = prev_s + (s - prev_s) * prev_d / (prev_d - d);  // eq. 4.28
-            // One regula falsi step: with steps of up to mu, D is not linear over the whole bracket.
+            // One regula falsi step: with steps of up to mu, D is not linear over the whole bracket. The cell it
+            // reads gives the normal too, so a hit costs one cell more than the march, not seven.
             float d_hit;
-            if (g.interpolate(o_vox + dir_vox * s_hit, d_hit)) {
+            normal.setZero();
+            if (g.sample(o_vox + dir_vox * s_hit, d_hit, &normal) == Cell::kOk) {
                 if (d_hit > 0.0f) {
                     s_hit += (s - s_hit) * d_hit / (d_hit - d);
                 } else if (d_hit < 0.0f) {
                     s_hit = prev_s + (s_hit - prev_s) * prev_d / (prev_d - d_hit);
                 }
+                const float len = normal.norm();
+                normal = len > 0.0f ? Eigen::Vector3f(normal / len) : Eigen::Vector3f::Zero();
             }
             return s_hit;
         }
@@ -77,7 +72,7 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
         have_prev = true;
         // In front of the surface the step is the distance D says is free (D is in units of mu), at least one
         // voxel and at most step_vox; the sign change is then bracketed within one step and refined above.
-        s += d > 0.0f ? std::max(1.0f, std::min(step_vox, d * g.trunc_dist_m / g.voxel_size_m)) : step_vox;
+        s += d > 0.0f ? std::max(1.0f, std::min(step_vox, d * free_step_per_d)) : step_vox;
     }
     return -1.0f;
 }
@@ -144,15 +139,10 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
                     s1 = std::min(s1, (z_hint + params_.search_after_hint_m + widen_m) * ray_len / vs);
                     if (!(s0 < s1)) continue;
                 }
-                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
-                if (s_hit < 0.0f) continue;
-                const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
-                Eigen::Vector3f grad;
-                if (!grid.gradient(p_vox, grad)) continue;
-                const float len = grad.norm();
-                if (!(len > 0.0f)) continue;
-                const Eigen::Vector3f p_world = grid.toWorld(p_vox);  // eq. 4.29
-                const Eigen::Vector3f n_world = grad / len;           // eq. 4.30
+                Eigen::Vector3f n_world;
+                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox, n_world);
+                if (s_hit < 0.0f || n_world.isZero()) continue;
+                const Eigen::Vector3f p_world = grid.toWorld(o_vox + dir_vox * s_hit);  // eq. 4.29
                 vert[u] = cv::Vec3f(p_world.x(), p_world.y(), p_world.z());
                 norm[u] = cv::Vec3f(n_world.x(), n_world.y(), n_world.z());
             }
@@ -178,13 +168,12 @@ void Raycaster::renderShaded(const VoxelBlockGrid& grid, const Intrinsics& k, co
                 const Eigen::Vector3f dir_vox = r * ray_cam.normalized();
                 float s0, s1;
                 if (!clipToCube(o_vox, dir_vox, n_max, s0, s1)) continue;
-                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
-                if (s_hit < 0.0f) continue;
+                Eigen::Vector3f n;
+                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox, n);
+                if (s_hit < 0.0f || n.isZero()) continue;
                 const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
-                Eigen::Vector3f grad;
-                if (!grid.gradient(p_vox, grad) || !(grad.norm() > 0.0f)) continue;
                 // Lambert with the light at the camera: brightness = cos(normal, ray back to the camera).
-                const float lambert = std::max(0.0f, -grad.normalized().dot(dir_vox));
+                const float lambert = std::max(0.0f, -n.dot(dir_vox));
                 const float shade = 0.15f + 0.85f * lambert;
                 Eigen::Vector3f bgr(200.0f, 200.0f, 200.0f);
                 Eigen::Vector3f c;
