@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "allocation_counter.hpp"
+#include "recon/face_pipeline.hpp"
 #include "recon/reconstructor.hpp"
 
 namespace facescan::recon {
@@ -306,6 +307,41 @@ TEST(FrameLoop, ReconstructorDoesNotAllocateAfterWarmUp) {
     const long allocations = testing::heapAllocations() - before;
     EXPECT_EQ(integrated, 12) << "every frame must be tracked and fused, or the loop checked is not the full one";
     EXPECT_EQ(allocations, 0) << "heap allocations in 8 frames after 4 warm-up frames";
+}
+
+TEST(FrameLoop, FacePipelineAndReconstructorDoNotAllocateAfterWarmUp) {
+    // Issue 16: the server's whole per-frame path, detection and segmentation included. Frames without colour, so
+    // the detector is the depth-only head finder; it re-detects every 3rd frame (redetect_every_frames) and
+    // segmentation follows the tracked head box in between, so both paths run after the warm-up.
+    std::vector<RgbdFrame> frames(12);
+    std::vector<cv::Mat> unused(frames.size());
+    for (size_t i = 0; i < frames.size(); ++i) frames[i] = sphereBeforeWall(static_cast<int>(i), unused[i]);
+    const Intrinsics k = Intrinsics::kinectV1();
+    FacePipelineParams fp;
+    fp.redetect_every_frames = 3;
+    StatusOr<FacePipeline> created = FacePipeline::create(fp, k, ColourCamera::registeredTo(k));
+    ASSERT_TRUE(created.isOk()) << created.status().toString();
+    FacePipeline pipeline = std::move(created).value();
+    Reconstructor rec(k, ReconParams::faceDefaults());
+    ASSERT_TRUE(rec.initStatus().isOk()) << rec.initStatus().toString();
+    long before = 0;
+    int integrated = 0, detections = 0;
+    for (int i = 0; i < static_cast<int>(frames.size()); ++i) {
+        if (i == 4) before = testing::heapAllocations();
+        const RgbdFrame& frame = frames[static_cast<size_t>(i)];
+        cv::Rect box;
+        const bool tracked = rec.predictedHeadBox(box);
+        const HeadObservation head = pipeline.process(frame, tracked ? &box : nullptr);
+        ASSERT_TRUE(head.found) << "frame " << i << ": " << head.reason;
+        if (i >= 4) detections += head.detection_ran ? 1 : 0;
+        const FrameResult r = rec.processFrame(frame, head.mask);
+        integrated += r.integrated ? 1 : 0;
+        if (!r.integrated) std::printf("frame %d: %s\n", i, r.reason);
+    }
+    const long allocations = testing::heapAllocations() - before;
+    EXPECT_EQ(integrated, 12) << "every frame must be tracked and fused, or the loop checked is not the full one";
+    EXPECT_GE(detections, 2) << "re-detection must run after the warm-up, or its allocations go unchecked";
+    EXPECT_EQ(allocations, 0) << "heap allocations in 8 frames (detection, segmentation, recon) after 4 warm-up frames";
 }
 
 }  // namespace
