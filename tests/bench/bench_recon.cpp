@@ -22,6 +22,10 @@
 #include <string>
 #include <vector>
 
+#if __has_include(<valgrind/callgrind.h>)
+#include <valgrind/callgrind.h>  // instruction counts of the loop alone: see loopInstrumentation()
+#endif
+
 #include "allocation_counter.hpp"  // counts heap allocations: the frame loop must make none after warm-up
 #include "bench_command.hpp"
 #include "eval/accuracy.hpp"
@@ -74,6 +78,21 @@ double currentRssMb() {
     long pages = 0, resident = 0;
     f >> pages >> resident;
     return static_cast<double>(resident) * 4096.0 / (1024.0 * 1024.0);
+}
+
+// Under `valgrind --tool=callgrind --instr-atstart=no`, only the timed loop is instrumented, so callgrind's
+// instruction count is the frame loop's alone (all threads): a figure that does not move with the machine's load,
+// for comparing variants on a busy machine. Without valgrind (or its header) these do nothing.
+void loopInstrumentation(bool on) {
+#ifdef CALLGRIND_START_INSTRUMENTATION
+    if (on) {
+        CALLGRIND_START_INSTRUMENTATION;
+    } else {
+        CALLGRIND_STOP_INSTRUMENTATION;
+    }
+#else
+    (void)on;
+#endif
 }
 
 std::map<std::string, std::string> parseKv(const std::string& s) {
@@ -407,7 +426,10 @@ int runRecon(const std::vector<std::string>& args) {
     std::map<std::string, int> reasons;
     const auto t0 = std::chrono::steady_clock::now();
     for (int i = 0; i < n; ++i) {
-        if (i == warmup) allocations_after_warmup = testing::heapAllocations();
+        if (i == warmup) {
+            allocations_after_warmup = testing::heapAllocations();
+            loopInstrumentation(true);
+        }
         recon::FrameResult r;
         std::string head_reason;  // outlives r.reason's use below
         if (pipeline) {
@@ -447,6 +469,7 @@ int runRecon(const std::vector<std::string>& args) {
         }
     }
     const double loop_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    loopInstrumentation(false);
     allocations_after_warmup = n > warmup ? testing::heapAllocations() - allocations_after_warmup : 0;
     const double rss_recon_mb = currentRssMb() - rss_frames_mb;
 
