@@ -38,6 +38,23 @@ facescan_require(TurboJpeg_FOUND "libjpeg-turbo (TurboJPEG API)" "libturbojpeg0-
 
 find_package(Threads REQUIRED)
 
+# The client's GLB export (glTF 2.0 binary) and the web viewer's HTTP and WebSocket server.
+find_package(TinyGLTF QUIET)
+facescan_require(TinyGLTF_FOUND "TinyGLTF" "libtinygltf-dev")
+# Not through civetweb's CMake config: Debian's (1.15+dfsg-4) also names the civetweb program, which is in another
+# package (civetweb), and stops configure when that is absent. The header and the library are all we use.
+find_package(ZLIB QUIET)  # the viewer gzips its page once at start
+facescan_require(ZLIB_FOUND "zlib" "zlib1g-dev")
+find_path(CIVETWEB_INCLUDE_DIR civetweb.h)
+find_library(CIVETWEB_LIBRARY civetweb)
+facescan_require(CIVETWEB_LIBRARY "CivetWeb (HTTP and WebSocket server)" "libcivetweb-dev")
+facescan_require(CIVETWEB_INCLUDE_DIR "CivetWeb's header" "libcivetweb-dev")
+if(NOT TARGET facescan::civetweb)
+    add_library(facescan::civetweb UNKNOWN IMPORTED)
+    set_target_properties(facescan::civetweb PROPERTIES IMPORTED_LOCATION "${CIVETWEB_LIBRARY}"
+        INTERFACE_INCLUDE_DIRECTORIES "${CIVETWEB_INCLUDE_DIR}")
+endif()
+
 if(FACESCAN_BUILD_TESTS)
     find_package(GTest QUIET)
     facescan_require(GTest_FOUND "GoogleTest" "libgtest-dev")

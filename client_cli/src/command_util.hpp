@@ -24,5 +24,6 @@ extern std::atomic<bool> g_interrupted;
 void installInterruptHandler();
 
 int runWatch(const CliOptions& options);
+int runView(const CliOptions& options);
 
 }  // namespace facescan::client::detail

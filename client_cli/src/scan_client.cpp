@@ -83,6 +83,7 @@ struct ScanClient::Endpoints {
     std::optional<wire::Reader<facescan_wire_ScanStatus>> status_reader;
     std::optional<wire::Topic<facescan_wire_MeshSnapshot>> snapshot_topic;
     std::optional<wire::Reader<facescan_wire_MeshSnapshot>> snapshot_reader;
+    std::optional<wire::WaitSet> followed;  // the status and snapshot readers: poll wakes for either
     std::map<dds_instance_handle_t, std::string> status_instances;  // for not-alive notices, which carry no data
     bool server_seen = false;
 };
@@ -186,7 +187,9 @@ Status ScanClient::ensureStatusReader() {
     e.status_topic.emplace(std::move(topic));
     ASSIGN_OR_RETURN(auto reader, wire::Reader<facescan_wire_ScanStatus>::create(*e.status_topic));
     e.status_reader.emplace(std::move(reader));
-    return Status::ok();
+    ASSIGN_OR_RETURN(auto waitset, wire::WaitSet::create(e.participant));
+    e.followed.emplace(std::move(waitset));
+    return e.followed->attach(*e.status_reader);
 }
 
 Status ScanClient::ensureSnapshotReader() {
@@ -196,7 +199,8 @@ Status ScanClient::ensureSnapshotReader() {
     e.snapshot_topic.emplace(std::move(topic));
     ASSIGN_OR_RETURN(auto reader, wire::Reader<facescan_wire_MeshSnapshot>::create(*e.snapshot_topic));
     e.snapshot_reader.emplace(std::move(reader));
-    return Status::ok();
+    RETURN_IF_ERROR(ensureStatusReader());
+    return e.followed->attach(*e.snapshot_reader);
 }
 
 Status ScanClient::takeStatuses(std::map<std::string, SessionStatus>& statuses) {
@@ -244,12 +248,13 @@ Status ScanClient::poll(milliseconds wait, std::map<std::string, SessionStatus>&
     RETURN_IF_ERROR(ensureStatusReader());
     Endpoints& e = *endpoints_;
     if (snapshots && !snapshot_session.empty()) RETURN_IF_ERROR(ensureSnapshotReader());
-    e.status_reader->waitForData(wait);
+    e.followed->wait(wait);
     RETURN_IF_ERROR(takeStatuses(statuses));
     if (!e.snapshot_reader) return Status::ok();
     auto taken = e.snapshot_reader->take(
         [&](const facescan_wire_MeshSnapshot& m, const dds_sample_info_t& info) {
-            if (!info.valid_data || !snapshots || wire::fromDds(m.session_id) != snapshot_session) return;
+            if (!info.valid_data || !snapshots) return;
+            if (snapshot_session != kAllSessions && wire::fromDds(m.session_id) != snapshot_session) return;
             MeshSnapshotData snap;
             snap.session_id = wire::fromDds(m.session_id);
             snap.seq = m.seq;

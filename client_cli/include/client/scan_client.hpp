@@ -53,6 +53,9 @@ struct MeshSnapshotData {
     std::chrono::steady_clock::time_point received;  // our clock: snapshot age needs no synchronised clocks
 };
 
+// ScanClient::poll's snapshot_session for the snapshots of every session (no session id is "*").
+inline constexpr const char* kAllSessions = "*";
+
 const char* scanStateName(facescan_wire_ScanState state);  // "WAITING", "SCANNING", ...
 const char* commandKindName(facescan_wire_CommandKind kind);
 
@@ -84,7 +87,8 @@ class ScanClient {
     StatusOr<std::vector<SessionStatus>> sessions(std::chrono::milliseconds settle);
 
     // Live following: takes what has arrived into `statuses` (by session id) and returns new snapshots of
-    // `snapshot_session` (empty: none wanted). Waits at most `wait` for something to arrive.
+    // `snapshot_session` (empty: none wanted; kAllSessions: every session's). Waits at most `wait` for a status or
+    // a snapshot to arrive.
     Status poll(std::chrono::milliseconds wait, std::map<std::string, SessionStatus>& statuses,
                 const std::string& snapshot_session, std::vector<MeshSnapshotData>* snapshots);
 

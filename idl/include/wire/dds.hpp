@@ -233,6 +233,33 @@ class Reader {
     Entity waitset_;
 };
 
+// Waits for data on several readers at once: a DDS waitset holding each attached reader's read condition (the
+// conditions belong to their readers and go with them).
+class WaitSet {
+ public:
+    static StatusOr<WaitSet> create(const Participant& participant) {
+        WaitSet waitset;
+        const dds_entity_t ws = dds_create_waitset(participant.handle());
+        if (ws < 0) return ddsStatus(ws, "create waitset");
+        waitset.waitset_ = Entity(ws);
+        return waitset;
+    }
+    template <typename T>
+    Status attach(const Reader<T>& reader) {
+        const dds_entity_t cond = dds_create_readcondition(reader.handle(), DDS_ANY_STATE);
+        if (cond < 0) return ddsStatus(cond, "create read condition");
+        const dds_return_t rc = dds_waitset_attach(waitset_.handle(), cond, reader.handle());
+        return rc < 0 ? ddsStatus(rc, "attach read condition") : Status::ok();
+    }
+    // Blocks until any attached reader has data (or an instance state change), or the timeout passes.
+    bool wait(std::chrono::milliseconds timeout) {
+        return dds_waitset_wait(waitset_.handle(), nullptr, 0, DDS_MSECS(timeout.count())) > 0;
+    }
+
+ private:
+    Entity waitset_;
+};
+
 // Polls `done` every few milliseconds until it returns true or the timeout passes (discovery waits).
 bool pollUntil(const std::function<bool()>& done, std::chrono::milliseconds timeout);
 
