@@ -30,10 +30,8 @@ bool clipToCube(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float n_max,
 
 // Marches one ray (eq. 4.27) in voxel coordinates between s_begin and s_end (units: voxels along the unit ray
 // direction dir_vox); returns the interpolated zero crossing (eq. 4.28) or a negative value when there is none.
-// normal: the unit surface normal there (eq. 4.30), the gradient of D of the trilinear cell of the refinement step
-// below (within a voxel of the crossing); zero when that cell has no gradient.
 float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox, float s_begin,
-               float s_end, float step_vox, Eigen::Vector3f& normal) {
+               float s_end, float step_vox) {
     using Cell = VoxelBlockGrid::Cell;
     float s = s_begin;
     float prev_d = 0.0f, prev_s = 0.0f;
@@ -51,18 +49,14 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
         }
         if (have_prev && prev_d > 0.0f && d <= 0.0f) {
             float s_hit = prev_s + (s - prev_s) * prev_d / (prev_d - d);  // eq. 4.28
-            // One regula falsi step: with steps of up to mu, D is not linear over the whole bracket. The cell it
-            // reads gives the normal too, so a hit costs one cell more than the march, not seven.
+            // One regula falsi step: with steps of up to mu, D is not linear over the whole bracket.
             float d_hit;
-            normal.setZero();
-            if (g.sample(o_vox + dir_vox * s_hit, d_hit, &normal) == Cell::kOk) {
+            if (g.sample(o_vox + dir_vox * s_hit, d_hit) == Cell::kOk) {
                 if (d_hit > 0.0f) {
                     s_hit += (s - s_hit) * d_hit / (d_hit - d);
                 } else if (d_hit < 0.0f) {
                     s_hit = prev_s + (s_hit - prev_s) * prev_d / (prev_d - d_hit);
                 }
-                const float len = normal.norm();
-                normal = len > 0.0f ? Eigen::Vector3f(normal / len) : Eigen::Vector3f::Zero();
             }
             return s_hit;
         }
@@ -75,6 +69,15 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
         s += d > 0.0f ? std::max(1.0f, std::min(step_vox, d * free_step_per_d)) : step_vox;
     }
     return -1.0f;
+}
+
+// The unit surface normal at p_vox (eq. 4.30); false where the gradient is unavailable or zero.
+bool surfaceNormal(const VoxelBlockGrid& g, const Eigen::Vector3f& p_vox, Eigen::Vector3f& n) {
+    if (!g.gradient(p_vox, n)) return false;
+    const float len = n.norm();
+    if (!(len > 0.0f)) return false;
+    n /= len;
+    return true;
 }
 
 // Depth of the nearest pixel of a hint row with a measurement, within `radius` pixels of u; 0 when none.
@@ -139,10 +142,12 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
                     s1 = std::min(s1, (z_hint + params_.search_after_hint_m + widen_m) * ray_len / vs);
                     if (!(s0 < s1)) continue;
                 }
+                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
+                if (s_hit < 0.0f) continue;
+                const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
                 Eigen::Vector3f n_world;
-                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox, n_world);
-                if (s_hit < 0.0f || n_world.isZero()) continue;
-                const Eigen::Vector3f p_world = grid.toWorld(o_vox + dir_vox * s_hit);  // eq. 4.29
+                if (!surfaceNormal(grid, p_vox, n_world)) continue;   // eq. 4.30
+                const Eigen::Vector3f p_world = grid.toWorld(p_vox);  // eq. 4.29
                 vert[u] = cv::Vec3f(p_world.x(), p_world.y(), p_world.z());
                 norm[u] = cv::Vec3f(n_world.x(), n_world.y(), n_world.z());
             }
@@ -168,10 +173,11 @@ void Raycaster::renderShaded(const VoxelBlockGrid& grid, const Intrinsics& k, co
                 const Eigen::Vector3f dir_vox = r * ray_cam.normalized();
                 float s0, s1;
                 if (!clipToCube(o_vox, dir_vox, n_max, s0, s1)) continue;
-                Eigen::Vector3f n;
-                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox, n);
-                if (s_hit < 0.0f || n.isZero()) continue;
+                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
+                if (s_hit < 0.0f) continue;
                 const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
+                Eigen::Vector3f n;
+                if (!surfaceNormal(grid, p_vox, n)) continue;
                 // Lambert with the light at the camera: brightness = cos(normal, ray back to the camera).
                 const float lambert = std::max(0.0f, -n.dot(dir_vox));
                 const float shade = 0.15f + 0.85f * lambert;

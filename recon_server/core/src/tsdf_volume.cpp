@@ -46,18 +46,6 @@ bool VoxelBlockGrid::interpolateColour(const Eigen::Vector3f& p_vox, Eigen::Vect
     return true;
 }
 
-bool VoxelBlockGrid::gradient(const Eigen::Vector3f& p_vox, Eigen::Vector3f& grad) const {
-    for (int a = 0; a < 3; ++a) {
-        Eigen::Vector3f lo = p_vox, hi = p_vox;
-        lo[a] -= 1.0f;
-        hi[a] += 1.0f;
-        float f_lo, f_hi;
-        if (!interpolate(lo, f_lo) || !interpolate(hi, f_hi)) return false;
-        grad[a] = f_hi - f_lo;
-    }
-    return true;
-}
-
 void VoxelBlockGrid::copyTo(VoxelBlockGrid& dst) const {
     dst.resolution_vox = resolution_vox;
     dst.blocks_per_side = blocks_per_side;

@@ -80,13 +80,12 @@ struct VoxelBlockGrid {
     // Inline (below): the ray caster's inner loop calls them ~200k times a frame.
     enum class Cell { kOk, kUnobserved, kUnallocated };
     Cell fetchCell(int x0, int y0, int z0, float corners[8]) const;
-    // D at p_vox and its gradient (per voxel) from the same 8 corners: the derivative of the trilinear
-    // interpolant, thesis eq. 4.30 evaluated on the cell the sample already read (8 voxel reads, where central
-    // differences of trilinear samples need 48). Returns what fetchCell returned for p_vox's cell.
-    Cell sample(const Eigen::Vector3f& p_vox, float& tsdf, Eigen::Vector3f* grad = nullptr) const;
+    // D at p_vox from its trilinear cell; returns what fetchCell returned for that cell.
+    Cell sample(const Eigen::Vector3f& p_vox, float& tsdf) const;
     // Same, with the running-average colour (BGR, 0..255) interpolated as well.
     bool interpolateColour(const Eigen::Vector3f& p_vox, Eigen::Vector3f& bgr) const;
-    // Gradient of D by central differences of trilinear samples (thesis eq. 4.30); false where unavailable.
+    // Gradient of D by central differences of trilinear samples one voxel apart (thesis eq. 4.30); false where
+    // unavailable. Inline (below) like sample(): the ray caster takes one per pixel.
     bool gradient(const Eigen::Vector3f& p_vox, Eigen::Vector3f& grad) const;
     // Copies only the allocated blocks (and the index) into `dst`, reusing its capacity.
     void copyTo(VoxelBlockGrid& dst) const;
@@ -113,31 +112,34 @@ using TsdfSnapshot = VoxelBlockGrid;
         return Cell::kOk;
     }
     // The cell straddles 2, 4 or 8 blocks: the upper corner's side of each axis that crosses into the next block
-    // (a 3-bit "crossing" code) names the block; each distinct block is looked up once.
+    // (a 3-bit "crossing" code) names the block; each distinct block is looked up once. Within a block, a step to
+    // the upper corner along an axis that crosses wraps to local coordinate 0.
     if (static_cast<unsigned>(x0 + 1) >= n || static_cast<unsigned>(y0 + 1) >= n || static_cast<unsigned>(z0 + 1) >= n)
         return Cell::kUnobserved;
     const int cross = (lx == 7 ? 1 : 0) | (ly == 7 ? 2 : 0) | (lz == 7 ? 4 : 0);
-    int block_of[8];
-    block_of[0] = b;
+    const Voxel* block_of[8];
+    block_of[0] = &voxels[static_cast<size_t>(b) * kBlockVoxels];
 #pragma GCC unroll 8
     for (int k = 1; k < 8; ++k) {
         if ((k & cross) != k) continue;
-        block_of[k] = block_index[((bz + (k >> 2)) * bps + by + ((k >> 1) & 1)) * bps + bx + (k & 1)];
-        if (block_of[k] < 0) return Cell::kUnobserved;
+        const int bk = block_index[((bz + (k >> 2)) * bps + by + ((k >> 1) & 1)) * bps + bx + (k & 1)];
+        if (bk < 0) return Cell::kUnobserved;
+        block_of[k] = &voxels[static_cast<size_t>(bk) * kBlockVoxels];
     }
+    const int base = lz * 64 + ly * 8 + lx;
+    const int step_x = lx == 7 ? -7 : 1, step_y = ly == 7 ? -56 : 8, step_z = lz == 7 ? -448 : 64;
+    float w = 1.0f;
 #pragma GCC unroll 8
     for (int i = 0; i < 8; ++i) {
-        const int dx = i & 1, dy = (i >> 1) & 1, dz = i >> 2;
-        const int lxi = (lx + dx) & 7, lyi = (ly + dy) & 7, lzi = (lz + dz) & 7;
-        const Voxel& v = voxels[static_cast<size_t>(block_of[i & cross]) * kBlockVoxels + (lzi * 64 + lyi * 8 + lxi)];
-        if (!(v.weight > 0.0f)) return Cell::kUnobserved;
+        const Voxel& v = block_of[i & cross][base + (i & 1) * step_x + ((i >> 1) & 1) * step_y + (i >> 2) * step_z];
+        w = std::min(w, v.weight);
         c[i] = v.tsdf;
     }
-    return Cell::kOk;
+    return w > 0.0f ? Cell::kOk : Cell::kUnobserved;
 }
 
-[[gnu::always_inline]] inline VoxelBlockGrid::Cell VoxelBlockGrid::sample(const Eigen::Vector3f& p_vox, float& tsdf,
-                                                                          Eigen::Vector3f* grad) const {
+[[gnu::always_inline]] inline VoxelBlockGrid::Cell VoxelBlockGrid::sample(const Eigen::Vector3f& p_vox,
+                                                                          float& tsdf) const {
     // Truncation, not floor: a negative coordinate is outside the cube either way (rejected here), and this keeps
     // the hot loop free of a libm call on targets without SSE4.1.
     if (!(p_vox.x() >= 0.0f && p_vox.y() >= 0.0f && p_vox.z() >= 0.0f)) return Cell::kUnallocated;
@@ -154,15 +156,22 @@ using TsdfSnapshot = VoxelBlockGrid;
     const float c01 = c[4] + fx * (c[5] - c[4]), c11 = c[6] + fx * (c[7] - c[6]);
     const float c0 = c00 + fy * (c10 - c00), c1 = c01 + fy * (c11 - c01);
     tsdf = c0 + fz * (c1 - c0);
-    if (grad != nullptr) {
-        // Partial derivatives of the trilinear interpolant above.
-        const float dx00 = c[1] - c[0], dx10 = c[3] - c[2], dx01 = c[5] - c[4], dx11 = c[7] - c[6];
-        const float dx0 = dx00 + fy * (dx10 - dx00), dx1 = dx01 + fy * (dx11 - dx01);
-        grad->x() = dx0 + fz * (dx1 - dx0);
-        grad->y() = (c10 - c00) + fz * ((c11 - c01) - (c10 - c00));
-        grad->z() = c1 - c0;
-    }
     return Cell::kOk;
+}
+
+inline bool VoxelBlockGrid::gradient(const Eigen::Vector3f& p_vox, Eigen::Vector3f& grad) const {
+    // Central differences over two voxels. The derivative of the trilinear cell alone would cost one sample instead
+    // of six, but measured twice the angular error on a sphere (4.3 against 2.1 degrees mean, p99 12.8 against
+    // 6.0) and, through ICP's point-to-plane terms, +0.002 mm mean error and +10 % ATE on the synthetic head.
+    for (int a = 0; a < 3; ++a) {
+        Eigen::Vector3f lo = p_vox, hi = p_vox;
+        lo[a] -= 1.0f;
+        hi[a] += 1.0f;
+        float f_lo, f_hi;
+        if (sample(lo, f_lo) != Cell::kOk || sample(hi, f_hi) != Cell::kOk) return false;
+        grad[a] = f_hi - f_lo;
+    }
+    return true;
 }
 
 struct IntegrateStats {
