@@ -18,6 +18,18 @@ facescan_require(Eigen3_FOUND "Eigen3" "libeigen3-dev")
 find_package(CycloneDDS QUIET)
 facescan_require(CycloneDDS_FOUND "Cyclone DDS (C API and idlc)" "cyclonedds-dev cyclonedds-tools")
 
+# DDS Security (deploy/security/): Cyclone's three built-in plugins, which Debian's libddsc0debian installs in a
+# folder of its own, off the loader's path; the configuration names them by full path, so the folder is compiled
+# in (FACESCAN_DDS_SECURITY_PLUGIN_DIR overrides it at run time). OpenSSL checks an identity's files at start-up.
+get_target_property(_facescan_ddsc CycloneDDS::ddsc LOCATION)
+get_filename_component(_facescan_ddsc_dir "${_facescan_ddsc}" DIRECTORY)
+find_path(FACESCAN_DDS_SECURITY_PLUGIN_DIR libdds_security_auth.so
+          HINTS ${_facescan_ddsc_dir}/libddsc0debian /usr/lib/${CMAKE_LIBRARY_ARCHITECTURE}/libddsc0debian
+                ${_facescan_ddsc_dir} NO_DEFAULT_PATH)
+facescan_require(FACESCAN_DDS_SECURITY_PLUGIN_DIR "Cyclone DDS Security plugins" "libddsc0debian")
+find_package(OpenSSL QUIET)
+facescan_require(OPENSSL_FOUND "OpenSSL" "libssl-dev")
+
 find_package(draco QUIET)
 facescan_require(draco_FOUND "Draco" "libdraco-dev")
 

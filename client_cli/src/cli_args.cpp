@@ -9,6 +9,7 @@
 
 #include "client/mesh_file.hpp"
 #include "client/view_server.hpp"
+#include "wire/dds_options.hpp"
 #include "wire/messages.hpp"
 
 namespace facescan::client {
@@ -23,17 +24,18 @@ struct CommandSpec {
     const char* usage;
 };
 
-constexpr const char* kGlobalOptions =
-    "Options shared by every command (and by facescan-agent and facescan-server):\n"
-    "  --profile P     DDS network profile: loopback, lan (default) or a Cyclone FILE.xml\n"
-    "  --domain N      DDS domain id 0..232 (default 0); programs only meet in the same domain\n"
-    "  --timeout S     seconds to wait for a server before giving up (default 10)\n"
-    "  -h, --help      this help\n";
+std::string globalOptions() {
+    return "Options shared by every command (the DDS ones also by facescan-agent and facescan-server):\n" +
+           wire::ddsOptionsHelp(22) +
+           "  --timeout S         seconds to wait for a server before giving up (default 10)\n"
+           "  -h, --help          this help\n";
+}
 
 constexpr const char* kExitCodes =
     "Exit codes: 0 ok, 1 the server refused (unknown session, bad request), 2 usage error,\n"
     "            3 no server answered in time, 4 the output file cannot be written,\n"
-    "            5 view cannot serve (port taken, web files missing), 130 interrupted.\n";
+    "            5 view cannot serve (port taken, web files missing),\n"
+    "            6 not allowed (DDS Security: a bad identity, or its role may not do this), 130 interrupted.\n";
 
 const std::vector<CommandSpec>& commandSpecs() {
     static const std::vector<CommandSpec> specs = {
@@ -134,9 +136,8 @@ const CommandSpec* findSpec(const std::string& name) {
 }
 
 bool takesValue(const std::string& option) {
-    static const std::set<std::string> kValued = {"--profile", "--domain",      "--timeout", "-o",
-                                                  "--save",    "--save-format", "--port",    "--bind"};
-    return kValued.count(option) > 0;
+    static const std::set<std::string> kValued = {"--timeout", "-o", "--save", "--save-format", "--port", "--bind"};
+    return kValued.count(option) > 0 || wire::isDdsOption(option);
 }
 
 template <typename T>
@@ -157,7 +158,7 @@ std::string commandName(Command command) {
 
 std::string usageText(const std::string& command) {
     if (const CommandSpec* spec = findSpec(command)) {
-        return std::string(spec->usage) + "\n" + kGlobalOptions + "\n" + kExitCodes;
+        return std::string(spec->usage) + "\n" + globalOptions() + "\n" + kExitCodes;
     }
     return std::string(
                "Usage: facescan [OPTIONS] COMMAND [ARGS]\n"
@@ -175,7 +176,7 @@ std::string usageText(const std::string& command) {
                "  reset SESSION                  clear a scan's model and start again\n"
                "  view [--port N] [--open]       watch every scan in a web browser (live 3D, downloads)\n"
                "\n") +
-           kGlobalOptions + "\n" + kExitCodes + "\n'facescan COMMAND --help' describes one command.\n";
+           globalOptions() + "\n" + kExitCodes + "\n'facescan COMMAND --help' describes one command.\n";
 }
 
 Status CliOptions::validate() const {
@@ -252,16 +253,12 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
     options.command = spec->command;
 
     for (const auto& [option, value] : values) {
-        const bool global = option == "--profile" || option == "--domain" || option == "--timeout";
+        const bool global = wire::isDdsOption(option) || option == "--timeout";
         if (!global && !spec->options.count(option)) {
             return invalidArgument("unknown option " + option + " for '" + spec->name + "'");
         }
-        if (option == "--profile") {
-            options.domain.profile = value;
-        } else if (option == "--domain") {
-            if (!parseNumber(value, options.domain.domain_id)) {
-                return invalidArgument("--domain must be a number 0..232, got '" + value + "'");
-            }
+        if (wire::isDdsOption(option)) {
+            RETURN_IF_ERROR(wire::applyDdsOption(options.domain, option, value));
         } else if (option == "--timeout") {
             double seconds = 0;
             if (!parseNumber(value, seconds) || !std::isfinite(seconds) || seconds <= 0 || seconds > 86400) {

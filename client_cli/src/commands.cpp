@@ -37,19 +37,29 @@ int exitCodeForRequest(const Status& status) {
     switch (status.code()) {
         case StatusCode::kDeadlineExceeded:
         case StatusCode::kUnavailable: return kExitNoServer;
+        case StatusCode::kPermissionDenied: return kExitNotAllowed;
         default: return kExitServerError;
     }
 }
 
-std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_code) {
+ClientConfig clientConfig(const CliOptions& options) {
     ClientConfig config;
     config.domain = options.domain;
     config.timeout = options.timeout;
+    return config;
+}
+
+std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_code, bool commands) {
+    ClientConfig config = clientConfig(options);
+    config.commands = commands;
     auto client = ScanClient::connect(config);
     if (client.isOk()) return std::move(client).value();
-    // A profile that does not exist or does not parse is the user's command line; anything else is DDS.
+    // A profile or identity that does not exist or does not parse is the user's command line; a refused identity
+    // (DDS Security) is not allowed; anything else is DDS.
     const StatusCode code = client.status().code();
-    exit_code = fail(code == StatusCode::kNotFound || code == StatusCode::kInvalidArgument ? kExitUsage : kExitNoServer,
+    exit_code = fail(code == StatusCode::kNotFound || code == StatusCode::kInvalidArgument ? kExitUsage
+                     : code == StatusCode::kPermissionDenied                               ? kExitNotAllowed
+                                                                                           : kExitNoServer,
                      client.status().message());
     return nullptr;
 }

@@ -34,14 +34,27 @@ int runView(const CliOptions& options) {
     auto web_root = findWebRoot();
     if (!web_root.isOk()) return fail(kExitCannotServe, web_root.status().message());
     int code = kExitOk;
-    auto live = connectOrFail(options, code);
+    // The live feed only reads (status and snapshots); downloads go through a client of their own.
+    auto live = connectOrFail(options, code, /*commands=*/false);
     if (!live) return code;
-    auto commands = connectOrFail(options, code);
-    if (!commands) return code;
-
     ViewHub hub;
+    std::unique_ptr<ScanClient> commands;
+    auto connected = ScanClient::connect(clientConfig(options));
+    if (connected.isOk()) {
+        if (Status s = (*connected)->enableCommands(); !s.isOk()) connected = s;
+    }
+    if (connected.isOk()) {
+        commands = std::move(connected).value();
+    } else {
+        // An identity that may only read (the viewer role of a secured site) cannot publish ScanCommand.
+        std::printf(
+            "facescan view: cannot ask servers for meshes (%s): downloads are each session's latest "
+            "snapshot, the final mesh once the scan is finished\n",
+            connected.status().message().c_str());
+    }
     std::mutex commands_mutex;  // a ScanClient runs one request at a time
     MeshFetcher fetch_mesh = [&](const std::string& session) -> StatusOr<std::vector<uint8_t>> {
+        if (!commands) return hub.snapshotMesh(session);
         std::lock_guard lock(commands_mutex);
         ASSIGN_OR_RETURN(CommandReply reply, commands->request(session, facescan_wire_CMD_GET_MESH));
         if (reply.payload.empty()) return notFound("session '" + session + "' has no mesh yet (nothing integrated)");
@@ -54,8 +67,7 @@ int runView(const CliOptions& options) {
     auto server = ViewServer::start(config, hub, fetch_mesh);
     if (!server.isOk()) return fail(kExitCannotServe, server.status().message());
     const std::string url = (*server)->url();
-    std::printf("facescan view: serving %s (domain %u, profile %s; Ctrl-C stops)\n", url.c_str(),
-                options.domain.domain_id, options.domain.profile.c_str());
+    std::printf("facescan view: serving %s (%s; Ctrl-C stops)\n", url.c_str(), options.domain.describe().c_str());
     std::printf("facescan view: web files from %s\n", web_root->c_str());
     if (options.view_bind == "127.0.0.1" || options.view_bind == "::1") {
         std::printf("facescan view: this machine only; --bind 0.0.0.0 serves the LAN\n");

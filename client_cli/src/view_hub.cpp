@@ -101,6 +101,16 @@ std::shared_ptr<const FramedSnapshot> ViewHub::snapshot(const std::string& sessi
     return it == snapshots_.end() ? nullptr : it->second.snapshot;
 }
 
+StatusOr<std::vector<uint8_t>> ViewHub::snapshotMesh(const std::string& session_id) const {
+    const auto held = snapshot(session_id);
+    if (!held) {
+        return notFound(session(session_id) ? "session '" + session_id + "' has no snapshot yet"
+                                            : "unknown session '" + session_id + "'");
+    }
+    const std::string_view bytes = held->draco();
+    return std::vector<uint8_t>(bytes.begin(), bytes.end());
+}
+
 std::shared_ptr<const std::string> ViewHub::sessionsJson() const {
     std::lock_guard lock(mutex_);
     return sessions_json_;

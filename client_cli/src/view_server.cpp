@@ -1,5 +1,6 @@
 // The viewer's HTTP and WebSocket side on CivetWeb (client/view_server.hpp). CivetWeb parses HTTP and WebSocket
-// frames and serves files; this file routes requests and runs one sender thread per browser over the ViewHub.
+// frames; this file routes requests, answers from memory (assets, snapshots, JSON) and runs one sender thread per
+// browser over the ViewHub.
 #include "client/view_server.hpp"
 
 #include <arpa/inet.h>

@@ -107,6 +107,13 @@ TEST(ViewHub, SessionsJsonChangesOnlyWithThePictureAndStaysValid) {
     EXPECT_FALSE(hub.next(cursor, 0ms).sessions_json);
     ASSERT_TRUE(hub.session("a"));
     EXPECT_FALSE(hub.session("b"));
+
+    // A read-only viewer's download: the latest snapshot's bytes, or why there is none.
+    EXPECT_EQ(hub.snapshotMesh("a").status().message(), "session 'a' has no snapshot yet");
+    EXPECT_EQ(hub.snapshotMesh("zz").status().message(), "unknown session 'zz'");
+    hub.putSnapshot(frameSnapshot(snap("a", 4, 10, {5, 6, 7})));
+    ASSERT_TRUE(hub.snapshotMesh("a").isOk());
+    EXPECT_EQ(*hub.snapshotMesh("a"), (std::vector<uint8_t>{5, 6, 7}));
 }
 
 }  // namespace

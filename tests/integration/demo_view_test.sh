@@ -3,6 +3,10 @@
 # after the scan, stays up after the results, and Ctrl-C (SIGINT to the demo) stops everything with exit code 0.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
+if [ -z "${FACESCAN_WEB_DIR:-}" ] && [ ! -f "$root/client_cli/web/node_modules/three/build/three.module.js" ]; then
+    echo "demo_view_test: SKIPPED: three.js is not installed in client_cli/web (run deploy/install-deps.sh: npm ci)"
+    exit 77
+fi
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 # The demo runs in its own process group so that the signal reaches it as Ctrl-C would reach a terminal's job.

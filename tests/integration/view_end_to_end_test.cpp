@@ -12,6 +12,7 @@
 #include <regex>
 
 #include "child_process.hpp"
+#include "client/web_assets.hpp"
 #include "http_client.hpp"
 #include "test_domain.hpp"
 #include "wire/mesh_codec.hpp"
@@ -29,6 +30,7 @@ using facescan::testing::WsClient;
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 TEST(ViewEndToEnd, FollowsARealScanAndServesItsMeshes) {
+    if (auto root = client::findWebRoot(); !root.isOk()) GTEST_SKIP() << root.status().message();
     const std::string domain = std::to_string(facescan::testing::privateDomain(15));
     const std::string session = "view-" + std::to_string(::getpid());
     const fs::path dir = fs::temp_directory_path() / ("facescan_view_e2e_" + std::to_string(::getpid()));

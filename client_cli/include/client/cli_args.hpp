@@ -19,6 +19,7 @@ enum ExitCode : int {
     kExitNoServer = 3,       // no server answered in time, or the server went away
     kExitCannotWrite = 4,    // the output file cannot be written
     kExitCannotServe = 5,    // view: the port cannot be bound, or the viewer's web files are missing
+    kExitNotAllowed = 6,     // DDS Security: a bad identity file, or the identity's role may not do this
     kExitInterrupted = 130,  // Ctrl-C (128 + SIGINT, the shell convention)
 };
 
@@ -38,7 +39,7 @@ struct CliOptions {
     uint16_t view_port = 8080;                  // view --port (0: any free port)
     std::string view_bind = "127.0.0.1";        // view --bind ADDRESS: this machine only unless told otherwise
     bool view_open = false;                     // view --open: open the page in the desktop's browser
-    wire::DomainConfig domain{0, "lan"};        // --domain N, --profile loopback|lan|FILE.xml
+    wire::DomainConfig domain{0, "lan"};        // --domain N, --profile P, --security DIR/NAME
     std::chrono::milliseconds timeout{10'000};  // --timeout SECONDS: how long to wait for a server
 
     Status validate() const;

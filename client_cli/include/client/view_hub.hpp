@@ -63,6 +63,9 @@ class ViewHub {
     std::vector<SessionStatus> sessions() const;
     std::optional<SessionStatus> session(const std::string& session_id) const;
     std::shared_ptr<const FramedSnapshot> snapshot(const std::string& session_id) const;
+    // The latest snapshot's Draco bytes as a mesh download (the final mesh once a scan is finished: its server
+    // publishes it as the last snapshot), for a viewer that may not send commands. NotFound when there is none.
+    StatusOr<std::vector<uint8_t>> snapshotMesh(const std::string& session_id) const;
     // {"type":"sessions","sessions":[...]}: every session's status JSON (client/status_json.hpp) with "alive".
     std::shared_ptr<const std::string> sessionsJson() const;
 
