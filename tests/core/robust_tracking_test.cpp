@@ -73,6 +73,20 @@ ScenarioRun runScenario(const synth::SequenceParams& sp, const ReconParams& para
     return run;
 }
 
+TEST(Robustness, TheGentleSequenceIsTrackedInEveryFrameFromTheModel) {
+    synth::SequenceParams sp = scenario("gentle");
+    sp.frames = 90;
+    sp.seed = 17;
+    const ScenarioRun run = runScenario(sp);
+    EXPECT_EQ(run.figures.tracked_in_view, sp.frames);
+    EXPECT_EQ(run.figures.losses, 0);
+    EXPECT_EQ(run.figures.wrong_poses, 0) << "max error " << run.figures.max_pose_err_mm << " mm";
+    EXPECT_EQ(run.figures.foreign_vertices, 0) << "torso fused";
+    int from_model = 0;
+    for (const ScanStep& s : run.steps) from_model += s.head.from_model;
+    EXPECT_GE(from_model, sp.frames - 10) << "once tracked, the head comes from the model, not from detection";
+}
+
 TEST(Robustness, WideFastTurnsAboveATorsoAreTracked) {
     synth::SequenceParams sp = scenario("wide");
     sp.frames = 150;  // a whole yaw cycle: 0 -> 60 -> 0 -> -60 -> 0 deg at up to 2.8 deg a frame
