@@ -81,7 +81,11 @@ for s in $(seq 1 "$sessions"); do
     [ -f "$f" ] || continue
     received=$(field "$f" frames received)
     skipped=$(field "$f" frames skipped)
+    # The snapshot thread's cost in % of a core, from the LAST snapshot's copy + mesh + encode ms (the summary keeps
+    # no mean) times snapshots a second: one snapshot's wall-clock cost, not an average over the session.
+    snapshot_cpu=$(awk -v c="$(field "$f" snapshot copy_ms)" -v m="$(field "$f" snapshot mesh_ms)" \
+        -v e="$(field "$f" snapshot encode_ms)" -v hz="${SNAPSHOT_HZ:-1}" 'BEGIN { printf "%.1f", (c + m + e) * hz / 10 }')
     printf '%-8s %5s of %-4s %5s %2s %9.1f %9.1f %10s %%\n' "rt$s" "$(field "$f" frames integrated)" "$frames" \
         "$skipped" "($(( received > 0 ? 100 * skipped / received : 0 ))%)" "$(field "$f" latency_ms p50)" \
-        "$(field "$f" latency_ms p95)" "$(field "$f" snapshot cpu_percent)"
+        "$(field "$f" latency_ms p95)" "$snapshot_cpu"
 done
