@@ -36,6 +36,10 @@ struct AgentOptions {
     // after a takeover. When full, the agent waits for the owner (nothing is lost).
     int keep_frames = 300;
     float finish_timeout_s = 120;  // seconds to wait, after the last frame, for the server to finish the scan
+    // Read the whole recording into memory before streaming (preloadSource): the agent then costs only its
+    // encoding, like a capture PC that does not share the server's cores. Recordings only.
+    bool preload = false;
+    std::function<void(int, int)> preload_progress;  // (frames read, frames expected or 0), while preloading
 
     Status validate() const;
 };
