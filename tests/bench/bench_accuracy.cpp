@@ -24,12 +24,15 @@ int usage(std::FILE* out) {
     std::fprintf(
         out,
         "usage: facescan-bench accuracy --mesh M --gt G [--nose X,Y,Z] [--init FILE] [--no-align] [--json]\n"
+        "                               [--offset-mm D] [--save-mesh OUT]\n"
         "       facescan-bench accuracy --baseline-frame [--distance M] [--head builtin|scan] [--frame I]"
         " [--json]\n"
         "  G is a head-frame mesh (y up, face along +z; e.g. head_gt.ply of a synthetic TUM folder); its nose\n"
         "  tip is found unless --nose gives it. --init FILE: 4x4 row-major T_gt_mesh guess, or a\n"
         "  T_camera0_head.txt (mesh in the first camera frame), whose inverse is used when --init-inverse.\n"
-        "  Face region: G within 0.11 m of the nose tip, facing forward. Distances in mm, M to G surface.\n");
+        "  Face region: G within 0.11 m of the nose tip, facing forward. Distances in mm, M to G surface.\n"
+        "  --offset-mm D moves every vertex of M D mm along its normal first (a uniform inflation, the known\n"
+        "  answer: `--mesh G --gt G --offset-mm 1` must read 1 mm); --save-mesh OUT writes M as measured.\n");
     return out == stdout ? 0 : 2;
 }
 
@@ -62,7 +65,8 @@ void printReport(const char* what, const eval::AccuracyReport& r, bool json) {
 }
 
 int runAccuracy(const std::vector<std::string>& args) {
-    std::string mesh_path, gt_path, init_path, head_arg = "default";
+    std::string mesh_path, gt_path, init_path, head_arg = "default", save_path;
+    float offset_mm = 0;
     std::optional<Eigen::Vector3f> nose;
     bool json = false, baseline = false, init_inverse = false;
     eval::AccuracyParams params;
@@ -83,6 +87,10 @@ int runAccuracy(const std::vector<std::string>& args) {
             mesh_path = args[++i];
         } else if (a == "--gt" && v) {
             gt_path = args[++i];
+        } else if (a == "--offset-mm" && v) {
+            offset_mm = std::strtof(args[++i].c_str(), nullptr);
+        } else if (a == "--save-mesh" && v) {
+            save_path = args[++i];
         } else if (a == "--init" && v) {
             init_path = args[++i];
         } else if (a == "--head" && v) {
@@ -143,6 +151,13 @@ int runAccuracy(const std::vector<std::string>& args) {
     if (!mesh.isOk() || !gt.isOk()) {
         std::fprintf(stderr, "accuracy: %s\n", (!mesh.isOk() ? mesh.status() : gt.status()).toString().c_str());
         return 1;
+    }
+    if (offset_mm != 0) *mesh = eval::offsetAlongNormals(*mesh, offset_mm * 1e-3f);
+    if (!save_path.empty()) {
+        if (const Status st = eval::writeMesh(*mesh, save_path); !st.isOk()) {
+            std::fprintf(stderr, "accuracy: %s\n", st.toString().c_str());
+            return 1;
+        }
     }
     std::optional<recon::Pose> init;
     if (!init_path.empty()) {

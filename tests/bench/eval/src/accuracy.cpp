@@ -141,6 +141,13 @@ Status AccuracyParams::validate() const {
     return Status::ok();
 }
 
+recon::Mesh offsetAlongNormals(const recon::Mesh& mesh, float offset_m) {
+    recon::Mesh out = mesh;
+    for (const auto vh : out.vertices()) out.point(vh) += offset_m * out.normal(vh);
+    out.update_normals();
+    return out;
+}
+
 Eigen::Vector3f findNoseTip(const recon::Mesh& gt) {
     float y_min = std::numeric_limits<float>::max(), y_max = -y_min;
     for (const auto vh : gt.vertices()) {

@@ -54,6 +54,10 @@ struct AccuracyReport {
     recon::Pose T_gt_mesh = recon::Pose::Identity();  // the alignment found: maps M into G's frame
 };
 
+// M with every vertex moved `offset_m` along its vertex normal (outwards for > 0): a uniform inflation or shrink,
+// the typical bias of TSDF fusion, and the ruler's known answer (it must read |offset_m|).
+recon::Mesh offsetAlongNormals(const recon::Mesh& mesh, float offset_m);
+
 // The nose tip of a head-frame mesh (y up, face along +z): the most forward vertex above the neck.
 Eigen::Vector3f findNoseTip(const recon::Mesh& gt_head_frame);
 
