@@ -9,6 +9,8 @@
 #include <cstdio>
 #include <future>
 
+#include "service/session_store.hpp"
+
 namespace facescan::service {
 namespace {
 
@@ -41,6 +43,7 @@ StatusOr<std::unique_ptr<Server>> Server::create(const ServerParams& params) {
 }
 
 Status Server::start() {
+    RETURN_IF_ERROR(checkDataDir(params_.data_dir));
     ASSIGN_OR_RETURN(participant_, boxed(wire::Participant::create(params_.domain)));
     const wire::Participant& p = *participant_;
     ASSIGN_OR_RETURN(camera_topic_, boxed(wire::Topic<facescan_wire_CameraInfo>::create(p)));

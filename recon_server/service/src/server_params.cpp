@@ -251,6 +251,10 @@ StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args) {
             out.help = true;
             return out;
         }
+        if (a == "--check") {
+            out.check = true;
+            continue;
+        }
         std::string flag = a, value;
         bool has_value = false;
         if (const size_t eq = a.find('='); a.rfind("--", 0) == 0 && eq != std::string::npos) {
@@ -304,6 +308,7 @@ std::string serverUsage() {
            "  --profile P             DDS profile: loopback | lan | FILE.xml (default lan)\n"
            "  --domain N              DDS domain id (default 0)\n"
            "  --server-id ID          name in replies and status (default HOST-PID)\n"
+           "  --check                 check the configuration (file, flags, DDS profile, data dir) and exit\n"
            "  --help                  this text\n\n"
            "config keys:\n" +
            keys;

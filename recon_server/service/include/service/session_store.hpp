@@ -32,6 +32,11 @@ struct SessionFiles {
 // Creates dir and writes the files that have content (mesh.ply and mesh.drc only for a non-empty mesh).
 Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& files);
 
+// Creates dir when missing and proves that a file can be written there (a probe written atomically, then
+// removed): checked when the server starts, so that a data dir the server cannot write is refused at once with
+// the reason, not discovered when the first finished scan cannot be saved.
+Status checkDataDir(const std::filesystem::path& dir);
+
 // Minimal JSON string escaping for summaries (quotes, backslash, control characters).
 std::string jsonEscape(const std::string& s);
 
