@@ -13,6 +13,8 @@ PACKAGES=(
     libzstd-dev libturbojpeg0-dev libnanoflann-dev
     # tests, benchmarks, fuzzers, formatting
     libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format
+    # the .deb and its test: dpkg-shlibdeps (dependencies), systemd-analyze and systemd-sysusers (units, user)
+    dpkg-dev systemd
 )
 
 missing=()
