@@ -49,19 +49,19 @@ std::optional<recon::Pose> readPose(const std::string& path) {
 
 void printReport(const char* what, const eval::AccuracyReport& r, bool json) {
     std::printf("%s\n", what);
-    std::printf("  %-30s %9.3f\n  %-30s %9.3f\n  %-30s %9.3f\n  %-30s %9.3f\n", "mean |d| (mm)", r.mean_mm, "RMS (mm)",
-                r.rms_mm, "median (mm)", r.median_mm, "p90 (mm)", r.p90_mm);
-    std::printf("  %-30s %9.4f\n  %-30s %9.4f\n  %-30s %9.4f\n  %-30s %9d\n  %-30s %9d\n  %-30s %9d\n",
-                "completeness (<= 2 mm)", r.completeness, "completeness, observed part", r.completeness_observed,
-                "outliers (> 5 mm)", r.outliers, "mesh vertices used", r.mesh_vertices_used, "GT face vertices",
-                r.gt_face_vertices, "GT face vertices observed", r.gt_observed_vertices);
-    if (json) {
-        std::printf(
-            "{\"mean_mm\":%.4f,\"rms_mm\":%.4f,\"median_mm\":%.4f,\"p90_mm\":%.4f,\"completeness\":%.5f,"
-            "\"completeness_observed\":%.5f,\"observable_share\":%.5f,\"outliers\":%.5f,\"mesh_vertices_used\":%d}\n",
-            r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, r.completeness, r.completeness_observed,
-            static_cast<double>(r.gt_observed_vertices) / r.gt_face_vertices, r.outliers, r.mesh_vertices_used);
-    }
+    const eval::DistanceFigures& u = r.unaligned;
+    std::printf("  %-30s %9s %12s\n", "", "aligned", "unaligned");
+    std::printf("  %-30s %9.3f %12.3f\n  %-30s %9.3f %12.3f\n  %-30s %9.3f %12.3f\n  %-30s %9.3f %12.3f\n",
+                "mean |d| (mm)", r.mean_mm, u.mean_mm, "RMS (mm)", r.rms_mm, u.rms_mm, "median (mm)", r.median_mm,
+                u.median_mm, "p90 (mm)", r.p90_mm, u.p90_mm);
+    std::printf("  %-30s %9d %12d\n", "samples over the face", r.mesh_vertices_used, u.samples);
+    std::printf("  %-30s %9.3f   (> 0: M inflated, found and left in the distances)\n", "uniform normal offset (mm)",
+                r.offset_mm);
+    std::printf("  %-30s %9.4f %12.4f\n", "outliers (> 5 mm)", r.outliers, u.outliers);
+    std::printf("  %-30s %9.4f\n  %-30s %9.4f\n  %-30s %9d\n  %-30s %9d\n", "completeness (<= 2 mm)", r.completeness,
+                "completeness, observed part", r.completeness_observed, "GT face vertices", r.gt_face_vertices,
+                "GT face vertices observed", r.gt_observed_vertices);
+    if (json) std::printf("%s\n", eval::accuracyJson(r).c_str());
 }
 
 int runAccuracy(const std::vector<std::string>& args) {

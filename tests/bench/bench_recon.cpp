@@ -295,22 +295,17 @@ PoseErrors poseErrors(const Sequence& seq, const std::vector<std::optional<Pose>
     return e;
 }
 
-std::string accuracyJson(const eval::AccuracyReport& r) {
-    char buf[320];
-    std::snprintf(buf, sizeof(buf),
-                  "{\"mean_mm\":%.4f,\"rms_mm\":%.4f,\"median_mm\":%.4f,\"p90_mm\":%.4f,\"completeness\":%.4f,"
-                  "\"completeness_observed\":%.4f,\"observable_share\":%.4f,\"outliers\":%.4f}",
-                  r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, r.completeness, r.completeness_observed,
-                  static_cast<double>(r.gt_observed_vertices) / r.gt_face_vertices, r.outliers);
-    return buf;
-}
-
 void printAccuracy(const char* what, const eval::AccuracyReport& r) {
     std::printf(
         "%-22s mean %.3f mm  rms %.3f mm  median %.3f mm  p90 %.3f mm  completeness(2 mm) %.1f %% of the face, "
         "%.1f %% of its observable part  outliers(5 mm) %.2f %%  (%d samples)\n",
         what, r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, 100.0 * r.completeness, 100.0 * r.completeness_observed,
         100.0 * r.outliers, r.mesh_vertices_used);
+    // The same surface at the true first pose, without any alignment, and the inflation the alignment found.
+    std::printf(
+        "%-22s mean %.3f mm  rms %.3f mm  median %.3f mm  p90 %.3f mm  (unaligned: true first pose)  "
+        "uniform offset %+.3f mm\n",
+        "", r.unaligned.mean_mm, r.unaligned.rms_mm, r.unaligned.median_mm, r.unaligned.p90_mm, r.offset_mm);
 }
 
 int runRecon(const std::vector<std::string>& args) {
@@ -526,7 +521,7 @@ int runRecon(const std::vector<std::string>& args) {
                 acc->gt_observed_vertices, acc->gt_face_vertices,
                 100.0 * acc->gt_observed_vertices / acc->gt_face_vertices, seq.frames.size(), sight_s);
             printAccuracy("accuracy (all frames)", *acc);
-            acc_json = accuracyJson(*acc);
+            acc_json = eval::accuracyJson(*acc);
             if (!o.misses_out.empty() && sightings.isOk()) {
                 if (const Status s = eval::writeMisses(gt, *sightings, mesh, *acc, nose, acc_params, o.misses_out);
                     !s.isOk())
@@ -537,7 +532,7 @@ int runRecon(const std::vector<std::string>& args) {
         }
         if (base.isOk()) {
             printAccuracy("baseline (1 frame)", *base);
-            base_json = accuracyJson(*base);
+            base_json = eval::accuracyJson(*base);
         }
     }
     if (o.json) {
