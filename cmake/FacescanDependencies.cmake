@@ -18,6 +18,18 @@ facescan_require(Eigen3_FOUND "Eigen3" "libeigen3-dev")
 find_package(CycloneDDS QUIET)
 facescan_require(CycloneDDS_FOUND "Cyclone DDS (C API and idlc)" "cyclonedds-dev cyclonedds-tools")
 
+# DDS Security (deploy/security/): Cyclone's three built-in plugins, which Debian's libddsc0debian installs in a
+# folder of its own, off the loader's path; the configuration names them by full path, so the folder is compiled
+# in (FACESCAN_DDS_SECURITY_PLUGIN_DIR overrides it at run time). OpenSSL checks an identity's files at start-up.
+get_target_property(_facescan_ddsc CycloneDDS::ddsc LOCATION)
+get_filename_component(_facescan_ddsc_dir "${_facescan_ddsc}" DIRECTORY)
+find_path(FACESCAN_DDS_SECURITY_PLUGIN_DIR libdds_security_auth.so
+          HINTS ${_facescan_ddsc_dir}/libddsc0debian /usr/lib/${CMAKE_LIBRARY_ARCHITECTURE}/libddsc0debian
+                ${_facescan_ddsc_dir} NO_DEFAULT_PATH)
+facescan_require(FACESCAN_DDS_SECURITY_PLUGIN_DIR "Cyclone DDS Security plugins" "libddsc0debian")
+find_package(OpenSSL QUIET)
+facescan_require(OPENSSL_FOUND "OpenSSL" "libssl-dev")
+
 find_package(draco QUIET)
 facescan_require(draco_FOUND "Draco" "libdraco-dev")
 
@@ -37,6 +49,23 @@ pkg_check_modules(TurboJpeg QUIET IMPORTED_TARGET libturbojpeg)
 facescan_require(TurboJpeg_FOUND "libjpeg-turbo (TurboJPEG API)" "libturbojpeg0-dev")
 
 find_package(Threads REQUIRED)
+
+# The client's GLB export (glTF 2.0 binary) and the web viewer's HTTP and WebSocket server.
+find_package(TinyGLTF QUIET)
+facescan_require(TinyGLTF_FOUND "TinyGLTF" "libtinygltf-dev")
+# Not through civetweb's CMake config: Debian's (1.15+dfsg-4) also names the civetweb program, which is in another
+# package (civetweb), and stops configure when that is absent. The header and the library are all we use.
+find_package(ZLIB QUIET)  # the viewer gzips its page once at start
+facescan_require(ZLIB_FOUND "zlib" "zlib1g-dev")
+find_path(CIVETWEB_INCLUDE_DIR civetweb.h)
+find_library(CIVETWEB_LIBRARY civetweb)
+facescan_require(CIVETWEB_LIBRARY "CivetWeb (HTTP and WebSocket server)" "libcivetweb-dev")
+facescan_require(CIVETWEB_INCLUDE_DIR "CivetWeb's header" "libcivetweb-dev")
+if(NOT TARGET facescan::civetweb)
+    add_library(facescan::civetweb UNKNOWN IMPORTED)
+    set_target_properties(facescan::civetweb PROPERTIES IMPORTED_LOCATION "${CIVETWEB_LIBRARY}"
+        INTERFACE_INCLUDE_DIRECTORIES "${CIVETWEB_INCLUDE_DIR}")
+endif()
 
 if(FACESCAN_BUILD_TESTS)
     find_package(GTest QUIET)

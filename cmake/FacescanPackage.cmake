@@ -24,8 +24,9 @@ set(CPACK_DEBIAN_PACKAGE_SECTION science)
 set(CPACK_DEBIAN_PACKAGE_PRIORITY optional)
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
 # Not shared libraries, so dpkg-shlibdeps cannot see them: the Haar cascade the server's detector loads
-# (FACESCAN_HAAR_FRONTAL) and the tool postinst falls back on to create the system user.
-set(CPACK_DEBIAN_PACKAGE_DEPENDS "opencv-data, adduser")
+# (FACESCAN_HAAR_FRONTAL), the tool postinst falls back on to create the system user, and the openssl program
+# facescan-site (deploy/security/site.sh) makes a site's keys and certificates with.
+set(CPACK_DEBIAN_PACKAGE_DEPENDS "opencv-data, adduser, openssl")
 set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "systemd")
 set(CPACK_DEBIAN_PACKAGE_HOMEPAGE "https://facescan.invalid/")
 

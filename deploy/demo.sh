@@ -7,7 +7,9 @@
 #   also on Ctrl-C.
 # Knobs (environment): DEMO_FRAMES (default 150), DEMO_RATE (real|max|HZ, default real: a live 30 Hz camera),
 #   OUT_DIR (default ./out), BUILD_DIR (default ./build), JOBS, DEMO_NO_INSTALL=1, DEMO_NO_BUILD=1 (use
-#   FACESCAN_SERVER/FACESCAN_AGENT/FACESCAN_CLIENT/FACESCAN_ACCURACY or the binaries already in BUILD_DIR).
+#   FACESCAN_SERVER/FACESCAN_AGENT/FACESCAN_CLIENT/FACESCAN_ACCURACY or the binaries already in BUILD_DIR),
+#   DEMO_VIEW=1 (also `facescan view`: prints the web viewer's URL before the scan and keeps it up after the
+#   results until Ctrl-C; DEMO_VIEW_PORT, default 8080, 0 for any free port).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
@@ -95,6 +97,18 @@ pids+=($!)
     --session "$session" --rate "$RATE" --wait-for-server 30 >"$work/agent.log" 2>&1 &
 agent_pid=$!
 pids+=("$agent_pid")
+if [ "${DEMO_VIEW:-0}" = 1 ]; then
+    "$CLIENT" view --port "${DEMO_VIEW_PORT:-8080}" "${dds[@]}" >"$work/view.log" 2>&1 &
+    view_pid=$!
+    pids+=("$view_pid")
+    for _ in $(seq 100); do
+        url=$(grep -o 'http://[^ ]*' "$work/view.log" 2>/dev/null | head -n 1 || true)
+        [ -n "$url" ] || ! kill -0 "$view_pid" 2>/dev/null || { sleep 0.1; continue; }
+        break
+    done
+    [ -n "${url:-}" ] || { cat "$work/view.log"; say "the web viewer did not start"; exit 1; }
+    say "watch it in a browser: $url?session=$session"
+fi
 say "scanning $FRAMES frames ($RATE rate); Ctrl-C stops everything"
 
 # --- 4. watch it live until the server has finished the scan --------------------------------------------------------
@@ -111,3 +125,9 @@ say "scan took $(elapsed "$scan_s") s"
 "$ACCURACY" --mesh "$OUT_DIR/face.ply" --subject "$subject" --distance 0.7 --seed 1
 
 say "done in $(elapsed "$start_s") s; results in $OUT_DIR/"
+
+if [ "${DEMO_VIEW:-0}" = 1 ]; then
+    say "the web viewer stays up at $url?session=$session (turn the face, download it); Ctrl-C stops it"
+    trap 'echo; say "stopping the viewer"; exit 0' INT TERM
+    wait "$view_pid" || { say "the web viewer stopped by itself:"; tail -n 5 "$work/view.log"; exit 1; }
+fi

@@ -1,7 +1,18 @@
 #!/usr/bin/env bash
-# Installs exactly what builds, runs and tests facescan on Debian 12 (bookworm). Idempotent: when everything
-# is present it says so and returns in well under a second. Needs root (or sudo) only when something is missing.
+# Installs exactly what builds, runs and tests facescan on Debian 12 (bookworm), and the web viewer's three.js
+# (npm ci in client_cli/web, from its package-lock.json). Idempotent: when everything is present it says so and
+# returns in well under a second. Needs root (or sudo) only when a Debian package is missing.
+#   --browser   also Debian's chromium, for the web viewer's browser test (deploy/test.sh passes it; users
+#               watching scans use their own browser, so a server box does not get one)
 set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+with_browser=0
+for arg in "$@"; do
+    case "$arg" in
+        --browser) with_browser=1 ;;
+        *) echo "install-deps: unknown option $arg (only --browser)" >&2; exit 2 ;;
+    esac
+done
 
 PACKAGES=(
     # toolchain
@@ -11,11 +22,41 @@ PACKAGES=(
     libopenni2-dev
     # codecs and nearest-neighbour search
     libzstd-dev libturbojpeg0-dev libnanoflann-dev
+    # DDS Security: identity checks (OpenSSL), the site script (openssl); the plugins come with cyclonedds-dev
+    libssl-dev openssl
+    # the client: GLB export (glTF 2.0) and the web viewer's HTTP/WebSocket server
+    libtinygltf-dev libcivetweb-dev zlib1g-dev
     # tests, benchmarks, fuzzers, formatting
     libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format
     # the .deb and its test: dpkg-shlibdeps (dependencies), systemd-analyze and systemd-sysusers (units, user)
     dpkg-dev systemd
 )
+
+# The viewer's three.js comes from npm (client_cli/web/package-lock.json): node and npm, from Debian unless the
+# machine has its own.
+command -v npm >/dev/null || PACKAGES+=(nodejs npm)
+[ "$with_browser" -eq 0 ] || PACKAGES+=(chromium)
+
+# npm ci in client_cli/web when node_modules does not match the lockfile (a stamp of the lockfile's hash).
+install_web() {
+    local web="$root/client_cli/web" stamp="$root/client_cli/web/node_modules/.facescan-lock.sha256"
+    [ -f "$web/package-lock.json" ] || return 0
+    local want
+    want=$(sha256sum "$web/package-lock.json" | cut -d' ' -f1)
+    if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
+        echo "install-deps: the viewer's npm packages match package-lock.json"
+        return 0
+    fi
+    echo "install-deps: npm ci in client_cli/web (three.js for the viewer, playwright-core for its test)"
+    # Only `facescan view` needs these: an offline machine still builds and runs the rest (the viewer then says
+    # what to run, and its tests skip).
+    (cd "$web" && npm ci --no-audit --no-fund --loglevel=error) || {
+        echo "install-deps: WARNING: npm ci failed in $web (is the npm registry reachable?); facescan view will" \
+            "not start until it succeeds" >&2
+        return 0
+    }
+    echo "$want" >"$stamp"
+}
 
 missing=()
 for pkg in "${PACKAGES[@]}"; do
@@ -26,6 +67,7 @@ done
 
 if [ ${#missing[@]} -eq 0 ]; then
     echo "install-deps: all ${#PACKAGES[@]} packages present"
+    install_web
     exit 0
 fi
 
@@ -44,4 +86,5 @@ export DEBIAN_FRONTEND=noninteractive
 APT=(apt-get -o DPkg::Lock::Timeout=600)
 $SUDO "${APT[@]}" update -qq
 $SUDO "${APT[@]}" install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+install_web
 echo "install-deps: done"

@@ -7,7 +7,8 @@ root=$(pwd)
 BUILD_DIR=${BUILD_DIR:-$root/build}
 JOBS=${JOBS:-$(nproc)}
 
-"$root/deploy/install-deps.sh"
+# --browser: Debian's chromium for the web viewer's browser test (a test-only dependency).
+"$root/deploy/install-deps.sh" --browser
 "$root/deploy/check-format.sh"
 
 # The configuration users and the .deb get (Release: -O3 -DNDEBUG, the portable default instruction set), with

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "capture/agent.hpp"
+#include "wire/dds_options.hpp"
 
 namespace {
 
@@ -37,11 +38,10 @@ options:
                         raw16, png (`facescan-bench codecs` compares them on your frames)
   --tum-depth-scale S   raw depth units per metre of tum: sources (default 5000; Kinect millimetres: 1000)
   --wait-for-server S   give up when no server appears within S seconds (default: wait forever)
-  --profile P           DDS network profile: loopback, lan (default) or FILE.xml
-  --domain N            DDS domain id 0-232 (default 0); agent, server and client must agree
-  --help                this text
+)";
+constexpr const char* kUsageEnd = R"(  --help                this text
 
-exit codes: 0 done, 1 error (source, network), 2 bad usage)";
+exit codes: 0 done, 1 error (source, network, DDS Security), 2 bad usage)";
 
 int usageError(const std::string& message) {
     std::fprintf(stderr, "facescan-agent: %s\n(see facescan-agent --help)\n", message.c_str());
@@ -64,7 +64,7 @@ int main(int argc, char** argv) {
         auto value = [&]() -> const char* { return i + 1 < argc ? argv[++i] : nullptr; };
         long n = 0;
         if (arg == "--help" || arg == "-h") {
-            std::puts(kUsage);
+            std::printf("%s%s%s\n", kUsage, wire::ddsOptionsHelp(24).c_str(), kUsageEnd);
             return 0;
         } else if (arg == "--no-colour" || arg == "--no-color") {
             options.source_options.colour = false;
@@ -102,11 +102,9 @@ int main(int argc, char** argv) {
             options.source_options.tum_depth_units_m = 1.0f / per_m;
         } else if (arg == "--wait-for-server") {
             options.wait_for_server_s = std::strtof(text.c_str(), nullptr);
-        } else if (arg == "--profile") {
-            options.dds.profile = text;
-        } else if (arg == "--domain") {
-            if (!parseInt(text, 0, 232, n)) return usageError("--domain takes 0-232");
-            options.dds.domain_id = static_cast<uint32_t>(n);
+        } else if (wire::isDdsOption(arg)) {
+            if (const Status s = wire::applyDdsOption(options.dds, arg, text); !s.isOk())
+                return usageError(s.message());
         } else {
             return usageError("unknown option " + arg);
         }
@@ -120,6 +118,7 @@ int main(int argc, char** argv) {
     }
     const capture::SourceInfo& info = (*agent)->sourceInfo();
     std::printf("facescan-agent: session %s\n", (*agent)->sessionId().c_str());
+    std::printf("facescan-agent: %s\n", wire::securitySummary(options.dds).c_str());
     std::printf("facescan-agent: source %s, %dx%d, %.1f Hz%s%s\n", info.description.c_str(), info.intrinsics.width_px,
                 info.intrinsics.height_px, info.rate_hz, info.has_colour ? ", colour" : ", depth only",
                 info.expected_frames > 0 ? (", " + std::to_string(info.expected_frames) + " frames").c_str() : "");
@@ -143,7 +142,7 @@ int main(int argc, char** argv) {
     getrusage(RUSAGE_SELF, &usage);
     const double cpu_s =
         usage.ru_utime.tv_sec + usage.ru_utime.tv_usec * 1e-6 + usage.ru_stime.tv_sec + usage.ru_stime.tv_usec * 1e-6;
-    std::printf("facescan-agent: %s; cpu %.1f s\n",
+    std::printf("facescan-agent: %s; cpu %.2f s\n",
                 g_stop ? "stopped (Ctrl-C), server told the stream ended" : "stream ended", cpu_s);
     if (!status.isOk()) {
         std::fprintf(stderr, "facescan-agent: %s\n", status.toString().c_str());

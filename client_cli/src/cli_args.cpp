@@ -8,6 +8,8 @@
 #include <set>
 
 #include "client/mesh_file.hpp"
+#include "client/view_server.hpp"
+#include "wire/dds_options.hpp"
 #include "wire/messages.hpp"
 
 namespace facescan::client {
@@ -22,16 +24,18 @@ struct CommandSpec {
     const char* usage;
 };
 
-constexpr const char* kGlobalOptions =
-    "Options shared by every command (and by facescan-agent and facescan-server):\n"
-    "  --profile P     DDS network profile: loopback, lan (default) or a Cyclone FILE.xml\n"
-    "  --domain N      DDS domain id 0..232 (default 0); programs only meet in the same domain\n"
-    "  --timeout S     seconds to wait for a server before giving up (default 10)\n"
-    "  -h, --help      this help\n";
+std::string globalOptions() {
+    return "Options shared by every command (the DDS ones also by facescan-agent and facescan-server):\n" +
+           wire::ddsOptionsHelp(22) +
+           "  --timeout S         seconds to wait for a server before giving up (default 10)\n"
+           "  -h, --help          this help\n";
+}
 
 constexpr const char* kExitCodes =
     "Exit codes: 0 ok, 1 the server refused (unknown session, bad request), 2 usage error,\n"
-    "            3 no server answered in time, 4 the output file cannot be written, 130 interrupted.\n";
+    "            3 no server answered in time, 4 the output file cannot be written,\n"
+    "            5 view cannot serve (port taken, web files missing),\n"
+    "            6 not allowed (DDS Security: a bad identity, or its role may not do this), 130 interrupted.\n";
 
 const std::vector<CommandSpec>& commandSpecs() {
     static const std::vector<CommandSpec> specs = {
@@ -48,7 +52,7 @@ const std::vector<CommandSpec>& commandSpecs() {
          0,
          1,
          {"--save", "--save-format"},
-         "Usage: facescan watch [SESSION] [--save DIR [--save-format ply|obj|stl|off|drc]]\n"
+         "Usage: facescan watch [SESSION] [--save DIR [--save-format ply|obj|stl|off|drc|glb]]\n"
          "Follows one scan live until it is finished (Ctrl-C stops watching; the scan goes on).\n"
          "Without SESSION it follows the newest live scan, waiting for one to start.\n"
          "On a terminal it redraws a small panel; into a pipe or log it prints one line per second.\n"
@@ -70,7 +74,9 @@ const std::vector<CommandSpec>& commandSpecs() {
          "Usage: facescan mesh SESSION -o FILE [--finish]\n"
          "Fetches the full-resolution mesh (the final one, or the current model while scanning) and writes it\n"
          "atomically. The format follows the extension: .ply (binary, colours), .obj and .off (colours),\n"
-         ".stl (no colours), .drc (Draco, colours). Positions are in metres.\n"
+         ".stl (no colours), .drc (Draco, colours), .glb (glTF 2.0 binary, vertex colours). Positions are in\n"
+         "metres, in the first camera's frame (x right, y down, z away from the camera); .glb uses glTF's axes\n"
+         "(y up, the face looking along +z), the same mesh turned 180 degrees about x.\n"
          "  -o FILE         output file (required)\n"
          "  --finish        end the scan first (the server writes it to its data folder)\n"},
         {Command::kPreview,
@@ -97,6 +103,20 @@ const std::vector<CommandSpec>& commandSpecs() {
          {},
          "Usage: facescan finish SESSION\n"
          "Ends the scan now: the server makes the final mesh and writes the session to its data folder.\n"},
+        {Command::kView,
+         "view",
+         0,
+         0,
+         {"--port", "--bind", "--open"},
+         "Usage: facescan view [--port 8080] [--bind 127.0.0.1] [--open]\n"
+         "Serves a web page that shows every scan on the domain live: the sessions with state, frames, fps and\n"
+         "server; a 3D view of a session's latest snapshot (drag to turn, wheel to zoom, right-drag to pan) that\n"
+         "updates as the scan grows; progress and the server's messages; and downloads of the mesh as PLY, OBJ,\n"
+         "STL and GLB. Browsers decode the snapshots themselves (three.js, served from this machine: no internet\n"
+         "needed). Runs until Ctrl-C.\n"
+         "  --port N        TCP port (default 8080; 0 picks a free one, printed at start)\n"
+         "  --bind ADDRESS  IP address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: the LAN)\n"
+         "  --open          open the page in this desktop's browser\n"},
         {Command::kReset,
          "reset",
          1,
@@ -116,9 +136,8 @@ const CommandSpec* findSpec(const std::string& name) {
 }
 
 bool takesValue(const std::string& option) {
-    static const std::set<std::string> kValued = {"--profile", "--domain", "--timeout",
-                                                  "-o",        "--save",   "--save-format"};
-    return kValued.count(option) > 0;
+    static const std::set<std::string> kValued = {"--timeout", "-o", "--save", "--save-format", "--port", "--bind"};
+    return kValued.count(option) > 0 || wire::isDdsOption(option);
 }
 
 template <typename T>
@@ -139,7 +158,7 @@ std::string commandName(Command command) {
 
 std::string usageText(const std::string& command) {
     if (const CommandSpec* spec = findSpec(command)) {
-        return std::string(spec->usage) + "\n" + kGlobalOptions + "\n" + kExitCodes;
+        return std::string(spec->usage) + "\n" + globalOptions() + "\n" + kExitCodes;
     }
     return std::string(
                "Usage: facescan [OPTIONS] COMMAND [ARGS]\n"
@@ -149,13 +168,15 @@ std::string usageText(const std::string& command) {
                "  sessions                       the live sessions on the domain, with state and frames\n"
                "  watch [SESSION]                follow a scan live (--save DIR keeps every snapshot)\n"
                "  status SESSION                 state, frame counts and timings of one session\n"
-               "  mesh SESSION -o FILE           the mesh as .ply .obj .stl .off or .drc (--finish ends the scan)\n"
+               "  mesh SESSION -o FILE           the mesh as .ply .obj .stl .off .drc or .glb (--finish ends the "
+               "scan)\n"
                "  preview SESSION -o FILE.png    a shaded picture of the current model\n"
                "  trajectory SESSION [-o FILE]   the camera trajectory (TUM text)\n"
                "  finish SESSION                 end a scan now\n"
                "  reset SESSION                  clear a scan's model and start again\n"
+               "  view [--port N] [--open]       watch every scan in a web browser (live 3D, downloads)\n"
                "\n") +
-           kGlobalOptions + "\n" + kExitCodes + "\n'facescan COMMAND --help' describes one command.\n";
+           globalOptions() + "\n" + kExitCodes + "\n'facescan COMMAND --help' describes one command.\n";
 }
 
 Status CliOptions::validate() const {
@@ -232,16 +253,12 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
     options.command = spec->command;
 
     for (const auto& [option, value] : values) {
-        const bool global = option == "--profile" || option == "--domain" || option == "--timeout";
+        const bool global = wire::isDdsOption(option) || option == "--timeout";
         if (!global && !spec->options.count(option)) {
             return invalidArgument("unknown option " + option + " for '" + spec->name + "'");
         }
-        if (option == "--profile") {
-            options.domain.profile = value;
-        } else if (option == "--domain") {
-            if (!parseNumber(value, options.domain.domain_id)) {
-                return invalidArgument("--domain must be a number 0..232, got '" + value + "'");
-            }
+        if (wire::isDdsOption(option)) {
+            RETURN_IF_ERROR(wire::applyDdsOption(options.domain, option, value));
         } else if (option == "--timeout") {
             double seconds = 0;
             if (!parseNumber(value, seconds) || !std::isfinite(seconds) || seconds <= 0 || seconds > 86400) {
@@ -259,10 +276,18 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
         } else if (option == "--save-format") {
             options.save_format = value;
             if (!meshFormatFor("x." + value).isOk()) {
-                return invalidArgument("--save-format must be ply, obj, stl, off or drc, got '" + value + "'");
+                return invalidArgument("--save-format must be ply, obj, stl, off, drc or glb, got '" + value + "'");
             }
         } else if (option == "--json") {
             options.json = true;
+        } else if (option == "--port") {
+            if (!parseNumber(value, options.view_port)) {
+                return invalidArgument("--port must be a TCP port 0..65535, got '" + value + "'");
+            }
+        } else if (option == "--bind") {
+            options.view_bind = value;
+        } else if (option == "--open") {
+            options.view_open = true;
         }
     }
 
@@ -272,7 +297,7 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
     if (n > 0) options.session = positional[0];
 
     if (options.command == Command::kMesh) {
-        if (options.output.empty()) return invalidArgument("'mesh' needs -o FILE (.ply .obj .stl .off .drc)");
+        if (options.output.empty()) return invalidArgument("'mesh' needs -o FILE (.ply .obj .stl .off .drc .glb)");
         if (Status s = meshFormatFor(options.output).status(); !s.isOk()) return s;
     }
     if (options.command == Command::kPreview) {
@@ -280,6 +305,11 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
         std::string ext = std::filesystem::path(options.output).extension().string();
         std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
         if (ext != ".png") return invalidArgument("the preview is a PNG picture: -o must end in .png");
+    }
+    if (options.command == Command::kView) {
+        ViewServerConfig server;
+        server.bind = options.view_bind;
+        if (Status s = server.validate(); !s.isOk()) return s;
     }
     if (!values.count("--save") && values.count("--save-format")) {
         return invalidArgument("--save-format needs --save DIR");

@@ -16,13 +16,16 @@ int fail(int code, const std::string& message);
 // The exit code of a failed network operation: no answer -> 3, refusal by a server -> 1.
 int exitCodeForRequest(const Status& status);
 
-// Connects with the options' domain, profile and timeout; on failure prints why and sets `exit_code`.
-std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_code);
+// The client configuration of the options' domain, profile and timeout.
+ClientConfig clientConfig(const CliOptions& options);
+// Connects with clientConfig(options) (`commands`: see ClientConfig); on failure prints why and sets `exit_code`.
+std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_code, bool commands = true);
 
 // Set by SIGINT/SIGTERM once installInterruptHandler() ran; long-running commands poll it.
 extern std::atomic<bool> g_interrupted;
 void installInterruptHandler();
 
 int runWatch(const CliOptions& options);
+int runView(const CliOptions& options);
 
 }  // namespace facescan::client::detail

@@ -7,6 +7,7 @@
 #include <iostream>
 
 #include "client/mesh_file.hpp"
+#include "client/status_json.hpp"
 #include "command_util.hpp"
 #include "wire/mesh_codec.hpp"
 
@@ -36,19 +37,29 @@ int exitCodeForRequest(const Status& status) {
     switch (status.code()) {
         case StatusCode::kDeadlineExceeded:
         case StatusCode::kUnavailable: return kExitNoServer;
+        case StatusCode::kPermissionDenied: return kExitNotAllowed;
         default: return kExitServerError;
     }
 }
 
-std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_code) {
+ClientConfig clientConfig(const CliOptions& options) {
     ClientConfig config;
     config.domain = options.domain;
     config.timeout = options.timeout;
+    return config;
+}
+
+std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_code, bool commands) {
+    ClientConfig config = clientConfig(options);
+    config.commands = commands;
     auto client = ScanClient::connect(config);
     if (client.isOk()) return std::move(client).value();
-    // A profile that does not exist or does not parse is the user's command line; anything else is DDS.
+    // A profile or identity that does not exist or does not parse is the user's command line; a refused identity
+    // (DDS Security) is not allowed; anything else is DDS.
     const StatusCode code = client.status().code();
-    exit_code = fail(code == StatusCode::kNotFound || code == StatusCode::kInvalidArgument ? kExitUsage : kExitNoServer,
+    exit_code = fail(code == StatusCode::kNotFound || code == StatusCode::kInvalidArgument ? kExitUsage
+                     : code == StatusCode::kPermissionDenied                               ? kExitNotAllowed
+                                                                                           : kExitNoServer,
                      client.status().message());
     return nullptr;
 }
@@ -58,38 +69,6 @@ std::unique_ptr<ScanClient> connectOrFail(const CliOptions& options, int& exit_c
 namespace {
 
 using namespace detail;
-
-std::string jsonString(const std::string& s) {
-    std::string out = "\"";
-    for (const char c : s) {
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += c;
-        } else if (static_cast<unsigned char>(c) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof(buf), "\\u%04x", c);
-            out += buf;
-        } else {
-            out += c;
-        }
-    }
-    return out + "\"";
-}
-
-std::string statusJson(const SessionStatus& s) {
-    char numbers[640];
-    std::snprintf(numbers, sizeof(numbers),
-                  "\"frames_received\":%u,\"frames_integrated\":%u,\"frames_rejected\":%u,\"frames_skipped\":%u,"
-                  "\"frames_dropped\":%u,\"every_frame\":%s,\"fps\":%.2f,\"ms\":{\"detect\":%.3f,\"segment\":%.3f,"
-                  "\"filter\":%.3f,\"icp\":%.3f,\"integrate\":%.3f,\"raycast\":%.3f,\"mesh\":%.3f},"
-                  "\"latency_p95_ms\":%.2f,\"snapshot_seq\":%u",
-                  s.frames_received, s.frames_integrated, s.frames_rejected, s.frames_skipped, s.frames_dropped,
-                  s.every_frame ? "true" : "false", s.fps, s.ms_detect, s.ms_segment, s.ms_filter, s.ms_icp,
-                  s.ms_integrate, s.ms_raycast, s.ms_mesh, s.latency_p95_ms, s.snapshot_seq);
-    return "{\"session\":" + jsonString(s.session_id) + ",\"server\":" + jsonString(s.server_id) +
-           ",\"state\":" + jsonString(scanStateName(s.state)) + ",\"detail\":" + jsonString(s.detail) + "," + numbers +
-           "}";
-}
 
 int runSessions(const CliOptions& options) {
     int code = kExitOk;
@@ -265,6 +244,7 @@ int runCommand(const CliOptions& options) {
         case Command::kTrajectory: return runPayloadCommand(options, facescan_wire_CMD_GET_TRAJECTORY);
         case Command::kFinish: return runSimpleCommand(options, facescan_wire_CMD_FINISH);
         case Command::kReset: return runSimpleCommand(options, facescan_wire_CMD_RESET);
+        case Command::kView: return runView(options);
     }
     return kExitUsage;
 }

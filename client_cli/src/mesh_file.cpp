@@ -12,6 +12,7 @@
 #include <cstring>
 #include <sstream>
 
+#include "client/gltf_mesh.hpp"
 #include "wire/mesh_codec.hpp"
 
 namespace facescan::client {
@@ -81,8 +82,9 @@ StatusOr<MeshFormat> meshFormatFor(const fs::path& path) {
     if (ext == ".stl") return MeshFormat::kStl;
     if (ext == ".off") return MeshFormat::kOff;
     if (ext == ".drc") return MeshFormat::kDrc;
+    if (ext == ".glb") return MeshFormat::kGlb;
     return invalidArgument("unknown mesh format '" + (ext.empty() ? path.string() : ext) +
-                           "': use .ply .obj .stl .off or .drc");
+                           "': use .ply .obj .stl .off .drc or .glb");
 }
 
 const char* meshFormatName(MeshFormat format) {
@@ -92,8 +94,21 @@ const char* meshFormatName(MeshFormat format) {
         case MeshFormat::kStl: return "stl";
         case MeshFormat::kOff: return "off";
         case MeshFormat::kDrc: return "drc";
+        case MeshFormat::kGlb: return "glb";
     }
     return "?";
+}
+
+const char* meshMimeType(MeshFormat format) {
+    switch (format) {
+        case MeshFormat::kPly: return "application/x-ply";  // no registered type; MeshLab's and Blender's name
+        case MeshFormat::kObj: return "model/obj";
+        case MeshFormat::kStl: return "model/stl";
+        case MeshFormat::kGlb: return "model/gltf-binary";
+        case MeshFormat::kOff:
+        case MeshFormat::kDrc: break;
+    }
+    return "application/octet-stream";
 }
 
 bool formatHasColours(MeshFormat format) { return format != MeshFormat::kStl; }
@@ -146,23 +161,19 @@ Status writeFileAtomically(const fs::path& path, std::string_view bytes) {
     return Status::ok();
 }
 
-Status writeMeshFile(const recon::Mesh& mesh, const fs::path& path, const std::vector<uint8_t>* draco_bytes) {
-    ASSIGN_OR_RETURN(const MeshFormat format, meshFormatFor(path));
-    if (mesh.n_faces() == 0 && !(format == MeshFormat::kDrc && draco_bytes)) {
-        return invalidArgument("the mesh has no triangles; nothing to write to '" + path.string() + "'");
+StatusOr<std::string> encodeMeshFile(const recon::Mesh& mesh, MeshFormat format,
+                                     const std::vector<uint8_t>* draco_bytes) {
+    if (format == MeshFormat::kDrc && draco_bytes) {
+        return std::string(reinterpret_cast<const char*>(draco_bytes->data()), draco_bytes->size());
     }
+    if (mesh.n_faces() == 0) return invalidArgument("the mesh has no triangles");
     if (format == MeshFormat::kDrc) {
-        if (draco_bytes) {
-            return writeFileAtomically(
-                path, std::string_view(reinterpret_cast<const char*>(draco_bytes->data()), draco_bytes->size()));
-        }
         std::vector<uint8_t> encoded;
         RETURN_IF_ERROR(wire::encodeMeshDraco(mesh, wire::MeshCodecParams{}, encoded));
-        return writeFileAtomically(path,
-                                   std::string_view(reinterpret_cast<const char*>(encoded.data()), encoded.size()));
+        return std::string(reinterpret_cast<const char*>(encoded.data()), encoded.size());
     }
-
-    if (format == MeshFormat::kObj) return writeFileAtomically(path, objText(mesh));
+    if (format == MeshFormat::kObj) return objText(mesh);
+    if (format == MeshFormat::kGlb) return meshToGlb(mesh);
 
     using OpenMesh::IO::Options;
     Options opts;
@@ -171,19 +182,30 @@ Status writeMeshFile(const recon::Mesh& mesh, const fs::path& path, const std::v
         case MeshFormat::kOff: opts = Options(Options::VertexNormal | Options::VertexColor); break;
         case MeshFormat::kStl: opts = Options(Options::Binary); break;
         case MeshFormat::kObj:
-        case MeshFormat::kDrc: break;
+        case MeshFormat::kDrc:
+        case MeshFormat::kGlb: break;
     }
     if (!mesh.has_vertex_normals()) opts -= Options::VertexNormal;
     if (!mesh.has_vertex_colors()) opts -= Options::VertexColor;
-    // OpenMesh writes into memory first: its writers report failure only as a bool, so the file itself is
-    // written (and its errors reported) by writeFileAtomically.
+    // OpenMesh writes into memory: its writers report failure only as a bool, so the file itself is written (and
+    // its errors reported) by writeFileAtomically.
     std::ostringstream out(std::ios::binary);
     omlog().disable();  // OpenMesh's writers chatter on the log stream ("[STLWriter] : write binary file")
     // Positions in metres: 6 significant digits would round to 1 micron at 1 m; 9 keep floats exact.
     if (!OpenMesh::IO::write_mesh(mesh, out, std::string(".") + meshFormatName(format), opts, 9)) {
         return internalError(std::string("OpenMesh could not encode the mesh as ") + meshFormatName(format));
     }
-    return writeFileAtomically(path, out.view());
+    return std::move(out).str();
+}
+
+Status writeMeshFile(const recon::Mesh& mesh, const fs::path& path, const std::vector<uint8_t>* draco_bytes) {
+    ASSIGN_OR_RETURN(const MeshFormat format, meshFormatFor(path));
+    auto bytes = encodeMeshFile(mesh, format, draco_bytes);
+    if (!bytes.isOk()) {
+        if (bytes.status().code() != StatusCode::kInvalidArgument) return bytes.status();
+        return invalidArgument(bytes.status().message() + "; nothing to write to '" + path.string() + "'");
+    }
+    return writeFileAtomically(path, *bytes);
 }
 
 }  // namespace facescan::client

@@ -6,6 +6,8 @@
 #include <random>
 #include <thread>
 
+#include "wire/dds_options.hpp"
+
 namespace facescan::client {
 namespace {
 
@@ -54,7 +56,7 @@ const char* commandKindName(facescan_wire_CommandKind kind) {
 
 std::string noServerMessage(const wire::DomainConfig& domain) {
     return "no server answered on domain " + std::to_string(domain.domain_id) + " (profile " + domain.profile +
-           "): is facescan-server running?";
+           "): is facescan-server running? " + wire::noPeerHint(domain);
 }
 
 Status ClientConfig::validate() const {
@@ -65,26 +67,24 @@ Status ClientConfig::validate() const {
 }
 
 struct ScanClient::Endpoints {
-    Endpoints(wire::Participant p, wire::Topic<facescan_wire_ScanCommand> ct, wire::Topic<facescan_wire_ScanReply> rt,
-              wire::Writer<facescan_wire_ScanCommand> cw, wire::Reader<facescan_wire_ScanReply> rr)
-        : participant(std::move(p)),
-          command_topic(std::move(ct)),
-          reply_topic(std::move(rt)),
-          command_writer(std::move(cw)),
-          reply_reader(std::move(rr)) {}
+    explicit Endpoints(wire::Participant p) : participant(std::move(p)) {}
 
     // Declared first so that it is destroyed last (deleting a participant deletes its children).
     wire::Participant participant;
-    wire::Topic<facescan_wire_ScanCommand> command_topic;
-    wire::Topic<facescan_wire_ScanReply> reply_topic;
-    wire::Writer<facescan_wire_ScanCommand> command_writer;
-    wire::Reader<facescan_wire_ScanReply> reply_reader;
+    // Made on first request (never in a client that only reads: ClientConfig::commands): a read-only identity
+    // (DDS Security role viewer) may not even create the command topics, yet watches.
+    std::optional<wire::Topic<facescan_wire_ScanCommand>> command_topic;
+    std::optional<wire::Topic<facescan_wire_ScanReply>> reply_topic;
+    std::optional<wire::Writer<facescan_wire_ScanCommand>> command_writer;
+    std::optional<wire::Reader<facescan_wire_ScanReply>> reply_reader;
     std::optional<wire::Topic<facescan_wire_ScanStatus>> status_topic;
     std::optional<wire::Reader<facescan_wire_ScanStatus>> status_reader;
     std::optional<wire::Topic<facescan_wire_MeshSnapshot>> snapshot_topic;
     std::optional<wire::Reader<facescan_wire_MeshSnapshot>> snapshot_reader;
+    std::optional<wire::WaitSet> followed;  // the status and snapshot readers: poll wakes for either
     std::map<dds_instance_handle_t, std::string> status_instances;  // for not-alive notices, which carry no data
-    bool server_seen = false;
+    bool server_seen = false;                                       // a server's ScanStatus writer is matched
+    bool command_server_seen = false;                               // a server's command endpoints are matched
 };
 
 ScanClient::ScanClient(ClientConfig config) : config_(std::move(config)) {}
@@ -94,13 +94,7 @@ StatusOr<std::unique_ptr<ScanClient>> ScanClient::connect(const ClientConfig& co
     RETURN_IF_ERROR(config.validate());
     std::unique_ptr<ScanClient> client(new ScanClient(config));
     ASSIGN_OR_RETURN(wire::Participant participant, wire::Participant::create(config.domain));
-    ASSIGN_OR_RETURN(auto command_topic, wire::Topic<facescan_wire_ScanCommand>::create(participant));
-    ASSIGN_OR_RETURN(auto reply_topic, wire::Topic<facescan_wire_ScanReply>::create(participant));
-    ASSIGN_OR_RETURN(auto command_writer, wire::Writer<facescan_wire_ScanCommand>::create(command_topic));
-    ASSIGN_OR_RETURN(auto reply_reader, wire::Reader<facescan_wire_ScanReply>::create(reply_topic));
-    client->endpoints_ =
-        std::make_unique<Endpoints>(std::move(participant), std::move(command_topic), std::move(reply_topic),
-                                    std::move(command_writer), std::move(reply_reader));
+    client->endpoints_ = std::make_unique<Endpoints>(std::move(participant));
     // Unique across clients and hosts: pid + random; the counter makes it unique per request.
     std::random_device rd;
     char host[64] = {};
@@ -109,26 +103,67 @@ StatusOr<std::unique_ptr<ScanClient>> ScanClient::connect(const ClientConfig& co
     return client;
 }
 
+Status ScanClient::readOnly() const {
+    return unavailable("this client only reads status and snapshots (it has no command endpoints)");
+}
+
 std::string ScanClient::nextRequestId() { return client_id_ + ":" + std::to_string(++request_counter_); }
 
 Status ScanClient::waitForServer() {
     Endpoints& e = *endpoints_;
     if (e.server_seen) return Status::ok();
-    // Every server reads ScanCommand and writes ScanReply: both directions must be matched before a command is
-    // sent, or the (volatile) command or its reply would go to nobody.
+    // Every server publishes ScanStatus from its start; reading it is what every role of a secured site may do.
+    RETURN_IF_ERROR(ensureStatusReader());
     const auto deadline = Clock::now() + config_.timeout;
-    const bool found = wire::pollUntil(
-        [&] { return e.command_writer.matchedReaders() > 0 && e.reply_reader.matchedWriters() > 0; }, config_.timeout);
-    if (!found) return deadlineExceeded(noServerMessage(config_.domain));
-    // Other servers on the domain are discovered at about the same time; give them a moment so that the
-    // command reaches the one that owns the session.
+    if (!e.status_reader->waitForWriters(1, config_.timeout)) return deadlineExceeded(noServerMessage(config_.domain));
+    // Other servers on the domain are discovered at about the same time; give them a moment too.
     std::this_thread::sleep_for(std::min(config_.discovery_settle, remaining(deadline)));
     e.server_seen = true;
     return Status::ok();
 }
 
+Status ScanClient::enableCommands() {
+    Endpoints& e = *endpoints_;
+    if (e.command_writer && e.reply_reader) return Status::ok();
+    if (!config_.commands) return readOnly();
+    Status made = [&]() -> Status {
+        ASSIGN_OR_RETURN(auto command_topic, wire::Topic<facescan_wire_ScanCommand>::create(e.participant));
+        e.command_topic.emplace(std::move(command_topic));
+        ASSIGN_OR_RETURN(auto reply_topic, wire::Topic<facescan_wire_ScanReply>::create(e.participant));
+        e.reply_topic.emplace(std::move(reply_topic));
+        ASSIGN_OR_RETURN(auto writer, wire::Writer<facescan_wire_ScanCommand>::create(*e.command_topic));
+        e.command_writer.emplace(std::move(writer));
+        ASSIGN_OR_RETURN(auto reader, wire::Reader<facescan_wire_ScanReply>::create(*e.reply_topic));
+        e.reply_reader.emplace(std::move(reader));
+        return Status::ok();
+    }();
+    if (made.code() == StatusCode::kPermissionDenied) {
+        return permissionDenied("DDS Security access control refused: identity " + config_.domain.security +
+                                " may not send commands to servers (its role's permissions: " + made.message() + ")");
+    }
+    return made;
+}
+
+Status ScanClient::waitForCommandServer() {
+    Endpoints& e = *endpoints_;
+    RETURN_IF_ERROR(enableCommands());
+    if (e.command_server_seen) return Status::ok();
+    // Every server reads ScanCommand and writes ScanReply: both directions must be matched before a command is
+    // sent, or the (volatile) command or its reply would go to nobody.
+    const auto deadline = Clock::now() + config_.timeout;
+    const bool found =
+        wire::pollUntil([&] { return e.command_writer->matchedReaders() > 0 && e.reply_reader->matchedWriters() > 0; },
+                        config_.timeout);
+    if (!found) return deadlineExceeded(noServerMessage(config_.domain));
+    // Other servers on the domain are discovered at about the same time; give them a moment so that the
+    // command reaches the one that owns the session.
+    std::this_thread::sleep_for(std::min(config_.discovery_settle, remaining(deadline)));
+    e.command_server_seen = true;
+    return Status::ok();
+}
+
 StatusOr<CommandReply> ScanClient::request(const std::string& session_id, facescan_wire_CommandKind kind) {
-    RETURN_IF_ERROR(waitForServer());
+    RETURN_IF_ERROR(waitForCommandServer());
     Endpoints& e = *endpoints_;
     const std::string request_id = nextRequestId();
     facescan_wire_ScanCommand command{};
@@ -136,7 +171,7 @@ StatusOr<CommandReply> ScanClient::request(const std::string& session_id, facesc
     command.request_id = wire::stringView(request_id);
     command.client_id = wire::stringView(client_id_);
     command.kind = kind;
-    RETURN_IF_ERROR(e.command_writer.write(command));
+    RETURN_IF_ERROR(e.command_writer->write(command));
 
     const auto deadline = Clock::now() + config_.timeout;
     std::optional<Clock::time_point> error_deadline;
@@ -147,8 +182,8 @@ StatusOr<CommandReply> ScanClient::request(const std::string& session_id, facesc
         if (error_deadline && now >= *error_deadline) break;
         if (now >= deadline) break;
         auto until = error_deadline ? std::min(*error_deadline, deadline) : deadline;
-        e.reply_reader.waitForData(std::min(milliseconds(100), remaining(until)));
-        auto taken = e.reply_reader.take(
+        e.reply_reader->waitForData(std::min(milliseconds(100), remaining(until)));
+        auto taken = e.reply_reader->take(
             [&](const facescan_wire_ScanReply& r, const dds_sample_info_t& info) {
                 if (!info.valid_data || wire::fromDds(r.request_id) != request_id) return;
                 CommandReply reply;
@@ -186,7 +221,9 @@ Status ScanClient::ensureStatusReader() {
     e.status_topic.emplace(std::move(topic));
     ASSIGN_OR_RETURN(auto reader, wire::Reader<facescan_wire_ScanStatus>::create(*e.status_topic));
     e.status_reader.emplace(std::move(reader));
-    return Status::ok();
+    ASSIGN_OR_RETURN(auto waitset, wire::WaitSet::create(e.participant));
+    e.followed.emplace(std::move(waitset));
+    return e.followed->attach(*e.status_reader);
 }
 
 Status ScanClient::ensureSnapshotReader() {
@@ -196,7 +233,8 @@ Status ScanClient::ensureSnapshotReader() {
     e.snapshot_topic.emplace(std::move(topic));
     ASSIGN_OR_RETURN(auto reader, wire::Reader<facescan_wire_MeshSnapshot>::create(*e.snapshot_topic));
     e.snapshot_reader.emplace(std::move(reader));
-    return Status::ok();
+    RETURN_IF_ERROR(ensureStatusReader());
+    return e.followed->attach(*e.snapshot_reader);
 }
 
 Status ScanClient::takeStatuses(std::map<std::string, SessionStatus>& statuses) {
@@ -244,12 +282,13 @@ Status ScanClient::poll(milliseconds wait, std::map<std::string, SessionStatus>&
     RETURN_IF_ERROR(ensureStatusReader());
     Endpoints& e = *endpoints_;
     if (snapshots && !snapshot_session.empty()) RETURN_IF_ERROR(ensureSnapshotReader());
-    e.status_reader->waitForData(wait);
+    e.followed->wait(wait);
     RETURN_IF_ERROR(takeStatuses(statuses));
     if (!e.snapshot_reader) return Status::ok();
     auto taken = e.snapshot_reader->take(
         [&](const facescan_wire_MeshSnapshot& m, const dds_sample_info_t& info) {
-            if (!info.valid_data || !snapshots || wire::fromDds(m.session_id) != snapshot_session) return;
+            if (!info.valid_data || !snapshots) return;
+            if (snapshot_session != kAllSessions && wire::fromDds(m.session_id) != snapshot_session) return;
             MeshSnapshotData snap;
             snap.session_id = wire::fromDds(m.session_id);
             snap.seq = m.seq;

@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -13,6 +14,7 @@
 #include <vector>
 
 #include "wire/data_files.hpp"
+#include "wire/security.hpp"
 
 namespace facescan::wire {
 namespace fs = std::filesystem;
@@ -23,6 +25,8 @@ Status ddsStatus(dds_return_t code, const std::string& what) {
         case DDS_RETCODE_TIMEOUT: return deadlineExceeded(text);
         case DDS_RETCODE_BAD_PARAMETER: return invalidArgument(text);
         case DDS_RETCODE_OUT_OF_RESOURCES: return resourceExhausted(text);
+        case DDS_RETCODE_NOT_ALLOWED_BY_SECURITY:
+            return permissionDenied(what + " is not allowed by this identity's DDS Security permissions");
         default: return internalError(text);
     }
 }
@@ -31,7 +35,16 @@ Status DomainConfig::validate() const {
     // DDS maps domain ids to UDP ports (7400 + 250 * id); above 232 they overflow the port range.
     if (domain_id > 232) return invalidArgument("domain id must be 0..232, got " + std::to_string(domain_id));
     if (profile.empty()) return invalidArgument("profile must be loopback, lan or a path to a Cyclone XML file");
+    // The governance and permissions documents of DDS Security name domain ids 0..230 only.
+    if (!security.empty() && domain_id > 230) {
+        return invalidArgument("DDS Security covers domain ids 0..230, got " + std::to_string(domain_id));
+    }
     return Status::ok();
+}
+
+std::string DomainConfig::describe() const {
+    return "domain " + std::to_string(domain_id) + " (profile " + profile +
+           (security.empty() ? std::string(", no DDS Security") : ", DDS Security identity " + security) + ")";
 }
 
 namespace {
@@ -57,8 +70,15 @@ std::optional<uint64_t> parseMemSize(const std::string& text) {
     return value;
 }
 
+// The domains this process has created, by id, with the configuration each was made with (one per id: Cyclone
+// keeps one configuration per domain and process).
+struct DomainEntry {
+    std::weak_ptr<Entity> entity;
+    std::string profile;
+    std::string security;
+};
 std::mutex g_domains_mutex;
-std::map<uint32_t, std::weak_ptr<Entity>> g_domains;
+std::map<uint32_t, DomainEntry> g_domains;
 
 }  // namespace
 
@@ -110,23 +130,58 @@ StatusOr<Participant> Participant::create(const DomainConfig& config) {
     participant.domain_id_ = config.domain_id;
     {
         std::lock_guard lock(g_domains_mutex);
-        participant.domain_ = g_domains[config.domain_id].lock();
+        DomainEntry& entry = g_domains[config.domain_id];
+        participant.domain_ = entry.entity.lock();
+        if (participant.domain_ && (entry.profile != config.profile || entry.security != config.security)) {
+            return invalidArgument("this process already uses " +
+                                   DomainConfig{config.domain_id, entry.profile, entry.security}.describe() +
+                                   "; one process has one configuration per domain");
+        }
         if (!participant.domain_) {
-            ASSIGN_OR_RETURN(const std::string xml, loadProfileXml(config.profile));
+            ASSIGN_OR_RETURN(std::string xml, loadProfileXml(config.profile));
             RETURN_IF_ERROR(checkSocketBuffers(xml));
-            const dds_entity_t domain = dds_create_domain(config.domain_id, xml.c_str());
-            if (domain < 0) {
-                return ddsStatus(domain, "create DDS domain " + std::to_string(config.domain_id) + " with profile '" +
-                                             config.profile + "'");
+            // DDS Security is configuration: the identity's files are checked and named in a <Security> element.
+            if (!config.security.empty()) {
+                ASSIGN_OR_RETURN(xml, addSecurity(xml, config.security));
             }
+            const dds_entity_t domain = dds_create_domain(config.domain_id, xml.c_str());
+            if (domain < 0) return ddsStatus(domain, "create DDS " + config.describe());
             participant.domain_ = std::make_shared<Entity>(domain);
-            g_domains[config.domain_id] = participant.domain_;
+            entry = {participant.domain_, config.profile, config.security};
         }
     }
     const dds_entity_t h = dds_create_participant(config.domain_id, nullptr, nullptr);
-    if (h < 0) return ddsStatus(h, "create DDS participant in domain " + std::to_string(config.domain_id));
+    if (h < 0) {
+        // The identity's files were checked before; what is left is the plugins' own refusal (in Cyclone's log).
+        if (!config.security.empty()) {
+            return permissionDenied("DDS Security refused to create a participant in " + config.describe() +
+                                    " although its files check out; Cyclone's log (CYCLONEDDS_URI tracing) says why");
+        }
+        return ddsStatus(h, "create DDS participant in " + config.describe());
+    }
     participant.entity_ = Entity(h);
     return participant;
+}
+
+int Participant::otherParticipants() const {
+    const dds_entity_t reader =
+        dds_create_reader(entity_.handle(), DDS_BUILTIN_TOPIC_DCPSPARTICIPANT, nullptr, nullptr);
+    if (reader < 0) return -1;
+    const Entity owned(reader);
+    dds_guid_t self{};
+    if (dds_get_guid(entity_.handle(), &self) < 0) return -1;
+    constexpr int kMax = 64;
+    void* samples[kMax] = {};
+    dds_sample_info_t infos[kMax];
+    const dds_return_t n = dds_read(reader, samples, infos, kMax, kMax);
+    if (n < 0) return -1;
+    int others = 0;
+    for (int i = 0; i < n; ++i) {
+        const auto* p = static_cast<const dds_builtintopic_participant_t*>(samples[i]);
+        if (infos[i].valid_data && std::memcmp(&p->key, &self, sizeof(self)) != 0) ++others;
+    }
+    if (n > 0) dds_return_loan(reader, samples, n);
+    return others;
 }
 
 bool pollUntil(const std::function<bool()>& done, std::chrono::milliseconds timeout) {

@@ -9,6 +9,7 @@
 #include "service/server.hpp"
 #include "service/session_store.hpp"
 #include "wire/dds.hpp"
+#include "wire/dds_options.hpp"
 
 int main(int argc, char** argv) {
     using namespace facescan;
@@ -52,11 +53,10 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "facescan-server: cannot start: %s\n", server.status().toString().c_str());
         return 1;
     }
-    std::fprintf(stderr,
-                 "facescan-server '%s': domain %u (profile %s), preset %s, up to %d sessions, snapshots %.2g Hz, "
-                 "data in %s\n",
-                 p.server_id.c_str(), p.domain.domain_id, p.domain.profile.c_str(), p.preset.c_str(), p.max_sessions,
+    std::fprintf(stderr, "facescan-server '%s': %s, preset %s, up to %d sessions, snapshots %.2g Hz, data in %s\n",
+                 p.server_id.c_str(), p.domain.describe().c_str(), p.preset.c_str(), p.max_sessions,
                  static_cast<double>(p.snapshot_hz), p.data_dir.c_str());
+    std::fprintf(stderr, "facescan-server: %s\n", wire::securitySummary(p.domain).c_str());
     int sig = 0;
     sigwait(&stop_signals, &sig);
     std::fprintf(stderr, "facescan-server: %s: finishing %d open session(s)\n", sig == SIGINT ? "SIGINT" : "SIGTERM",

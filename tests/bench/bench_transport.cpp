@@ -1,7 +1,8 @@
 // facescan-bench transport: an agent-sized RGB-D stream between two processes over Cyclone DDS on loopback.
 // Phase 1 (paced): depth + colour at --rate Hz for --seconds, reliable QoS as the agent sends a live camera:
 // delivered share, latency p50/p99/max (write to take, same clock), CPU per side. Phase 2 (flat out): keep-all
-// with back-pressure as a --rate max recording, frames per second delivered.
+// with back-pressure as a --rate max recording, frames per second delivered. --security SITE runs both sides with
+// DDS Security (the publisher as SITE/agent, the reader as SITE/server): the transport's share of its cost.
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -42,6 +43,11 @@ struct Options {
     uint32_t domain = 0;
     int distinct_frames = 30;
     bool json = false;
+    std::string security_site;  // a site of deploy/security/site.sh; empty: no DDS Security
+
+    wire::DomainConfig dds(const char* role) const {
+        return {domain, "loopback", security_site.empty() ? std::string() : security_site + "/" + role};
+    }
 };
 
 // Real payloads: synthetic Kinect frames compressed with the agent's default codecs, cycled.
@@ -61,10 +67,11 @@ std::vector<wire::EncodedFrame> makePayloads(int count) {
     return payloads;
 }
 
-// The publishing process: phase 1 paced (live QoS), phase 2 flat out (keep-all). Exits when done.
-[[noreturn]] void publisher(const Options& o) {
+// The publishing process: phase 1 paced (live QoS), phase 2 flat out (keep-all). Writes its CPU seconds of the
+// paced phase to `cpu_fd`. Exits when done.
+[[noreturn]] void publisher(const Options& o, int cpu_fd) {
     const auto payloads = makePayloads(o.distinct_frames);
-    auto participant = wire::Participant::create({o.domain, "loopback"});
+    auto participant = wire::Participant::create(o.dds("agent"));
     if (!participant) _exit(10);
     auto topic = wire::Topic<facescan_wire_RgbdFrame>::create(*participant);
     if (!topic) _exit(11);
@@ -74,6 +81,8 @@ std::vector<wire::EncodedFrame> makePayloads(int count) {
         auto writer = wire::Writer<facescan_wire_RgbdFrame>::create(*topic, &qos);
         if (!writer || !writer->waitForReaders(1, 20s)) _exit(12);
         std::this_thread::sleep_for(200ms);  // let the reader's side of discovery settle
+        rusage before{};
+        getrusage(RUSAGE_SELF, &before);
         const auto start = Clock::now();
         const double seconds = phase == 0 ? o.seconds : o.flat_out_seconds;
         for (uint32_t seq = 0;; ++seq) {
@@ -90,6 +99,12 @@ std::vector<wire::EncodedFrame> makePayloads(int count) {
         end.end_of_stream = true;
         if (!writer->write(end).isOk()) _exit(14);
         (void)writer->waitForAcks(10s);
+        if (phase == 0) {
+            rusage after{};
+            getrusage(RUSAGE_SELF, &after);
+            const double cpu_s = cpuSeconds(after) - cpuSeconds(before);
+            if (::write(cpu_fd, &cpu_s, sizeof(cpu_s)) != sizeof(cpu_s)) _exit(15);
+        }
         // Wait for the reader to move on before the next phase's writer appears.
         std::this_thread::sleep_for(300ms);
     }
@@ -145,9 +160,11 @@ int runTransport(const std::vector<std::string>& args) {
         if (a == "--help") {
             std::puts(
                 "usage: facescan-bench transport [--seconds S] [--rate HZ] [--flat-out-seconds S] [--domain N] "
-                "[--json]\n\nStreams compressed synthetic Kinect frames (depth + colour, the agent's codecs) "
-                "between two processes over DDS on the loopback profile.\nPaced phase: delivered share, latency "
-                "p50/p99/max, CPU per side. Flat-out phase (keep-all, back-pressure): frames per second.");
+                "[--security SITE] [--json]\n\nStreams compressed synthetic Kinect frames (depth + colour, the "
+                "agent's codecs) between two processes over DDS on the loopback profile.\nPaced phase: delivered "
+                "share, latency p50/p99/max, CPU per side. Flat-out phase (keep-all, back-pressure): frames per "
+                "second.\n--security SITE: both sides with DDS Security, as SITE/agent and SITE/server "
+                "(deploy/security/site.sh init SITE).");
             return 0;
         } else if (a == "--seconds") {
             o.seconds = next();
@@ -159,6 +176,8 @@ int runTransport(const std::vector<std::string>& args) {
             o.domain = static_cast<uint32_t>(next());
         } else if (a == "--json") {
             o.json = true;
+        } else if (a == "--security" && i + 1 < args.size()) {
+            o.security_site = args[++i];
         } else {
             std::fprintf(stderr, "facescan-bench transport: unknown option %s\n", a.c_str());
             return 2;
@@ -170,11 +189,14 @@ int runTransport(const std::vector<std::string>& args) {
     }
 
     // Fork before any DDS or OpenCV thread exists in this process.
+    int cpu_pipe[2];
+    if (::pipe(cpu_pipe) != 0) return 1;
     const pid_t child = fork();
     if (child < 0) return 1;
-    if (child == 0) publisher(o);
+    if (child == 0) publisher(o, cpu_pipe[1]);
+    ::close(cpu_pipe[1]);
 
-    auto participant = wire::Participant::create({o.domain, "loopback"});
+    auto participant = wire::Participant::create(o.dds("server"));
     if (!participant) {
         std::fprintf(stderr, "transport: %s\n", participant.status().toString().c_str());
         return 1;
@@ -199,6 +221,10 @@ int runTransport(const std::vector<std::string>& args) {
         std::fprintf(stderr, "transport: publisher failed (status %d)\n", status);
         return 1;
     }
+    double writer_cpu_s = 0;
+    if (::read(cpu_pipe[0], &writer_cpu_s, sizeof(writer_cpu_s)) != sizeof(writer_cpu_s)) writer_cpu_s = 0;
+    ::close(cpu_pipe[0]);
+    const double writer_cpu = writer_cpu_s / std::max(paced.seconds, 1e-9);
     const uint32_t sent = paced.max_seq + 1;
     const double delivered = sent > 0 ? 100.0 * paced.received / sent : 0;
     const double reader_cpu = (cpuSeconds(self_paced) - cpuSeconds(self_before)) / std::max(paced.seconds, 1e-9);
@@ -206,23 +232,26 @@ int runTransport(const std::vector<std::string>& args) {
     const double flat_fps = flat.seconds > 0 ? flat.received / flat.seconds : 0;
     const double mean_mb = paced.received ? paced.megabytes / paced.received : 0;
 
-    std::printf("transport: two processes, DDS loopback profile, domain %u\n", o.domain);
+    std::printf("transport: two processes, DDS loopback profile, domain %u, %s\n", o.domain,
+                o.security_site.empty() ? "no DDS Security" : ("DDS Security (site " + o.security_site + ")").c_str());
     std::printf("  paced %.0f Hz for %.0f s: %u of %u frames delivered (%.1f %%), %.2f MB/frame, %.1f Mbit/s\n",
                 o.rate_hz, o.seconds, paced.received, sent, delivered, mean_mb,
                 paced.seconds > 0 ? paced.megabytes * 8 / paced.seconds : 0);
     std::printf("  latency write->take: p50 %.2f ms, p99 %.2f ms, max %.2f ms\n", percentile(paced.latency_ms, 0.5),
                 percentile(paced.latency_ms, 0.99), paced.latency_ms.empty() ? 0 : paced.latency_ms.back());
-    std::printf("  CPU: reader %.1f %% of a core while paced; publisher %.1f s in all (incl. payload prep)\n",
-                100 * reader_cpu, cpuSeconds(child_usage));
+    std::printf(
+        "  CPU while paced: reader %.1f %% of a core, writer %.1f %%; publisher %.1f s in all (incl. payload "
+        "prep)\n",
+        100 * reader_cpu, 100 * writer_cpu, cpuSeconds(child_usage));
     std::printf("  flat out (keep-all, back-pressure): %u frames in %.2f s = %.0f frames/s\n", flat.received,
                 flat.seconds, flat_fps);
     if (o.json) {
         std::printf(
             "{\"delivered\": %.2f, \"p50_ms\": %.3f, \"p99_ms\": %.3f, \"max_ms\": %.3f, \"fps\": %.1f, "
-            "\"reader_cpu\": %.3f, \"publisher_cpu_s\": %.2f, \"frame_mb\": %.3f}\n",
+            "\"reader_cpu\": %.3f, \"writer_cpu\": %.3f, \"publisher_cpu_s\": %.2f, \"frame_mb\": %.3f}\n",
             delivered, percentile(paced.latency_ms, 0.5), percentile(paced.latency_ms, 0.99),
-            paced.latency_ms.empty() ? 0 : paced.latency_ms.back(), flat_fps, reader_cpu, cpuSeconds(child_usage),
-            mean_mb);
+            paced.latency_ms.empty() ? 0 : paced.latency_ms.back(), flat_fps, reader_cpu, writer_cpu,
+            cpuSeconds(child_usage), mean_mb);
     }
     return delivered >= 100.0 ? 0 : 1;
 }

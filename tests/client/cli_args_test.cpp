@@ -51,7 +51,7 @@ TEST(CliArgs, WatchSessionIsOptionalAndSaveTakesAFormat) {
 }
 
 TEST(CliArgs, EveryMeshExtensionIsAcceptedCaseInsensitively) {
-    for (const char* file : {"a.ply", "a.obj", "a.stl", "a.off", "a.drc", "A.PLY", "dir/b.Obj"}) {
+    for (const char* file : {"a.ply", "a.obj", "a.stl", "a.off", "a.drc", "a.glb", "A.PLY", "dir/b.Obj"}) {
         EXPECT_TRUE(parse({"mesh", "s", "-o", file}).isOk()) << file;
     }
     expectUsageError({"mesh", "s", "-o", "a.xyz"}, "unknown mesh format");
@@ -78,6 +78,26 @@ TEST(CliArgs, TrajectoryOutputIsOptional) {
     auto parsed = parse({"trajectory", "s"});
     ASSERT_TRUE(parsed.isOk());
     EXPECT_TRUE(parsed->output.empty());
+}
+
+TEST(CliArgs, ViewListsOnLocalhostPort8080UnlessTold) {
+    auto plain = parse({"view"});
+    ASSERT_TRUE(plain.isOk()) << plain.status().toString();
+    EXPECT_EQ(plain->command, Command::kView);
+    EXPECT_EQ(plain->view_port, 8080);
+    EXPECT_EQ(plain->view_bind, "127.0.0.1");
+    EXPECT_FALSE(plain->view_open);
+    auto lan = parse({"view", "--port", "0", "--bind", "0.0.0.0", "--open", "--domain", "7"});
+    ASSERT_TRUE(lan.isOk()) << lan.status().toString();
+    EXPECT_EQ(lan->view_port, 0);
+    EXPECT_EQ(lan->view_bind, "0.0.0.0");
+    EXPECT_TRUE(lan->view_open);
+    EXPECT_EQ(lan->domain.domain_id, 7u);
+    expectUsageError({"view", "--port", "65536"}, "--port must be a TCP port");
+    expectUsageError({"view", "--port", "http"}, "--port must be a TCP port");
+    expectUsageError({"view", "--bind", "my-laptop"}, "--bind needs an IP address");
+    expectUsageError({"view", "scan-1"}, "unexpected argument 'scan-1'");
+    expectUsageError({"status", "s", "--port", "80"}, "unknown option --port");
 }
 
 TEST(CliArgs, UsageErrorsSayWhatIsWrong) {

@@ -1,7 +1,10 @@
 // The real `facescan` binary on its error paths: each gives its message on stderr and its exit code
-// (notes/protocol.md: 1 server refused, 2 usage, 3 no server, 4 cannot write). The unknown-session path needs a
-// real server and is covered by tests/integration.
+// (notes/protocol.md: 1 server refused, 2 usage, 3 no server, 4 cannot write, 5 view cannot serve). The
+// unknown-session path needs a real server and is covered by tests/integration.
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -24,7 +27,7 @@ bool contains(const std::string& text, const std::string& needle) { return text.
 
 TEST(CliErrors, HelpOnEveryCommandExitsZero) {
     for (const char* cmd :
-         {"", "sessions ", "watch ", "status ", "mesh ", "preview ", "trajectory ", "finish ", "reset "}) {
+         {"", "sessions ", "watch ", "status ", "mesh ", "preview ", "trajectory ", "finish ", "reset ", "view "}) {
         const CliRun run = runCli(std::string(cmd) + "--help");
         EXPECT_EQ(run.exit_code, 0) << cmd << run.out;
         EXPECT_TRUE(contains(run.out, "Usage: facescan")) << cmd;
@@ -43,6 +46,33 @@ TEST(CliErrors, UsageErrorsExitTwoAndPointToHelp) {
     const CliRun profile = runCli("status s1 --profile nosuch --timeout 1");
     EXPECT_EQ(profile.exit_code, 2);
     EXPECT_TRUE(contains(profile.out, "unknown DDS profile 'nosuch'")) << profile.out;
+}
+
+// `facescan view` that cannot serve exits 5 and says why: its web files missing (what to run), or its port taken.
+TEST(CliErrors, ViewWithoutItsFilesOrItsPortExitsFive) {
+    const std::string dds = " --profile loopback --domain " + privateDomain();
+    const CliRun missing = facescan::testing::runCommand("FACESCAN_WEB_DIR=/nonexistent " + std::string(FACESCAN_CLI) +
+                                                         " view --port 0" + dds);
+    EXPECT_EQ(missing.exit_code, 5) << missing.out;
+    EXPECT_TRUE(contains(missing.out,
+                         "facescan: error: the viewer's file '/nonexistent/index.html' is missing: run "
+                         "deploy/install-deps.sh"))
+        << missing.out;
+
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);  // a port in use on 127.0.0.1
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)), 0);
+    ASSERT_EQ(::listen(fd, 1), 0);
+    socklen_t len = sizeof(addr);
+    ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+    const std::string port = std::to_string(ntohs(addr.sin_port));
+    const CliRun taken = runCli("view --port " + port + dds);
+    ::close(fd);
+    EXPECT_EQ(taken.exit_code, 5) << taken.out;
+    EXPECT_TRUE(contains(taken.out, "facescan: error: cannot serve on 127.0.0.1:" + port)) << taken.out;
+    EXPECT_TRUE(contains(taken.out, "--port")) << taken.out;
 }
 
 TEST(CliErrors, NoServerExitsThreeAfterTheTimeout) {

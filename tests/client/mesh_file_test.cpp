@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <tiny_gltf.h>
 #include <unistd.h>
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
@@ -77,6 +78,8 @@ TEST_F(MeshFileTest, FormatsByExtension) {
     EXPECT_EQ(meshFormatFor("x/a.stl").value(), MeshFormat::kStl);
     EXPECT_EQ(meshFormatFor("a.off").value(), MeshFormat::kOff);
     EXPECT_EQ(meshFormatFor("a.drc").value(), MeshFormat::kDrc);
+    EXPECT_EQ(meshFormatFor("a.GLB").value(), MeshFormat::kGlb);
+    EXPECT_TRUE(formatHasColours(MeshFormat::kGlb));
     EXPECT_FALSE(meshFormatFor("a.png").isOk());
     EXPECT_FALSE(formatHasColours(MeshFormat::kStl));
     EXPECT_TRUE(formatHasColours(MeshFormat::kPly));
@@ -133,6 +136,69 @@ TEST_F(MeshFileTest, DracoFileDecodesWithTheSameCountsAndColours) {
     EXPECT_EQ(max_red, 230);
 }
 
+// The GLB read back with TinyGLTF's own reader: glTF 2.0, one triangle primitive whose accessors have the mesh's
+// counts, positions turned into glTF's axes, the required POSITION bounds, and COLOR_0 with the mesh's colours.
+TEST_F(MeshFileTest, GlbReadsBackWithTinyGltfWithColoursAndGltfAxes) {
+    const recon::Mesh mesh = testMesh();
+    const fs::path path = dir_ / "face.glb";
+    ASSERT_TRUE(writeMeshFile(mesh, path).isOk());
+    expectOnlyFile(path);
+
+    tinygltf::Model model;
+    tinygltf::TinyGLTF reader;
+    std::string err, warn;
+    ASSERT_TRUE(reader.LoadBinaryFromFile(&model, &err, &warn, path.string())) << err << warn;
+    EXPECT_EQ(model.asset.version, "2.0");
+    ASSERT_EQ(model.meshes.size(), 1u);
+    ASSERT_EQ(model.meshes[0].primitives.size(), 1u);
+    const tinygltf::Primitive& prim = model.meshes[0].primitives[0];
+    EXPECT_EQ(prim.mode, TINYGLTF_MODE_TRIANGLES);
+    ASSERT_TRUE(prim.attributes.count("POSITION") && prim.attributes.count("COLOR_0") &&
+                prim.attributes.count("NORMAL"));
+
+    // Reads element i of an accessor (tightly packed, as written).
+    auto element = [&](int accessor_index, size_t i) {
+        const tinygltf::Accessor& a = model.accessors[accessor_index];
+        const tinygltf::BufferView& v = model.bufferViews[a.bufferView];
+        const size_t size =
+            tinygltf::GetComponentSizeInBytes(a.componentType) * tinygltf::GetNumComponentsInType(a.type);
+        return model.buffers[v.buffer].data.data() + v.byteOffset + a.byteOffset + i * size;
+    };
+    const tinygltf::Accessor& pos = model.accessors[prim.attributes.at("POSITION")];
+    ASSERT_EQ(pos.count, mesh.n_vertices());
+    EXPECT_EQ(pos.componentType, TINYGLTF_COMPONENT_TYPE_FLOAT);
+    ASSERT_EQ(pos.minValues.size(), 3u);
+    ASSERT_EQ(pos.maxValues.size(), 3u);
+    const tinygltf::Accessor& idx = model.accessors[prim.indices];
+    EXPECT_EQ(idx.count, 3 * mesh.n_faces());
+    const tinygltf::Accessor& col = model.accessors[prim.attributes.at("COLOR_0")];
+    EXPECT_EQ(col.count, mesh.n_vertices());
+    EXPECT_EQ(col.componentType, TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE);
+    EXPECT_TRUE(col.normalized);
+
+    // Vertex by vertex (the GLB keeps OpenMesh's order): (x, -y, -z) and the same colour.
+    for (const auto vh : mesh.vertices()) {
+        const size_t i = static_cast<size_t>(vh.idx());
+        float p[3];
+        std::memcpy(p, element(prim.attributes.at("POSITION"), i), sizeof(p));
+        EXPECT_FLOAT_EQ(p[0], mesh.point(vh)[0]);
+        EXPECT_FLOAT_EQ(p[1], -mesh.point(vh)[1]);
+        EXPECT_FLOAT_EQ(p[2], -mesh.point(vh)[2]);
+        for (int k = 0; k < 3; ++k) {
+            EXPECT_GE(p[k], pos.minValues[k]);
+            EXPECT_LE(p[k], pos.maxValues[k]);
+        }
+        const uint8_t* c = element(prim.attributes.at("COLOR_0"), i);
+        EXPECT_EQ(c[0], mesh.color(vh)[0]);
+        EXPECT_EQ(c[1], mesh.color(vh)[1]);
+        EXPECT_EQ(c[2], mesh.color(vh)[2]);
+        EXPECT_EQ(c[3], 255);
+    }
+    // A matte material (glTF's default is fully metallic and renders black without an environment).
+    ASSERT_EQ(model.materials.size(), 1u);
+    EXPECT_EQ(model.materials[0].pbrMetallicRoughness.metallicFactor, 0.0);
+}
+
 TEST_F(MeshFileTest, DracoPayloadIsWrittenAsItIs) {
     const std::vector<uint8_t> payload = {1, 2, 3, 4, 5};
     const fs::path path = dir_ / "server.drc";
@@ -173,9 +239,11 @@ TEST_F(MeshFileTest, UnwritablePathsAreUnavailableAndLeaveNothing) {
 }
 
 TEST_F(MeshFileTest, EmptyMeshIsRefused) {
-    const Status s = writeMeshFile(recon::Mesh(), dir_ / "empty.ply");
-    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
-    EXPECT_FALSE(fs::exists(dir_ / "empty.ply"));
+    for (const char* name : {"empty.ply", "empty.glb"}) {
+        const Status s = writeMeshFile(recon::Mesh(), dir_ / name);
+        EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << name;
+        EXPECT_FALSE(fs::exists(dir_ / name));
+    }
 }
 
 }  // namespace

@@ -19,7 +19,8 @@ using Clock = std::chrono::steady_clock;
 
 uint32_t privateDomain(uint32_t salt) { return facescan::testing::privateDomain(salt); }
 
-// One server's side of the command protocol: owns `owned_session`; answers after `delay`.
+// One server's side of the command protocol: owns `owned_session`; answers after `delay`. Like a real server it
+// publishes ScanStatus from its start (ScanClient::waitForServer looks for that writer).
 class ProtocolPeer {
  public:
     ProtocolPeer(uint32_t domain, std::string server_id, std::string owned_session, std::chrono::milliseconds delay)
@@ -31,6 +32,8 @@ class ProtocolPeer {
         reply_topic_ = std::move(wire::Topic<facescan_wire_ScanReply>::create(participant_)).value();
         reader_ = std::move(wire::Reader<facescan_wire_ScanCommand>::create(command_topic_)).value();
         writer_ = std::move(wire::Writer<facescan_wire_ScanReply>::create(reply_topic_)).value();
+        status_topic_ = std::move(wire::Topic<facescan_wire_ScanStatus>::create(participant_)).value();
+        status_writer_ = std::move(wire::Writer<facescan_wire_ScanStatus>::create(status_topic_)).value();
         thread_ = std::thread([this] { serve(); });
     }
     ~ProtocolPeer() {
@@ -73,6 +76,8 @@ class ProtocolPeer {
     wire::Topic<facescan_wire_ScanReply> reply_topic_;
     wire::Reader<facescan_wire_ScanCommand> reader_;
     wire::Writer<facescan_wire_ScanReply> writer_;
+    wire::Topic<facescan_wire_ScanStatus> status_topic_;
+    wire::Writer<facescan_wire_ScanStatus> status_writer_;
     std::atomic<bool> stop_{false};
     std::atomic<int> commands_seen_{0};
     std::thread thread_;
@@ -115,6 +120,29 @@ TEST(ClientProtocol, UnknownSessionIsNotFoundAfterTheGracePeriodNotTheTimeout) {
     EXPECT_EQ(reply.status().message(), "unknown session 'nobody'");
     EXPECT_GE(took, 450ms);  // the grace: another server might still own it
     EXPECT_LT(took, 3s);
+}
+
+// A client that only reads (the viewer's live feed): no command endpoints, so a server sees no command from it,
+// and a command is refused at once instead of waiting for a server.
+TEST(ClientProtocol, AReadOnlyClientSendsNoCommands) {
+    const uint32_t domain = privateDomain(5);
+    ProtocolPeer peer(domain, "only", "scan-1", 0ms);
+    ClientConfig config;
+    config.domain = {domain, "loopback"};
+    config.commands = false;
+    auto client = ScanClient::connect(config);
+    ASSERT_TRUE(client.isOk()) << client.status().toString();
+    const auto start = Clock::now();
+    auto reply = (*client)->request("scan-1", facescan_wire_CMD_RESET);
+    EXPECT_LT(Clock::now() - start, 100ms);
+    ASSERT_FALSE(reply.isOk());
+    EXPECT_EQ(reply.status().code(), StatusCode::kUnavailable);
+    EXPECT_NE(reply.status().message().find("only reads"), std::string::npos) << reply.status().message();
+    std::map<std::string, SessionStatus> statuses;
+    std::vector<MeshSnapshotData> snapshots;
+    EXPECT_TRUE((*client)->poll(10ms, statuses, kAllSessions, &snapshots).isOk());
+    std::this_thread::sleep_for(300ms);
+    EXPECT_EQ(peer.commandsSeen(), 0);
 }
 
 TEST(ClientProtocol, NoServerIsDeadlineExceededWithTheDomainAndProfile) {

@@ -15,6 +15,7 @@
 #include <fstream>
 #include <thread>
 
+#include "child_process.hpp"
 #include "eval/accuracy.hpp"
 #include "run_command.hpp"
 #include "synth/kinect_simulator.hpp"
@@ -32,56 +33,8 @@ using CliRun = facescan::testing::CommandRun;
 // The real `facescan` binary with these arguments.
 CliRun runCli(const std::string& args) { return facescan::testing::runCommand(std::string(FACESCAN_CLI) + " " + args); }
 
-// A child program with its output in a log file; SIGTERM and reaped on destruction.
-class ChildProcess {
- public:
-    ChildProcess(std::vector<std::string> args, const fs::path& log) {
-        pid_ = ::fork();
-        if (pid_ == 0) {
-            const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-            if (fd >= 0) {
-                ::dup2(fd, 1);
-                ::dup2(fd, 2);
-            }
-            std::vector<char*> argv;
-            for (std::string& a : args) argv.push_back(a.data());
-            argv.push_back(nullptr);
-            ::execv(argv[0], argv.data());
-            ::_exit(127);
-        }
-    }
-    ~ChildProcess() { stop(); }
-    // Waits for the program to end by itself; its exit code, or -1 on timeout.
-    int wait(std::chrono::seconds timeout) {
-        const auto deadline = std::chrono::steady_clock::now() + timeout;
-        while (pid_ > 0 && std::chrono::steady_clock::now() < deadline) {
-            int status = 0;
-            if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-                pid_ = 0;
-                return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-            }
-            std::this_thread::sleep_for(50ms);
-        }
-        return -1;
-    }
-    void stop() {
-        if (pid_ <= 0) return;
-        ::kill(pid_, SIGTERM);
-        if (wait(10s) < 0) {
-            ::kill(pid_, SIGKILL);
-            ::waitpid(pid_, nullptr, 0);
-        }
-        pid_ = 0;
-    }
-
- private:
-    pid_t pid_ = 0;
-};
-
-std::string readText(const fs::path& path) {
-    std::ifstream in(path);
-    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+using facescan::testing::ChildProcess;
+using facescan::testing::readText;
 
 bool contains(const std::string& text, const std::string& needle) { return text.find(needle) != std::string::npos; }
 

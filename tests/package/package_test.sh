@@ -8,7 +8,9 @@
 #   4. run from the scratch root: facescan-server --help, the unit's own ExecStart line with --check (the shipped
 #      server.conf parses and the lan profile is found in the INSTALLED share/facescan), and a loopback scan of the
 #      installed server, agent and client (the server's face detection uses the Haar cascade from opencv-data);
-#   5. SIGTERM to the installed server in the middle of a live scan: it exits 0 and the open scan is on disk.
+#   5. SIGTERM to the installed server in the middle of a live scan: it exits 0 and the open scan is on disk;
+#   6. what other features install: facescan view serves its page from the installed share/facescan/web, and
+#      facescan-site (the DDS Security site script) makes a site.
 # usage: package_test.sh BUILD_DIR        exit 0 pass, 1 fail, 77 skipped (with the reason)
 set -euo pipefail
 
@@ -53,7 +55,7 @@ cat "$work/info.txt"
 depends=$(dpkg-deb --field "$deb" Depends)
 # From dpkg-shlibdeps: the shared libraries the programs link (versioned), plus the two added by hand.
 for dep in libc6 libstdc++6 libddsc0 libopencv-core libopencv-objdetect libdraco libopenmesh libopenni2-0 libzstd1 \
-    libturbojpeg0 opencv-data adduser; do
+    libturbojpeg0 libssl3 libcivetweb opencv-data adduser openssl; do
     grep -q "$dep" <<<"$depends" || fail "Depends lacks $dep: $depends"
 done
 grep -qE 'libddsc0[^,]*\(>= ' <<<"$depends" || fail "Depends has no versions (dpkg-shlibdeps did not run?): $depends"
@@ -71,7 +73,14 @@ expected=(
     /etc/facescan/server.conf /etc/facescan/agent.conf
     /lib/systemd/system/facescan-server.service /lib/systemd/system/facescan-agent@.service
     /usr/lib/sysusers.d/facescan.conf /usr/lib/sysctl.d/60-facescan.conf /usr/share/doc/facescan/README.md
+    /usr/bin/facescan-site /usr/share/facescan/web/index.html /usr/share/facescan/web/viewer.js
 )
+# three.js comes from npm (deploy/install-deps.sh runs npm ci); without it the viewer is not installed whole.
+web_vendor=0
+if [ -f "$root_dir/client_cli/web/node_modules/three/build/three.module.js" ]; then
+    web_vendor=1
+    expected+=(/usr/share/facescan/web/node_modules/three/build/three.module.js)
+fi
 [ -x "$build/tests/bench/facescan-bench" ] && expected+=(/usr/bin/facescan-bench)
 for path in "${expected[@]}"; do
     grep -qx "$path" "$work/contents.txt" || fail "$path is not in the package"
@@ -189,6 +198,35 @@ grep -q '"state"' "$work/data/$live/summary.json" || true
 echo "open scan saved on SIGTERM after $integrated+ frames: $(ls "$work/data/$live" | tr '\n' ' ')"
 kill -TERM "$agent_pid" 2>/dev/null || true
 wait "$agent_pid" 2>/dev/null || true
+
+# --- 6. the other installed features ---------------------------------------------------------------------------
+step "facescan view and facescan-site from the scratch root"
+if [ "$web_vendor" -eq 1 ]; then
+    "$R/usr/bin/facescan" view "${dds[@]}" --port 0 >"$work/view.log" 2>&1 &
+    view_pid=$!
+    pids+=("$view_pid")
+    for _ in $(seq 100); do grep -q "web files from" "$work/view.log" && break; sleep 0.1; done
+    cat "$work/view.log"
+    grep -q "web files from $R/usr/share/facescan/web" "$work/view.log" ||
+        fail "the installed viewer did not serve the installed share/facescan/web"
+    port=$(sed -n 's|.*serving http://[^:]*:\([0-9]*\)/.*|\1|p' "$work/view.log" | head -n 1)
+    exec 3<>"/dev/tcp/127.0.0.1/$port"
+    printf 'GET /vendor/three.module.js HTTP/1.0\r\nHost: localhost\r\n\r\n' >&3
+    reply=$(head -n 1 <&3 | tr -d '\r')
+    exec 3>&-
+    [[ "$reply" == *" 200 "* ]] || fail "the installed viewer answered '$reply' for three.js"
+    echo "installed viewer on port $port: /vendor/three.module.js -> $reply"
+    kill -TERM "$view_pid"
+    wait "$view_pid" || true
+else
+    echo "client_cli/web/node_modules missing (npm ci not run): the installed viewer is not checked"
+fi
+"$R/usr/bin/facescan-site" --help >/dev/null || fail "installed facescan-site --help failed"
+if command -v openssl >/dev/null; then
+    "$R/usr/bin/facescan-site" init "$work/site" --days 2 >"$work/site.log" 2>&1 || { cat "$work/site.log"; fail "facescan-site init failed"; }
+    "$R/usr/bin/facescan-site" list "$work/site" | tee "$work/site-list.txt" | head -n 6
+    grep -q server "$work/site-list.txt" || fail "facescan-site list shows no server identity"
+fi
 
 echo
 echo "PASS: package, units, scratch-root install and installed programs"

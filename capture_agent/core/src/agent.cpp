@@ -11,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "wire/dds_options.hpp"
 #include "wire/messages.hpp"
 
 namespace facescan::capture {
@@ -88,6 +89,7 @@ std::string newSessionId() {
 
 struct Agent::Impl {
     wire::Participant participant;
+    Clock::time_point joined;  // when the participant was created (discovery time is measured from here)
     wire::Topic<facescan_wire_CameraInfo> info_topic;
     wire::Writer<facescan_wire_CameraInfo> info_writer;
     wire::Topic<facescan_wire_RgbdFrame> frame_topic;
@@ -116,6 +118,7 @@ StatusOr<std::unique_ptr<Agent>> Agent::create(AgentOptions options) {
 
     auto impl = std::make_unique<Impl>();
     ASSIGN_OR_RETURN(impl->participant, wire::Participant::create(agent->options_.dds));
+    impl->joined = Clock::now();
     ASSIGN_OR_RETURN(impl->info_topic, wire::Topic<facescan_wire_CameraInfo>::create(impl->participant));
     ASSIGN_OR_RETURN(impl->info_writer, wire::Writer<facescan_wire_CameraInfo>::create(impl->info_topic));
     ASSIGN_OR_RETURN(impl->frame_topic, wire::Topic<facescan_wire_RgbdFrame>::create(impl->participant));
@@ -150,22 +153,35 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
     RETURN_IF_ERROR(s.info_writer.write(wire::toMessage(camera)));
 
     // Nothing is read from the source until a server listens, so a recording loses no frame while we wait.
-    const std::string where =
-        "domain " + std::to_string(options_.dds.domain_id) + " (profile " + options_.dds.profile + ")";
+    const std::string where = options_.dds.describe();
     if (!s.frame_writer.waitForReaders(1, 300ms)) {
         on_event("waiting for a facescan-server on " + where + " ...");
-        const auto deadline = Clock::now() + std::chrono::duration<float>(options_.wait_for_server_s);
+        const auto waiting_since = Clock::now();
+        const auto deadline = waiting_since + std::chrono::duration<float>(options_.wait_for_server_s);
+        bool hinted = false;
         while (!s.frame_writer.waitForReaders(1, 200ms)) {
             if (stop) return Status::ok();
+            // Discovery takes a moment; after that, say why no server may answer (a secured domain, most often).
+            if (!hinted && Clock::now() - waiting_since > 2s) {
+                on_event("no facescan-server answers: " +
+                         wire::noPeerHint(options_.dds, s.participant.otherParticipants()));
+                hinted = true;
+            }
             if (options_.wait_for_server_s > 0 && Clock::now() > deadline) {
                 char seconds[32];
                 std::snprintf(seconds, sizeof(seconds), "%g", options_.wait_for_server_s);
                 return deadlineExceeded("no facescan-server appeared on " + where + " within " + seconds +
-                                        " s: start one with the same --profile and --domain");
+                                        " s: start one with the same --profile, --domain and --security; " +
+                                        wire::noPeerHint(options_.dds, s.participant.otherParticipants()));
             }
         }
     }
-    on_event("server found: streaming session " + session_id_ + (every_frame ? " (every frame)" : " (live)"));
+    // Discovery time from joining the domain (with DDS Security: authentication handshakes and key exchange too).
+    char found_after[48];
+    std::snprintf(found_after, sizeof(found_after), "server found %.2f s after joining the domain",
+                  std::chrono::duration<double>(Clock::now() - s.joined).count());
+    on_event(std::string(found_after) + ": streaming session " + session_id_ +
+             (every_frame ? " (every frame)" : " (live)"));
 
     // The camera thread: reads frames, paces recordings, never waits on the network in live mode.
     const bool paced = options_.rate == RateMode::kFixed || (options_.rate == RateMode::kReal && info.is_recording);

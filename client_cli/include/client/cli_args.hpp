@@ -18,10 +18,12 @@ enum ExitCode : int {
     kExitUsage = 2,          // wrong command line
     kExitNoServer = 3,       // no server answered in time, or the server went away
     kExitCannotWrite = 4,    // the output file cannot be written
+    kExitCannotServe = 5,    // view: the port cannot be bound, or the viewer's web files are missing
+    kExitNotAllowed = 6,     // DDS Security: a bad identity file, or the identity's role may not do this
     kExitInterrupted = 130,  // Ctrl-C (128 + SIGINT, the shell convention)
 };
 
-enum class Command { kSessions, kWatch, kStatus, kMesh, kPreview, kTrajectory, kFinish, kReset };
+enum class Command { kSessions, kWatch, kStatus, kMesh, kPreview, kTrajectory, kFinish, kReset, kView };
 
 struct CliOptions {
     Command command = Command::kSessions;
@@ -32,9 +34,12 @@ struct CliOptions {
     std::string output;                         // -o FILE (mesh, preview; trajectory: empty = stdout)
     bool finish = false;                        // mesh --finish: end the scan first
     std::string save_dir;                       // watch --save DIR: write each snapshot there
-    std::string save_format = "ply";            // watch --save-format: ply|obj|stl|off|drc
+    std::string save_format = "ply";            // watch --save-format: ply|obj|stl|off|drc|glb
     bool json = false;                          // sessions/status --json: one JSON object per line
-    wire::DomainConfig domain{0, "lan"};        // --domain N, --profile loopback|lan|FILE.xml
+    uint16_t view_port = 8080;                  // view --port (0: any free port)
+    std::string view_bind = "127.0.0.1";        // view --bind ADDRESS: this machine only unless told otherwise
+    bool view_open = false;                     // view --open: open the page in the desktop's browser
+    wire::DomainConfig domain{0, "lan"};        // --domain N, --profile P, --security DIR/NAME
     std::chrono::milliseconds timeout{10'000};  // --timeout SECONDS: how long to wait for a server
 
     Status validate() const;

@@ -1,4 +1,5 @@
-// Output files of the client: meshes through OpenMesh (PLY, OBJ, STL, OFF) or Draco (DRC), chosen by extension,
+// Output files of the client: meshes through OpenMesh (PLY, OBJ, STL, OFF), Draco (DRC) or TinyGLTF (GLB), chosen by
+// extension,
 // and plain byte files (PNG, TUM text). Every file is written atomically: a temporary file beside the target,
 // flushed to disk, then renamed over it, so a reader never sees half a mesh and a failed write leaves nothing.
 #pragma once
@@ -13,13 +14,13 @@
 
 namespace facescan::client {
 
-enum class MeshFormat { kPly, kObj, kStl, kOff, kDrc };
+enum class MeshFormat { kPly, kObj, kStl, kOff, kDrc, kGlb };
 
 // The format of a path by its extension (case-insensitive). InvalidArgument for anything else.
 StatusOr<MeshFormat> meshFormatFor(const std::filesystem::path& path);
 // "ply", "obj", ... (the extension without the dot).
 const char* meshFormatName(MeshFormat format);
-// Whether the format keeps vertex colours (PLY, OBJ, OFF, DRC: yes; STL: no).
+// Whether the format keeps vertex colours (PLY, OBJ, OFF, DRC, GLB: yes; STL: no).
 bool formatHasColours(MeshFormat format);
 
 // Fails early (before any network work) when `path` cannot be written: a missing or read-only folder, or a
@@ -29,9 +30,16 @@ Status checkWritable(const std::filesystem::path& path);
 // Writes `bytes` to `path` atomically (temporary file + fsync + rename). Unavailable with the reason.
 Status writeFileAtomically(const std::filesystem::path& path, std::string_view bytes);
 
-// Writes `mesh` in the format of `path`'s extension, atomically: binary PLY with normals and colours, OBJ and
-// OFF with normals and colours, binary STL, or Draco (positions, normals, colours). For .drc, `draco_bytes`
-// (the server's payload), when not null, is written as it is instead of encoding `mesh` again.
+// The bytes of `mesh` in `format`: binary PLY with normals and colours, OBJ and OFF with normals and colours,
+// binary STL, Draco (positions, normals, colours), or glTF binary (client/gltf_mesh.hpp). For DRC, `draco_bytes`
+// (the server's payload), when not null, is used as it is instead of encoding `mesh` again. InvalidArgument for a
+// mesh without triangles.
+StatusOr<std::string> encodeMeshFile(const recon::Mesh& mesh, MeshFormat format,
+                                     const std::vector<uint8_t>* draco_bytes = nullptr);
+// The MIME type of a format's bytes (for the web viewer's downloads).
+const char* meshMimeType(MeshFormat format);
+
+// Writes encodeMeshFile(mesh, format of `path`'s extension) to `path` atomically.
 Status writeMeshFile(const recon::Mesh& mesh, const std::filesystem::path& path,
                      const std::vector<uint8_t>* draco_bytes = nullptr);
 

@@ -1,6 +1,7 @@
 // The client side of the scan protocol (notes/protocol.md): commands with replies collected from every server,
-// the live ScanStatus of all sessions, and MeshSnapshots. One DDS participant; readers are made on first use so
-// that `facescan mesh` never pulls the durable snapshots of every session.
+// the live ScanStatus of all sessions, and MeshSnapshots. One DDS participant; endpoints are made on first use so
+// that `facescan mesh` never pulls the durable snapshots of every session, and a read-only identity (DDS Security
+// role viewer) can watch without the command topics it may not touch.
 #pragma once
 
 #include <chrono>
@@ -23,6 +24,9 @@ struct ClientConfig {
     std::chrono::milliseconds grace{500};       // after an error reply, wait this long for another server's ok
     // After the first server is discovered, wait this long for more (each server answers for its own sessions).
     std::chrono::milliseconds discovery_settle{250};
+    // false: status and snapshots only, no ScanCommand writer or ScanReply reader (a live feed never sends
+    // commands, and a read-only viewer identity may not); request() is then Unavailable at once.
+    bool commands = true;
 
     Status validate() const;
 };
@@ -53,10 +57,13 @@ struct MeshSnapshotData {
     std::chrono::steady_clock::time_point received;  // our clock: snapshot age needs no synchronised clocks
 };
 
+// ScanClient::poll's snapshot_session for the snapshots of every session (no session id is "*").
+inline constexpr const char* kAllSessions = "*";
+
 const char* scanStateName(facescan_wire_ScanState state);  // "WAITING", "SCANNING", ...
 const char* commandKindName(facescan_wire_CommandKind kind);
 
-// "no server answered on domain N (profile P): is facescan-server running?"
+// "no server answered on domain N (profile P): is facescan-server running?" and why that may be (DDS Security)
 std::string noServerMessage(const wire::DomainConfig& domain);
 
 class ScanClient {
@@ -70,13 +77,18 @@ class ScanClient {
 
     const ClientConfig& config() const { return config_; }
 
-    // Waits until at least one server is discovered (a ScanCommand reader), up to the timeout.
-    // DeadlineExceeded with noServerMessage() when none is.
+    // Waits until at least one server is discovered (its ScanStatus writer), up to the timeout.
+    // DeadlineExceeded with noServerMessage() when none is. Needs only the right to read ScanStatus.
     Status waitForServer();
+
+    // Makes the command endpoints now rather than at the first request: PermissionDenied when this identity's role
+    // may not send commands (DDS Security), Unavailable for a client that only reads. Safe to call again.
+    Status enableCommands();
 
     // Sends one command and collects replies with its request id (notes/protocol.md): the first ok reply wins;
     // after an error reply, other servers get `grace` to answer ok. Errors: DeadlineExceeded (no server),
-    // NotFound ("unknown session 'X'", the server's text), InvalidArgument (any other refusal).
+    // NotFound ("unknown session 'X'", the server's text), InvalidArgument (any other refusal),
+    // PermissionDenied (DDS Security: this identity's role may not send commands).
     StatusOr<CommandReply> request(const std::string& session_id, facescan_wire_CommandKind kind);
 
     // The ScanStatus of every session on the domain, as far as it has arrived: waits for a server, then up to
@@ -84,15 +96,18 @@ class ScanClient {
     StatusOr<std::vector<SessionStatus>> sessions(std::chrono::milliseconds settle);
 
     // Live following: takes what has arrived into `statuses` (by session id) and returns new snapshots of
-    // `snapshot_session` (empty: none wanted). Waits at most `wait` for something to arrive.
+    // `snapshot_session` (empty: none wanted; kAllSessions: every session's). Waits at most `wait` for a status or
+    // a snapshot to arrive.
     Status poll(std::chrono::milliseconds wait, std::map<std::string, SessionStatus>& statuses,
                 const std::string& snapshot_session, std::vector<MeshSnapshotData>* snapshots);
 
  private:
     explicit ScanClient(ClientConfig config);
     Status ensureStatusReader();
+    Status waitForCommandServer();
     Status ensureSnapshotReader();
     Status takeStatuses(std::map<std::string, SessionStatus>& statuses);
+    Status readOnly() const;
     std::string nextRequestId();
 
     struct Endpoints;

@@ -21,12 +21,22 @@ namespace facescan::wire {
 // A Cyclone return code (negative) as a Status that names the failed operation.
 Status ddsStatus(dds_return_t code, const std::string& what);
 
-// Which DDS domain and which network profile. Profiles: "loopback" (this machine only; tests and demo), "lan"
-// (discovery on the local network), or a path to a Cyclone XML file.
+// Which DDS domain, which network profile and which DDS Security identity. Profiles: "loopback" (this machine
+// only; tests and demo), "lan" (discovery on the local network), or a path to a Cyclone XML file. Every program
+// sets these from the same command-line options (wire/dds_options.hpp).
 struct DomainConfig {
+    // {domain, "loopback"} in tests, {0, "lan"} as programs' defaults: security stays off unless given.
+    DomainConfig(uint32_t domain = 0, std::string profile_name = "lan", std::string security_dir = {})
+        : domain_id(domain), profile(std::move(profile_name)), security(std::move(security_dir)) {}
+
     uint32_t domain_id = 0;       // DDS domain; separate domains never see each other
     std::string profile = "lan";  // loopback | lan | FILE.xml
+    // An identity folder DIR/NAME of a site made by deploy/security/site.sh: enables OMG DDS Security
+    // (authentication, access control, encryption) with it (wire/security.hpp). Empty: no DDS Security.
+    std::string security;
     Status validate() const;
+    // "domain 7 (profile lan, secured as DIR/NAME)": for messages.
+    std::string describe() const;
 };
 
 // The file of a profile: FILE.xml as given; loopback and lan from $FACESCAN_PROFILE_DIR when set, else
@@ -85,6 +95,10 @@ class Participant {
     static StatusOr<Participant> create(const DomainConfig& config);
     dds_entity_t handle() const { return entity_.handle(); }
     uint32_t domainId() const { return domain_id_; }
+    // Other participants discovered on the domain so far (DDS's built-in DCPSParticipant topic), whoever they are;
+    // -1 when it cannot be read. Participants of DDS Security are discovered even by one without it (but never
+    // talk to it): "someone is here, nobody answers" is how an unsecured program learns it is on a secured domain.
+    int otherParticipants() const;
 
  private:
     std::shared_ptr<Entity> domain_;
@@ -232,6 +246,33 @@ class Reader {
 
  private:
     Entity entity_;
+    Entity waitset_;
+};
+
+// Waits for data on several readers at once: a DDS waitset holding each attached reader's read condition (the
+// conditions belong to their readers and go with them).
+class WaitSet {
+ public:
+    static StatusOr<WaitSet> create(const Participant& participant) {
+        WaitSet waitset;
+        const dds_entity_t ws = dds_create_waitset(participant.handle());
+        if (ws < 0) return ddsStatus(ws, "create waitset");
+        waitset.waitset_ = Entity(ws);
+        return waitset;
+    }
+    template <typename T>
+    Status attach(const Reader<T>& reader) {
+        const dds_entity_t cond = dds_create_readcondition(reader.handle(), DDS_ANY_STATE);
+        if (cond < 0) return ddsStatus(cond, "create read condition");
+        const dds_return_t rc = dds_waitset_attach(waitset_.handle(), cond, reader.handle());
+        return rc < 0 ? ddsStatus(rc, "attach read condition") : Status::ok();
+    }
+    // Blocks until any attached reader has data (or an instance state change), or the timeout passes.
+    bool wait(std::chrono::milliseconds timeout) {
+        return dds_waitset_wait(waitset_.handle(), nullptr, 0, DDS_MSECS(timeout.count())) > 0;
+    }
+
+ private:
     Entity waitset_;
 };
 

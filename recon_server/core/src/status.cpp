@@ -15,6 +15,7 @@ const char* statusCodeName(StatusCode code) {
         case StatusCode::kResourceExhausted: return "RESOURCE_EXHAUSTED";
         case StatusCode::kInternal: return "INTERNAL";
         case StatusCode::kUnimplemented: return "UNIMPLEMENTED";
+        case StatusCode::kPermissionDenied: return "PERMISSION_DENIED";
     }
     return "UNKNOWN";
 }

@@ -8,6 +8,8 @@
 #include <functional>
 #include <map>
 
+#include "wire/dds_options.hpp"
+
 namespace facescan::service {
 namespace {
 
@@ -127,18 +129,13 @@ const std::map<std::string, Setter>& setters() {
              p.data_dir = value;
              return Status::ok();
          }},
-        {"domain",
-         [](ServerParams& p, const std::string& key, const std::string& value) -> Status {
-             ASSIGN_OR_RETURN(const int v, parseInt(key, value));
-             if (v < 0) return invalidArgument("domain must be >= 0");
-             p.domain.domain_id = static_cast<uint32_t>(v);
-             return Status::ok();
-         }},
-        {"profile",
-         [](ServerParams& p, const std::string&, const std::string& value) -> Status {
-             p.domain.profile = value;
-             return Status::ok();
-         }},
+        // The DDS options every program shares (wire/dds_options.hpp), also as config keys.
+        {"domain", [](ServerParams& p, const std::string&,
+                      const std::string& value) { return wire::applyDdsOption(p.domain, "--domain", value); }},
+        {"profile", [](ServerParams& p, const std::string&,
+                       const std::string& value) { return wire::applyDdsOption(p.domain, "--profile", value); }},
+        {"security", [](ServerParams& p, const std::string&,
+                        const std::string& value) { return wire::applyDdsOption(p.domain, "--security", value); }},
         {"server_id",
          [](ServerParams& p, const std::string&, const std::string& value) -> Status {
              p.server_id = value;
@@ -240,6 +237,7 @@ StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args) {
                                                               {"--data-dir", "data_dir"},
                                                               {"--profile", "profile"},
                                                               {"--domain", "domain"},
+                                                              {"--security", "security"},
                                                               {"--server-id", "server_id"},
                                                               {"--preset", "preset"},
                                                               {"--config", ""},
@@ -305,10 +303,9 @@ std::string serverUsage() {
            "  --max-sessions N        open sessions at once (default 4); more are refused in their status\n"
            "  --idle-timeout-s S      finish a session after S seconds without frames (default 60)\n"
            "  --data-dir DIR          finished sessions go to DIR/SESSION/ (default ./facescan-data)\n"
-           "  --profile P             DDS profile: loopback | lan | FILE.xml (default lan)\n"
-           "  --domain N              DDS domain id (default 0)\n"
            "  --server-id ID          name in replies and status (default HOST-PID)\n"
-           "  --check                 check the configuration (file, flags, DDS profile, data dir) and exit\n"
+           "  --check                 check the configuration (file, flags, DDS profile, data dir) and exit\n" +
+           wire::ddsOptionsHelp(26) +
            "  --help                  this text\n\n"
            "config keys:\n" +
            keys;

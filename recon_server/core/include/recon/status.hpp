@@ -21,6 +21,7 @@ enum class StatusCode {
     kResourceExhausted,  // out of a limited resource (sessions, buffers)
     kInternal,
     kUnimplemented,
+    kPermissionDenied,  // credentials do not allow it: DDS Security access control, a bad identity file
 };
 
 const char* statusCodeName(StatusCode code);
@@ -51,6 +52,7 @@ inline Status unavailable(std::string m) { return {StatusCode::kUnavailable, std
 inline Status deadlineExceeded(std::string m) { return {StatusCode::kDeadlineExceeded, std::move(m)}; }
 inline Status resourceExhausted(std::string m) { return {StatusCode::kResourceExhausted, std::move(m)}; }
 inline Status internalError(std::string m) { return {StatusCode::kInternal, std::move(m)}; }
+inline Status permissionDenied(std::string m) { return {StatusCode::kPermissionDenied, std::move(m)}; }
 
 template <typename T>
 class [[nodiscard]] StatusOr {

@@ -1,0 +1,69 @@
+// The web side of `facescan view` (CivetWeb, Debian's libcivetweb-dev): the page and its three.js files, a small
+// JSON API, the final mesh as a download, and one WebSocket per browser that pushes the sessions list and the
+// followed session's snapshots from the ViewHub.
+//
+//   GET /                                      the page (client_cli/web/index.html)
+//   GET /viewer.js /style.css /vendor/...      our script and style; three.js and Draco's wasm decoder from npm
+//                                              (client/web_assets.hpp: from memory, gzipped when accepted, ETags)
+//   GET /api/sessions                          {"type":"sessions","sessions":[status, ...]}
+//   GET /api/sessions/ID                       one session's status; 404 when unknown
+//   GET /api/sessions/ID/snapshot.drc          the latest MeshSnapshot's Draco bytes, as received; 404 when none
+//   GET /api/sessions/ID/mesh.EXT              the full-resolution mesh from its server (ScanCommand GET_MESH) as
+//                                              EXT = ply obj stl off drc glb, an attachment named ID.EXT
+//   WS  /ws                                    server -> browser: the sessions message (text) and snapshots
+//                                              (binary, client/view_hub.hpp); browser -> server: "follow ID"
+// Errors are JSON {"error": "..."}: 400 for a malformed request (bad session id, unknown format, bad method), 404
+// for an unknown session or page, 503 when no server answers. No DDS here: meshes come through a MeshFetcher.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "client/view_hub.hpp"
+#include "client/web_assets.hpp"
+#include "recon/status.hpp"
+
+namespace facescan::client {
+
+struct ViewServerConfig {
+    std::string bind = "127.0.0.1";  // an IP address: 127.0.0.1 (this machine only), 0.0.0.0 (the LAN), ::1, ...
+    uint16_t port = 8080;            // 0: any free port (see ViewServer::port())
+    std::filesystem::path web_root;  // the asset folder (findWebRoot())
+    int threads = 64;                // CivetWeb workers; each open WebSocket holds one
+
+    Status validate() const;
+};
+
+// The full-resolution mesh of a session as Draco bytes (ScanClient::request(GET_MESH) in the real viewer).
+// NotFound: unknown session; DeadlineExceeded or Unavailable: no server answered.
+using MeshFetcher = std::function<StatusOr<std::vector<uint8_t>>(const std::string& session_id)>;
+
+class ViewServer {
+ public:
+    // Listens at once. Unavailable with CivetWeb's reason when the address cannot be bound (e.g. in use).
+    static StatusOr<std::unique_ptr<ViewServer>> start(const ViewServerConfig& config, ViewHub& hub,
+                                                       MeshFetcher fetch_mesh);
+    ~ViewServer();  // stop()
+    ViewServer(const ViewServer&) = delete;
+    ViewServer& operator=(const ViewServer&) = delete;
+
+    // Closes every WebSocket (a close frame, so browsers see the end at once) and stops listening.
+    void stop();
+    uint16_t port() const { return port_; }
+    // http://ADDRESS:PORT/ (for 0.0.0.0: this host's name, which the LAN can reach).
+    std::string url() const;
+    int browsers() const;  // open WebSockets
+
+    struct Impl;
+
+ private:
+    ViewServer() = default;
+    std::unique_ptr<Impl> impl_;
+    uint16_t port_ = 0;
+};
+
+}  // namespace facescan::client

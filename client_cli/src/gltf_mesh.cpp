@@ -1,0 +1,139 @@
+// A facescan mesh as glTF 2.0 binary through TinyGLTF: the buffers are laid out here (glTF's accessors need
+// 4-byte aligned elements, so colours are RGBA), TinyGLTF writes the JSON chunk and the GLB container.
+#include "client/gltf_mesh.hpp"
+
+#include <tiny_gltf.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <sstream>
+
+namespace facescan::client {
+namespace {
+
+// Appends `count` elements of `bytes_each` bytes to the buffer and adds a view and an accessor for them.
+int addAccessor(tinygltf::Model& model, const void* data, size_t count, size_t bytes_each, int component_type, int type,
+                bool normalized, int target) {
+    std::vector<unsigned char>& buffer = model.buffers[0].data;
+    const size_t offset = buffer.size();  // every block's size is a multiple of 4: offsets stay aligned
+    buffer.resize(offset + count * bytes_each);
+    std::memcpy(buffer.data() + offset, data, count * bytes_each);
+
+    tinygltf::BufferView view;
+    view.buffer = 0;
+    view.byteOffset = offset;
+    view.byteLength = count * bytes_each;
+    view.target = target;
+    model.bufferViews.push_back(view);
+
+    tinygltf::Accessor accessor;
+    accessor.bufferView = static_cast<int>(model.bufferViews.size() - 1);
+    accessor.componentType = component_type;
+    accessor.count = count;
+    accessor.type = type;
+    accessor.normalized = normalized;
+    model.accessors.push_back(accessor);
+    return static_cast<int>(model.accessors.size() - 1);
+}
+
+}  // namespace
+
+StatusOr<std::string> meshToGlb(const recon::Mesh& mesh) {
+    // Live vertices numbered densely (OpenMesh may keep deleted elements until garbage collection).
+    std::vector<uint32_t> index_of(mesh.n_vertices(), std::numeric_limits<uint32_t>::max());
+    std::vector<float> positions, normals;
+    std::vector<uint8_t> colours;
+    const bool has_normals = mesh.has_vertex_normals();
+    const bool has_colours = mesh.has_vertex_colors();
+    std::array<double, 3> lo{}, hi{};
+    lo.fill(std::numeric_limits<double>::max());
+    hi.fill(std::numeric_limits<double>::lowest());
+    uint32_t n = 0;
+    for (const auto vh : mesh.vertices()) {
+        const auto& p = mesh.point(vh);
+        if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
+            return invalidArgument("glTF export: vertex " + std::to_string(vh.idx()) + " is not finite");
+        }
+        // 180 degrees about x: camera frame (y down, z forward) to glTF's (y up, viewer on +z).
+        const float q[3] = {p[0], -p[1], -p[2]};
+        for (int k = 0; k < 3; ++k) {
+            positions.push_back(q[k]);
+            lo[k] = std::min(lo[k], double(q[k]));
+            hi[k] = std::max(hi[k], double(q[k]));
+        }
+        if (has_normals) {
+            OpenMesh::Vec3f nv = mesh.normal(vh);
+            if (!std::isfinite(nv.sqrnorm()) || nv.sqrnorm() < 1e-12f) nv = OpenMesh::Vec3f(0, 0, -1);
+            nv.normalize();
+            normals.insert(normals.end(), {nv[0], -nv[1], -nv[2]});
+        }
+        if (has_colours) {
+            const auto& c = mesh.color(vh);
+            colours.insert(colours.end(), {c[0], c[1], c[2], 255});
+        }
+        index_of[vh.idx()] = n++;
+    }
+    std::vector<uint32_t> indices;
+    for (const auto fh : mesh.faces()) {
+        if (mesh.valence(fh) != 3) continue;
+        for (const auto vh : mesh.fv_range(fh)) indices.push_back(index_of[vh.idx()]);
+    }
+    if (indices.empty()) return invalidArgument("glTF export: the mesh has no triangles");
+
+    tinygltf::Model model;
+    model.asset.version = "2.0";
+    model.asset.generator = "facescan";
+    model.buffers.resize(1);
+    tinygltf::Primitive primitive;
+    primitive.mode = TINYGLTF_MODE_TRIANGLES;
+    const int position = addAccessor(model, positions.data(), n, 12, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3,
+                                     false, TINYGLTF_TARGET_ARRAY_BUFFER);
+    model.accessors[position].minValues.assign(lo.begin(), lo.end());  // required for POSITION by the spec
+    model.accessors[position].maxValues.assign(hi.begin(), hi.end());
+    primitive.attributes["POSITION"] = position;
+    if (has_normals) {
+        primitive.attributes["NORMAL"] = addAccessor(model, normals.data(), n, 12, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                                     TINYGLTF_TYPE_VEC3, false, TINYGLTF_TARGET_ARRAY_BUFFER);
+    }
+    if (has_colours) {
+        primitive.attributes["COLOR_0"] =
+            addAccessor(model, colours.data(), n, 4, TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE, TINYGLTF_TYPE_VEC4, true,
+                        TINYGLTF_TARGET_ARRAY_BUFFER);
+    }
+    primitive.indices = addAccessor(model, indices.data(), indices.size(), 4, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
+                                    TINYGLTF_TYPE_SCALAR, false, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
+
+    // glTF's default material is fully metallic, which renders black without an environment: a matte one instead.
+    // Double-sided: a scan is an open surface, seen from behind when it is turned around.
+    tinygltf::Material material;
+    material.name = "facescan";
+    material.pbrMetallicRoughness.metallicFactor = 0.0;
+    material.pbrMetallicRoughness.roughnessFactor = 0.9;
+    material.doubleSided = true;
+    model.materials.push_back(material);
+    primitive.material = 0;
+
+    tinygltf::Mesh gltf_mesh;
+    gltf_mesh.name = "face";
+    gltf_mesh.primitives.push_back(primitive);
+    model.meshes.push_back(gltf_mesh);
+    tinygltf::Node node;
+    node.mesh = 0;
+    node.name = "face";
+    model.nodes.push_back(node);
+    tinygltf::Scene scene;
+    scene.nodes.push_back(0);
+    model.scenes.push_back(scene);
+    model.defaultScene = 0;
+
+    std::ostringstream out(std::ios::binary);
+    tinygltf::TinyGLTF writer;
+    if (!writer.WriteGltfSceneToStream(&model, out, /*prettyPrint=*/false, /*writeBinary=*/true)) {
+        return internalError("TinyGLTF could not write the GLB");
+    }
+    return out.str();
+}
+
+}  // namespace facescan::client

@@ -1,0 +1,95 @@
+// `facescan view`: one DDS subscriber (ScanStatus and MeshSnapshot of every session) feeding the ViewHub, and the
+// web server that fans it out to every browser. Mesh downloads go through a second client, so a download never
+// holds up the live feed.
+#include <spawn.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <mutex>
+#include <thread>
+
+#include "client/view_hub.hpp"
+#include "client/view_server.hpp"
+#include "command_util.hpp"
+
+extern char** environ;
+
+namespace facescan::client::detail {
+namespace {
+
+// Opens `url` with the desktop's browser (xdg-open), without waiting for it.
+void openInBrowser(const std::string& url) {
+    pid_t pid = 0;
+    const char* argv[] = {"xdg-open", url.c_str(), nullptr};
+    if (::posix_spawnp(&pid, "xdg-open", nullptr, nullptr, const_cast<char* const*>(argv), environ) != 0) {
+        std::fprintf(stderr, "facescan view: cannot run xdg-open; open %s in a browser\n", url.c_str());
+        return;
+    }
+    std::thread([pid] { ::waitpid(pid, nullptr, 0); }).detach();  // reaped when it is done, never a zombie
+}
+
+}  // namespace
+
+int runView(const CliOptions& options) {
+    auto web_root = findWebRoot();
+    if (!web_root.isOk()) return fail(kExitCannotServe, web_root.status().message());
+    int code = kExitOk;
+    // The live feed only reads (status and snapshots); downloads go through a client of their own.
+    auto live = connectOrFail(options, code, /*commands=*/false);
+    if (!live) return code;
+    ViewHub hub;
+    std::unique_ptr<ScanClient> commands;
+    auto connected = ScanClient::connect(clientConfig(options));
+    if (connected.isOk()) {
+        if (Status s = (*connected)->enableCommands(); !s.isOk()) connected = s;
+    }
+    if (connected.isOk()) {
+        commands = std::move(connected).value();
+    } else {
+        // An identity that may only read (the viewer role of a secured site) cannot publish ScanCommand.
+        std::printf(
+            "facescan view: cannot ask servers for meshes (%s): downloads are each session's latest "
+            "snapshot, the final mesh once the scan is finished\n",
+            connected.status().message().c_str());
+    }
+    std::mutex commands_mutex;  // a ScanClient runs one request at a time
+    MeshFetcher fetch_mesh = [&](const std::string& session) -> StatusOr<std::vector<uint8_t>> {
+        if (!commands) return hub.snapshotMesh(session);
+        std::lock_guard lock(commands_mutex);
+        ASSIGN_OR_RETURN(CommandReply reply, commands->request(session, facescan_wire_CMD_GET_MESH));
+        if (reply.payload.empty()) return notFound("session '" + session + "' has no mesh yet (nothing integrated)");
+        return std::move(reply.payload);
+    };
+    ViewServerConfig config;
+    config.bind = options.view_bind;
+    config.port = options.view_port;
+    config.web_root = *web_root;
+    auto server = ViewServer::start(config, hub, fetch_mesh);
+    if (!server.isOk()) return fail(kExitCannotServe, server.status().message());
+    const std::string url = (*server)->url();
+    std::printf("facescan view: serving %s (%s; Ctrl-C stops)\n", url.c_str(), options.domain.describe().c_str());
+    std::printf("facescan view: web files from %s\n", web_root->c_str());
+    if (options.view_bind == "127.0.0.1" || options.view_bind == "::1") {
+        std::printf("facescan view: this machine only; --bind 0.0.0.0 serves the LAN\n");
+    }
+    std::fflush(stdout);
+    if (options.view_open) openInBrowser(url);
+    installInterruptHandler();
+
+    std::map<std::string, SessionStatus> statuses;
+    std::vector<MeshSnapshotData> snapshots;
+    while (!g_interrupted) {
+        snapshots.clear();
+        if (Status s = live->poll(std::chrono::milliseconds(200), statuses, kAllSessions, &snapshots); !s.isOk()) {
+            (*server)->stop();
+            return fail(kExitNoServer, s.message());
+        }
+        hub.updateStatuses(statuses);
+        for (const MeshSnapshotData& snapshot : snapshots) hub.putSnapshot(frameSnapshot(snapshot));
+    }
+    (*server)->stop();
+    std::printf("facescan view: stopped\n");
+    return kExitOk;
+}
+
+}  // namespace facescan::client::detail

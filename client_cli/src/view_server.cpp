@@ -1,0 +1,350 @@
+// The viewer's HTTP and WebSocket side on CivetWeb (client/view_server.hpp). CivetWeb parses HTTP and WebSocket
+// frames; this file routes requests, answers from memory (assets, snapshots, JSON) and runs one sender thread per
+// browser over the ViewHub.
+#include "client/view_server.hpp"
+
+#include <arpa/inet.h>
+#include <civetweb.h>
+#include <unistd.h>
+
+#include <cstring>
+#include <map>
+#include <mutex>
+#include <thread>
+
+#include "client/mesh_file.hpp"
+#include "client/status_json.hpp"
+#include "wire/mesh_codec.hpp"
+#include "wire/messages.hpp"
+
+namespace facescan::client {
+
+namespace {
+
+std::string jsonError(const std::string& message) { return "{\"error\":" + jsonString(message) + "}"; }
+
+// One response with a body (none for HEAD). CivetWeb writes the status line and headers.
+// API answers are live data: no-store unless told (assets bring their own caching headers).
+void respond(mg_connection* conn, int status, const char* mime, std::string_view body,
+             const std::vector<std::pair<std::string, std::string>>& headers = {}, bool no_store = true) {
+    mg_response_header_start(conn, status);
+    mg_response_header_add(conn, "Content-Type", mime, -1);
+    if (no_store) mg_response_header_add(conn, "Cache-Control", "no-store", -1);
+    mg_response_header_add(conn, "Content-Length", std::to_string(body.size()).c_str(), -1);
+    for (const auto& [name, value] : headers) mg_response_header_add(conn, name.c_str(), value.c_str(), -1);
+    mg_response_header_send(conn);
+    const mg_request_info* ri = mg_get_request_info(conn);
+    if (std::strcmp(ri->request_method, "HEAD") != 0 && !body.empty()) mg_write(conn, body.data(), body.size());
+}
+
+int respondError(mg_connection* conn, int status, const std::string& message) {
+    respond(conn, status, "application/json", jsonError(message));
+    return status;
+}
+
+}  // namespace
+
+Status ViewServerConfig::validate() const {
+    in_addr v4{};
+    in6_addr v6{};
+    if (::inet_pton(AF_INET, bind.c_str(), &v4) != 1 && ::inet_pton(AF_INET6, bind.c_str(), &v6) != 1) {
+        return invalidArgument(
+            "--bind needs an IP address of this machine (127.0.0.1, 0.0.0.0 for the LAN, ::1), got '" + bind + "'");
+    }
+    if (threads < 4 || threads > 1024) return invalidArgument("ViewServerConfig: threads must be 4..1024");
+    return Status::ok();
+}
+
+// One browser's WebSocket: its cursor in the hub and the thread that sends it what is new.
+struct Browser {
+    mg_connection* conn = nullptr;
+    ViewHub::Cursor cursor;
+    std::thread sender;
+};
+
+struct ViewServer::Impl {
+    ViewServerConfig config;
+    std::vector<LoadedAsset> assets;
+    ViewHub* hub = nullptr;
+    MeshFetcher fetch_mesh;
+    mg_context* ctx = nullptr;
+    mutable std::mutex browsers_mutex;
+    std::map<const mg_connection*, std::unique_ptr<Browser>> browsers;
+
+    int handleRequest(mg_connection* conn);
+    int handleApi(mg_connection* conn, std::string_view rest);
+    int sendAsset(mg_connection* conn, const LoadedAsset& asset);
+    int sendMesh(mg_connection* conn, const std::string& session, const std::string& extension);
+
+    // Writes one WebSocket message; false once the browser is gone.
+    static bool send(mg_connection* conn, int opcode, std::string_view bytes) {
+        mg_lock_connection(conn);
+        const int rc = mg_websocket_write(conn, opcode, bytes.data(), bytes.size());
+        mg_unlock_connection(conn);
+        return rc > 0;
+    }
+
+    void senderLoop(Browser* browser) {
+        while (true) {
+            const ViewHub::Update update = hub->next(browser->cursor, std::chrono::seconds(1));
+            if (update.closed) return;
+            if (update.sessions_json && !send(browser->conn, MG_WEBSOCKET_OPCODE_TEXT, *update.sessions_json)) return;
+            if (update.snapshot && !send(browser->conn, MG_WEBSOCKET_OPCODE_BINARY, update.snapshot->message)) return;
+        }
+    }
+};
+
+int ViewServer::Impl::handleRequest(mg_connection* conn) {
+    const mg_request_info* ri = mg_get_request_info(conn);
+    const std::string_view method = ri->request_method;
+    const std::string_view uri = ri->local_uri ? ri->local_uri : "";
+    if (method != "GET" && method != "HEAD") {
+        respond(conn, 405, "application/json", jsonError("only GET and HEAD are served, not " + std::string(method)),
+                {{"Allow", "GET, HEAD"}});
+        return 405;
+    }
+    if (uri == "/api/sessions" || uri.starts_with("/api/sessions/")) return handleApi(conn, uri.substr(13));
+    for (const LoadedAsset& asset : assets) {
+        if (uri == asset.url) return sendAsset(conn, asset);
+    }
+    return respondError(conn, 404, "no such page: " + std::string(uri));
+}
+
+// From memory: gzipped when the browser accepts it, 304 when it has this version (no-cache: it always asks, so a
+// new viewer's page is never stale).
+int ViewServer::Impl::sendAsset(mg_connection* conn, const LoadedAsset& asset) {
+    const char* if_none_match = mg_get_header(conn, "If-None-Match");
+    if (if_none_match && asset.etag == if_none_match) {
+        mg_response_header_start(conn, 304);
+        mg_response_header_add(conn, "ETag", asset.etag.c_str(), -1);
+        mg_response_header_add(conn, "Cache-Control", "no-cache", -1);
+        mg_response_header_send(conn);
+        return 304;
+    }
+    const char* accept = mg_get_header(conn, "Accept-Encoding");
+    const bool gzip = accept && std::string_view(accept).find("gzip") != std::string_view::npos;
+    std::vector<std::pair<std::string, std::string>> headers = {
+        {"ETag", asset.etag}, {"Cache-Control", "no-cache"}, {"Vary", "Accept-Encoding"}};
+    if (gzip) headers.emplace_back("Content-Encoding", "gzip");
+    respond(conn, 200, asset.mime.c_str(), gzip ? asset.gzip : asset.identity, headers, /*no_store=*/false);
+    return 200;
+}
+
+int ViewServer::Impl::handleApi(mg_connection* conn, std::string_view rest) {
+    if (rest.empty() || rest == "/") {
+        respond(conn, 200, "application/json", *hub->sessionsJson());
+        return 200;
+    }
+    rest.remove_prefix(1);  // the '/'
+    const size_t slash = rest.find('/');
+    const std::string session(rest.substr(0, slash));
+    const std::string what = slash == std::string_view::npos ? std::string() : std::string(rest.substr(slash + 1));
+    if (Status s = wire::validateSessionId(session); !s.isOk()) {
+        return respondError(conn, 400, "bad session id '" + session + "': " + s.message());
+    }
+    if (what.empty()) {
+        const auto status = hub->session(session);
+        if (!status) return respondError(conn, 404, "unknown session '" + session + "'");
+        respond(conn, 200, "application/json", statusJson(*status, /*with_alive=*/true));
+        return 200;
+    }
+    if (what == "snapshot.drc") {
+        const auto snapshot = hub->snapshot(session);
+        if (!snapshot) {
+            return respondError(conn, 404,
+                                hub->session(session) ? "session '" + session + "' has no snapshot yet"
+                                                      : "unknown session '" + session + "'");
+        }
+        respond(conn, 200, "application/octet-stream", snapshot->draco(),
+                {{"X-Facescan-Seq", std::to_string(snapshot->seq)},
+                 {"X-Facescan-Created-Ms", millisecondsText(snapshot->created_ns)}});
+        return 200;
+    }
+    if (what.starts_with("mesh.")) return sendMesh(conn, session, what.substr(5));
+    return respondError(conn, 404, "no such resource '" + what + "' (snapshot.drc, mesh.ply|obj|stl|off|drc|glb)");
+}
+
+int ViewServer::Impl::sendMesh(mg_connection* conn, const std::string& session, const std::string& extension) {
+    auto format = meshFormatFor("mesh." + extension);
+    if (!format.isOk()) return respondError(conn, 400, format.status().message());
+    auto draco = fetch_mesh(session);
+    if (!draco.isOk()) {
+        const StatusCode code = draco.status().code();
+        const int http = code == StatusCode::kNotFound                                               ? 404
+                         : code == StatusCode::kDeadlineExceeded || code == StatusCode::kUnavailable ? 503
+                                                                                                     : 502;
+        return respondError(conn, http, draco.status().message());
+    }
+    auto mesh = wire::decodeMeshDraco(draco->data(), draco->size());
+    if (!mesh.isOk()) return respondError(conn, 502, "the server's mesh cannot be decoded: " + mesh.status().message());
+    auto bytes = encodeMeshFile(*mesh, *format, &*draco);
+    if (!bytes.isOk()) return respondError(conn, 502, bytes.status().message());
+    respond(conn, 200, meshMimeType(*format), *bytes,
+            {{"Content-Disposition", "attachment; filename=\"" + session + "." + meshFormatName(*format) + "\""}});
+    return 200;
+}
+
+namespace {
+
+int onRequest(mg_connection* conn, void* data) { return static_cast<ViewServer::Impl*>(data)->handleRequest(conn); }
+
+// Refuses a WebSocket opened by another site's page (cross-site WebSocket hijacking): browsers always send
+// Origin, and ours is the page this server served, so its host is the Host the browser asked for.
+bool sameOrigin(const char* origin, const char* host) {
+    if (!origin) return true;  // not a browser (tests, tools): nothing to hijack
+    if (!host) return false;
+    std::string_view o(origin), h(host);
+    if (!o.starts_with("http://")) return false;
+    o.remove_prefix(7);
+    return o == h;
+}
+
+int onWsConnect(const mg_connection* conn, void*) {
+    return sameOrigin(mg_get_header(conn, "Origin"), mg_get_header(conn, "Host")) ? 0 : 1;
+}
+
+void onWsReady(mg_connection* conn, void* data) {
+    auto* impl = static_cast<ViewServer::Impl*>(data);
+    auto browser = std::make_unique<Browser>();
+    browser->conn = conn;
+    Browser* raw = browser.get();
+    std::lock_guard lock(impl->browsers_mutex);
+    impl->browsers[conn] = std::move(browser);
+    raw->sender = std::thread([impl, raw] { impl->senderLoop(raw); });
+}
+
+int onWsData(mg_connection* conn, int flags, char* data, size_t size, void* cb) {
+    auto* impl = static_cast<ViewServer::Impl*>(cb);
+    const int opcode = flags & 0xf;
+    if (opcode == MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE) return 0;
+    if (opcode != MG_WEBSOCKET_OPCODE_TEXT) return 1;  // pings are answered by CivetWeb; nothing else is expected
+    const std::string text(data, size);
+    Browser* browser = nullptr;
+    {
+        std::lock_guard lock(impl->browsers_mutex);
+        const auto it = impl->browsers.find(conn);
+        if (it != impl->browsers.end()) browser = it->second.get();
+    }
+    if (!browser) return 0;
+    std::string error;
+    if (text.starts_with("follow ")) {
+        const std::string session = text.substr(7);
+        if (Status s = wire::validateSessionId(session); s.isOk()) {
+            impl->hub->follow(browser->cursor, session);
+            return 1;
+        } else {
+            error = "bad session id: " + s.message();
+        }
+    } else {
+        error = "unknown message (expected 'follow SESSION')";
+    }
+    ViewServer::Impl::send(conn, MG_WEBSOCKET_OPCODE_TEXT,
+                           "{\"type\":\"error\",\"message\":" + jsonString(error) + "}");
+    return 1;
+}
+
+void onWsClose(const mg_connection* conn, void* data) {
+    auto* impl = static_cast<ViewServer::Impl*>(data);
+    std::unique_ptr<Browser> browser;
+    {
+        std::lock_guard lock(impl->browsers_mutex);
+        const auto it = impl->browsers.find(conn);
+        if (it == impl->browsers.end()) return;
+        browser = std::move(it->second);
+        impl->browsers.erase(it);
+    }
+    // CivetWeb frees the connection after this returns: the sender must be done with it.
+    impl->hub->close(browser->cursor);
+    if (browser->sender.joinable()) browser->sender.join();
+}
+
+int onLog(const mg_connection*, const char* message) {
+    std::fprintf(stderr, "facescan view: %s\n", message);
+    return 1;
+}
+
+}  // namespace
+
+StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& config, ViewHub& hub,
+                                                        MeshFetcher fetch_mesh) {
+    RETURN_IF_ERROR(config.validate());
+    ASSIGN_OR_RETURN(std::vector<LoadedAsset> assets, loadWebAssets(config.web_root));
+    static std::once_flag init_once;
+    std::call_once(init_once, [] { mg_init_library(0); });
+
+    std::unique_ptr<ViewServer> server(new ViewServer());
+    server->impl_ = std::make_unique<Impl>();
+    Impl& impl = *server->impl_;
+    impl.config = config;
+    impl.assets = std::move(assets);
+    impl.hub = &hub;
+    impl.fetch_mesh = std::move(fetch_mesh);
+
+    const bool v6 = config.bind.find(':') != std::string::npos;
+    const std::string listen = (v6 ? "[" + config.bind + "]" : config.bind) + ":" + std::to_string(config.port);
+    const std::string threads = std::to_string(config.threads);
+    const char* options[] = {"listening_ports", listen.c_str(), "num_threads", threads.c_str(),
+                             // No folder is served as such: only the routes above (no directory listing).
+                             "enable_directory_listing", "no", nullptr};
+    mg_callbacks callbacks{};
+    callbacks.log_message = onLog;
+    mg_init_data init{};
+    init.callbacks = &callbacks;
+    init.user_data = &impl;
+    init.configuration_options = options;
+    char error_text[256] = {};
+    unsigned error_code = 0;
+    mg_error_data error{};
+    error.code = &error_code;
+    error.text = error_text;
+    error.text_buffer_size = sizeof(error_text);
+    impl.ctx = mg_start2(&init, &error);
+    if (!impl.ctx) {
+        return unavailable("cannot serve on " + listen + ": " + (error_text[0] ? error_text : "CivetWeb failed") +
+                           " (another program on that port? choose one with --port)");
+    }
+    mg_set_request_handler(impl.ctx, "/", onRequest, &impl);
+    mg_set_websocket_handler(impl.ctx, "/ws", onWsConnect, onWsReady, onWsData, onWsClose, &impl);
+
+    mg_server_port ports[4] = {};
+    const int n = mg_get_server_ports(impl.ctx, 4, ports);
+    server->port_ = n > 0 ? static_cast<uint16_t>(ports[0].port) : config.port;
+    return server;
+}
+
+ViewServer::~ViewServer() { stop(); }
+
+void ViewServer::stop() {
+    if (!impl_ || !impl_->ctx) return;
+    {
+        std::lock_guard lock(impl_->browsers_mutex);
+        for (auto& [conn, browser] : impl_->browsers) {
+            impl_->hub->close(browser->cursor);
+            // A close frame ends the browser's side at once; CivetWeb's read loop would otherwise notice the stop
+            // only at its next poll (up to 2 s).
+            Impl::send(browser->conn, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, "");
+        }
+    }
+    // Calls onWsClose for every browser left (which joins its sender). CivetWeb's threads notice the stop at their
+    // next poll: about 2 s.
+    mg_stop(impl_->ctx);
+    impl_->ctx = nullptr;
+}
+
+std::string ViewServer::url() const {
+    std::string host = impl_->config.bind;
+    if (host == "0.0.0.0" || host == "::") {
+        char name[256] = {};
+        host = ::gethostname(name, sizeof(name) - 1) == 0 && name[0] ? name : "localhost";
+    } else if (host.find(':') != std::string::npos) {
+        host = "[" + host + "]";
+    }
+    return "http://" + host + ":" + std::to_string(port_) + "/";
+}
+
+int ViewServer::browsers() const {
+    std::lock_guard lock(impl_->browsers_mutex);
+    return static_cast<int>(impl_->browsers.size());
+}
+
+}  // namespace facescan::client

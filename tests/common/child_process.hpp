@@ -1,0 +1,81 @@
+// A real program of ours as a child process for integration tests, with its output in a log file; stopped with
+// SIGTERM (SIGKILL after 10 s) and reaped on destruction. Safe to start from a test process that already runs
+// threads (DDS): nothing allocates between fork and exec.
+#pragma once
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace facescan::testing {
+
+class ChildProcess {
+ public:
+    ChildProcess(std::vector<std::string> args, const std::filesystem::path& log) : args_(std::move(args)) {
+        std::vector<char*> argv;
+        for (std::string& a : args_) argv.push_back(a.data());
+        argv.push_back(nullptr);
+        const std::string log_path = log.string();
+        pid_ = ::fork();
+        if (pid_ == 0) {
+            const int fd = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+            if (fd >= 0) {
+                ::dup2(fd, 1);
+                ::dup2(fd, 2);
+            }
+            ::execv(argv[0], argv.data());
+            ::_exit(127);
+        }
+    }
+    ~ChildProcess() { stop(); }
+    ChildProcess(const ChildProcess&) = delete;
+    ChildProcess& operator=(const ChildProcess&) = delete;
+    // Sends `signal` (e.g. SIGINT, as Ctrl-C would) without waiting.
+    void signal(int signal) {
+        if (pid_ > 0) ::kill(pid_, signal);
+    }
+    // Waits for the program to end by itself; its exit code (128 + signal when killed), or -1 on timeout.
+    int wait(std::chrono::seconds timeout) {
+        const auto deadline = std::chrono::steady_clock::now() + timeout;
+        while (pid_ > 0) {
+            int status = 0;
+            if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+                pid_ = 0;
+                return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+            }
+            if (std::chrono::steady_clock::now() >= deadline) break;
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        }
+        return -1;
+    }
+    void stop() {
+        if (pid_ <= 0) return;
+        ::kill(pid_, SIGTERM);
+        if (wait(std::chrono::seconds(10)) < 0) {
+            ::kill(pid_, SIGKILL);
+            ::waitpid(pid_, nullptr, 0);
+        }
+        pid_ = 0;
+    }
+
+ private:
+    std::vector<std::string> args_;
+    pid_t pid_ = 0;
+};
+
+// The whole content of a file (a child's log); empty when it cannot be read.
+inline std::string readText(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+}  // namespace facescan::testing

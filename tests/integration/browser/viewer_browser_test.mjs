@@ -1,0 +1,176 @@
+// The web viewer in a real browser during a real scan: facescan-server and facescan-agent (synthetic Kinect, live
+// 30 Hz) and `facescan view` run as processes on loopback in a private domain; Debian's headless chromium opens
+// the page, waits for the mesh, takes two screenshots a few snapshots apart, checks that the face is drawn and
+// that the picture changed, that the console shows no error, downloads the GLB and reads it back with three.js'
+// glTF reader. Run by viewer_browser_test.sh (which skips when the browser cannot start).
+// Usage: node viewer_browser_test.mjs OUT_DIR DOMAIN   (env: FACESCAN_SERVER, FACESCAN_AGENT, FACESCAN_CLI,
+//        FACESCAN_WEB_NODE_MODULES, CHROMIUM)
+import assert from 'node:assert/strict';
+import fs from 'node:fs';
+import { createRequire } from 'node:module';
+import path from 'node:path';
+import { pathToFileURL } from 'node:url';
+import { ddsArgs, launchChromium, sleep, start, startViewer, stop, tail } from './scan_processes.mjs';
+
+const [outDir, domain] = process.argv.slice(2);
+const env = process.env;
+const modules = env.FACESCAN_WEB_NODE_MODULES;
+const require = createRequire(path.join(modules, 'noop.js'));
+const playwright = require('playwright-core');
+fs.mkdirSync(outDir, { recursive: true });
+const t0 = Date.now();
+const log = (text) => console.log(`[${((Date.now() - t0) / 1000).toFixed(1)} s] ${text}`);
+
+const session = `browser-${process.pid}`;
+const server = start('server', env.FACESCAN_SERVER, [...ddsArgs(domain), '--data-dir', path.join(outDir, 'data'),
+  '--snapshot-hz', '2'], outDir);
+const agent = start('agent', env.FACESCAN_AGENT, [...ddsArgs(domain), '--session', session, '--source',
+  'synthetic:frames=600,subject=builtin,seed=3', '--rate', 'real', '--wait-for-server', '30'], outDir);
+const { viewer, url } = await startViewer(env.FACESCAN_CLI, domain, outDir);
+log(`viewer at ${url}`);
+
+const browser = await launchChromium(playwright, env.CHROMIUM);
+let failed = true;
+try {
+  const page = await browser.newPage({ viewport: { width: 1100, height: 700 }, acceptDownloads: true });
+  const problems = [];
+  page.on('console', (message) => { if (message.type() === 'error') problems.push(`console: ${message.text()}`); });
+  page.on('pageerror', (error) => problems.push(`page error: ${error.message}`));
+  page.on('requestfailed', (request) => problems.push(`request failed: ${request.url()} ${request.failure()?.errorText}`));
+
+  await page.goto(`${url}?session=${session}`);
+  const webgl = await page.evaluate(() => {
+    const gl = document.createElement('canvas').getContext('webgl2');
+    const info = gl && gl.getExtension('WEBGL_debug_renderer_info');
+    return gl ? gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER) : null;
+  });
+  log(`WebGL renderer: ${webgl}`);
+  assert.ok(webgl, 'WebGL is not available in this chromium (SwiftShader flags?)');
+
+  // Pixels of the 3D view's centre half (the WebGL canvas keeps its drawing buffer), kept in the page under a
+  // name: the share that differs from the background, and later the share that differs between two samples.
+  const sample = (name) => page.evaluate((key) => {
+    const source = document.getElementById('canvas');
+    const copy = document.createElement('canvas');
+    copy.width = source.width; copy.height = source.height;
+    const ctx = copy.getContext('2d');
+    ctx.drawImage(source, 0, 0);
+    const x = Math.floor(source.width / 4), y = Math.floor(source.height / 4);
+    const { data } = ctx.getImageData(x, y, Math.floor(source.width / 2), Math.floor(source.height / 2));
+    (window.testSamples ||= {})[key] = data;
+    let face = 0;
+    for (let i = 0; i < data.length; i += 4) {
+      if (Math.abs(data[i] - 0x16) + Math.abs(data[i + 1] - 0x18) + Math.abs(data[i + 2] - 0x1d) > 24) face++;
+    }
+    return { name: key, share: face / (data.length / 4) };
+  }, name);
+  const differs = (p, q) => page.evaluate(([k1, k2]) => {
+    const x = window.testSamples[k1], y = window.testSamples[k2];
+    let n = 0;
+    for (let i = 0; i < x.length; i += 4) {
+      if (Math.abs(x[i] - y[i]) + Math.abs(x[i + 1] - y[i + 1]) + Math.abs(x[i + 2] - y[i + 2]) > 24) n++;
+    }
+    return n / (x.length / 4);
+  }, [p.name, q.name]);
+  const drawn = () => page.evaluate(() => window.facescanStats.drawn);
+
+  await page.waitForFunction(() => window.facescanStats.drawn >= 1, null, { timeout: 40000 });
+  const first = await drawn();
+  await sleep(300);
+  await page.screenshot({ path: path.join(outDir, 'viewer-1.png') });
+  const a = await sample('first');
+  log(`snapshot drawn (${first}); face covers ${(100 * a.share).toFixed(1)}% of the view's centre`);
+  await page.waitForFunction((n) => window.facescanStats.drawn >= n + 3, first, { timeout: 30000 });
+  await sleep(300);
+  await page.screenshot({ path: path.join(outDir, 'viewer-2.png') });
+  const b = await sample('second');
+  const changedShare = await differs(a, b);
+  log(`3 snapshots later: face covers ${(100 * b.share).toFixed(1)}%, ${(100 * changedShare).toFixed(1)}% of the centre changed`);
+  assert.ok(a.share > 0.1 && b.share > 0.1, `the face is not drawn: ${a.share}, ${b.share} of the centre`);
+  assert.ok(changedShare > 0.005, `the picture did not change between snapshots (${changedShare})`);
+
+  // The view's controls, by a person's gestures: wireframe, turning (drag), zooming (wheel), reset view.
+  const settle = () => sleep(250);
+  await page.check('#wireframe'); await settle();
+  const wire = await sample('wire');
+  await page.screenshot({ path: path.join(outDir, 'viewer-wireframe.png') });
+  await page.uncheck('#wireframe'); await settle();
+  const box = await page.locator('#canvas').boundingBox();
+  const cx = box.x + box.width / 2, cy = box.y + box.height / 2;
+  const before = await sample('before');
+  await page.mouse.move(cx, cy); await page.mouse.down();
+  await page.mouse.move(cx + 250, cy, { steps: 10 }); await page.mouse.up(); await settle();
+  const turned = await sample('turned');
+  const turnedDirection = await page.evaluate(() => window.facescanStats.viewDirection());
+  await page.screenshot({ path: path.join(outDir, 'viewer-turned.png') });
+  await page.click('#reset-view'); await settle();
+  const reset = await sample('reset');
+  const resetDirection = await page.evaluate(() => window.facescanStats.viewDirection());
+  await page.mouse.move(cx, cy); await page.mouse.wheel(0, -600); await settle();
+  const zoomed = await sample('zoomed');
+  await page.click('#reset-view'); await settle();
+  const [dWire, dTurned] = [await differs(before, wire), await differs(before, turned)];
+  const fmt = (v) => v.map((x) => x.toFixed(2)).join(', ');
+  log(`controls: wireframe changed ${(100 * dWire).toFixed(0)}%, turning ${(100 * dTurned).toFixed(0)}% ` +
+      `(view from ${fmt(turnedDirection)}; after reset ${fmt(resetDirection)}); ` +
+      `zoom in: face ${(100 * reset.share).toFixed(0)}% -> ${(100 * zoomed.share).toFixed(0)}%`);
+  assert.ok(dWire > 0.05, 'the wireframe toggle changed nothing');
+  assert.ok(dTurned > 0.15 && turnedDirection[2] < 0.95, 'dragging did not turn the face');
+  assert.ok(resetDirection[2] > 0.999, 'reset view did not bring back the front view');
+  assert.ok(zoomed.share > reset.share + 0.05, 'the wheel did not zoom in');
+
+  const progress = await page.evaluate(() => ({
+    state: document.getElementById('state').textContent,
+    integrated: document.getElementById('integrated').textContent,
+    server: document.getElementById('server').textContent,
+    rows: document.querySelectorAll('#sessions tbody tr').length,
+  }));
+  log(`progress: ${JSON.stringify(progress)}`);
+  assert.match(progress.state, /SCANNING|LOST|FINISHED/);
+  assert.ok(Number(progress.integrated.replace(/\D/g, '')) > 0, 'no frames integrated shown');
+  assert.notEqual(progress.server, '–', 'the session\'s server is not shown');
+  assert.equal(progress.rows, 1);
+
+  // The GLB download, read back with three.js' own glTF reader.
+  const [download] = await Promise.all([page.waitForEvent('download', { timeout: 30000 }),
+    page.click('.downloads button[data-format="glb"]')]);
+  const glbPath = path.join(outDir, download.suggestedFilename());
+  await download.saveAs(glbPath);
+  const glb = fs.readFileSync(glbPath);
+  assert.equal(glb.toString('latin1', 0, 4), 'glTF');
+  const { GLTFLoader } = await import(pathToFileURL(path.join(modules, 'three/examples/jsm/loaders/GLTFLoader.js')));
+  const gltf = await new GLTFLoader().parseAsync(glb.buffer.slice(glb.byteOffset, glb.byteOffset + glb.length), '');
+  const meshes = [];
+  gltf.scene.traverse((object) => { if (object.isMesh) meshes.push(object); });
+  assert.equal(meshes.length, 1);
+  const geometry = meshes[0].geometry;
+  log(`GLB ${download.suggestedFilename()}: ${glb.length} bytes, ${geometry.attributes.position.count} vertices, ` +
+      `${geometry.index.count / 3} triangles, colours: ${Boolean(geometry.attributes.color)}`);
+  assert.ok(geometry.attributes.position.count > 1000);
+  assert.ok(geometry.attributes.color, 'the GLB has no vertex colours (COLOR_0)');
+
+  // A URL naming a session nobody scans: the page says so (and offers the list).
+  const lost = await browser.newPage();
+  lost.on('pageerror', (error) => problems.push(`page error (unknown session page): ${error.message}`));
+  await lost.goto(`${url}?session=nobody-${process.pid}`);
+  await lost.waitForFunction(() => !document.getElementById('message').hidden, null, { timeout: 10000 });
+  const text = await lost.textContent('#message');
+  log(`unknown session page: "${text}"`);
+  assert.match(text, /Unknown session 'nobody-\d+'/);
+  await lost.close();
+
+  const stats = await page.evaluate(() => window.facescanStats.snapshots);
+  fs.writeFileSync(path.join(outDir, 'stats.json'), JSON.stringify(stats, null, 1));
+  const latencies = stats.map((s) => s.latency_ms).sort((x, y) => x - y);
+  log(`${stats.length} snapshots drawn; latency median ${latencies[Math.floor(latencies.length / 2)].toFixed(0)} ms, ` +
+      `decode median ${stats.map((s) => s.decode_ms).sort((x, y) => x - y)[Math.floor(stats.length / 2)].toFixed(1)} ms`);
+  assert.deepEqual(problems, [], `the browser reported problems:\n${problems.join('\n')}`);
+  failed = false;
+} finally {
+  await browser.close();
+  await stop(viewer);
+  await stop(agent);
+  await stop(server);
+  if (failed) for (const child of [viewer, agent, server]) console.log(`--- ${child.logPath}\n${tail(child)}`);
+}
+log('passed');
