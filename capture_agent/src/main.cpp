@@ -25,9 +25,11 @@ options:
                           openni2[:URI]          the first OpenNI2 camera, or the one with this URI
                           oni:FILE               an OpenNI2 recording, every frame in order
                           tum:DIR                a TUM RGB-D folder
-                          synthetic[:k=v,...]    the virtual Kinect filming a head scan; keys: frames,
-                                                 distance (m), yaw, pitch (deg), period (frames), seed,
-                                                 noise (0/1), subject (auto|builtin|scan|PATH)
+                          synthetic[:k=v,...]    the virtual Kinect filming a head scan; keys: scenario
+                                                 (gentle|wide|chin|gap|occluder), frames, distance (m),
+                                                 yaw, pitch (deg), period (frames), seed, noise (0/1),
+                                                 subject (auto|builtin|scan|PATH); all keys: an unknown
+                                                 key's error lists them
   --session ID          session id (default: a fresh unique id, printed at start)
   --frames N            stop after N frames (default: all)
   --rate real|max|HZ    real: the source's own rate (default); max: as fast as the server takes them, with no

@@ -27,9 +27,13 @@
 #include "eval/accuracy.hpp"
 #include "eval/mesh_io.hpp"
 #include "eval/observed_region.hpp"
+#include "eval/scenario_figures.hpp"
 #include "recon/face_pipeline.hpp"
 #include "recon/reconstructor.hpp"
+#include "recon/scan_step.hpp"
+#include "recon_input.hpp"
 #include "synth/kinect_simulator.hpp"
+#include "synth/sequence_options.hpp"
 
 namespace facescan::bench {
 namespace {
@@ -52,15 +56,7 @@ struct Options {
     // --mask pipeline: the head mask comes from the server's own FacePipeline (Viola-Jones + depth, segmentation,
     // tracked-box seeding), run inside the timed loop as facescan-server does; default: the input's own mask.
     bool pipeline_mask = false;
-};
-
-struct Sequence {
-    recon::Intrinsics k;
-    std::vector<recon::RgbdFrame> frames;
-    std::vector<cv::Mat> masks;                     // per frame, empty = whole frame
-    std::vector<std::optional<Pose>> T_ref_camera;  // reference poses (first camera = identity), when known
-    std::string mask_source = "none";
-    std::optional<synth::KinectSimulator> sim;  // synthetic input only
+    bool twin = false;  // --twin: also scan the scenario's twin without its event (scenario_figures.hpp)
 };
 
 double peakRssMb() {
@@ -74,186 +70,6 @@ double currentRssMb() {
     long pages = 0, resident = 0;
     f >> pages >> resident;
     return static_cast<double>(resident) * 4096.0 / (1024.0 * 1024.0);
-}
-
-std::map<std::string, std::string> parseKv(const std::string& s) {
-    std::map<std::string, std::string> kv;
-    std::stringstream ss(s);
-    std::string item;
-    while (std::getline(ss, item, ',')) {
-        const auto eq = item.find('=');
-        if (eq != std::string::npos) kv[item.substr(0, eq)] = item.substr(eq + 1);
-    }
-    return kv;
-}
-
-// synthetic[:distance=0.9,yaw=35,yaw_period=150,pitch_period=75,frames=300,seed=1,noise=1,head=lps|builtin]
-Status loadSynthetic(const std::string& opts, int frames, Sequence& seq) {
-    auto kv = parseKv(opts);
-    synth::SequenceParams sp;
-    auto num = [&](const char* key, float def) { return kv.count(key) ? std::stof(kv[key]) : def; };
-    sp.frames = frames > 0 ? frames : static_cast<int>(num("frames", 300));
-    sp.distance_m = num("distance", sp.distance_m);
-    sp.yaw_amplitude_deg = num("yaw", sp.yaw_amplitude_deg);
-    sp.pitch_amplitude_deg = num("pitch", sp.pitch_amplitude_deg);
-    sp.yaw_period_frames = num("yaw_period", sp.yaw_period_frames);
-    sp.pitch_period_frames = num("pitch_period", sp.pitch_period_frames);
-    sp.seed = static_cast<uint64_t>(num("seed", 1));
-    sp.noise = num("noise", 1) != 0;
-    RETURN_IF_ERROR(sp.validate());
-    synth::HeadModel head;
-    if (kv.count("head") && kv["head"] == "builtin") {
-        head = synth::builtinHead();
-    } else {
-        const auto dir = synth::findLeePerrySmith();
-        if (!dir) return notFound("leeperrysmith data not found (use head=builtin)");
-        ASSIGN_OR_RETURN(head, synth::loadHeadScan(*dir));
-    }
-    seq.sim.emplace(std::move(head), sp);
-    seq.k = seq.sim->intrinsics();
-    seq.frames.resize(static_cast<size_t>(sp.frames));
-    seq.masks.resize(seq.frames.size());
-    seq.T_ref_camera.resize(seq.frames.size());
-    const Pose T_c0_head = seq.sim->poseAt(0);
-    cv::parallel_for_(cv::Range(0, sp.frames), [&](const cv::Range& r) {
-        for (int i = r.start; i < r.end; ++i) {
-            synth::FrameTruth truth;
-            seq.sim->render(i, seq.frames[i], &truth);
-            seq.masks[i] = truth.label == static_cast<uint8_t>(synth::PixelLabel::kHead);
-            // The head is static in the world (= first camera); the camera moves: T_c0_ci = T_c0_h T_ci_h^-1.
-            seq.T_ref_camera[i] = T_c0_head * truth.T_camera_head.inverse();
-        }
-    });
-    seq.mask_source = "renderer head label (ground truth)";
-    return Status::ok();
-}
-
-Pose readMatrix4(std::istream& in) {
-    Eigen::Matrix4f m;
-    for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) in >> m(r, c);
-    Pose p;
-    p.matrix() = m;
-    // 7-Scenes rotations are not exactly orthonormal (the trace-based angle of frame 150->151 reads 1.38 deg
-    // for a 0.75 deg rotation); project onto the nearest rotation before comparing.
-    const Eigen::JacobiSVD<Eigen::Matrix3f> svd(m.topLeftCorner<3, 3>(), Eigen::ComputeFullU | Eigen::ComputeFullV);
-    p.linear() = svd.matrixU() * svd.matrixV().transpose();
-    return p;
-}
-
-// 7scenes:DIR — frame-XXXXXX.{color.png, depth.png (mm), pose.txt (camera to world)}, fx=fy=585, cx=320, cy=240.
-Status load7Scenes(const fs::path& dir_in, int frames, Sequence& seq) {
-    const fs::path dir = fs::is_directory(dir_in / "rgbd-frames") ? dir_in / "rgbd-frames" : dir_in;
-    std::vector<fs::path> depth_files;
-    for (const auto& e : fs::directory_iterator(dir)) {
-        const std::string n = e.path().filename().string();
-        if (n.size() > 10 && n.substr(n.size() - 10) == ".depth.png") depth_files.push_back(e.path());
-    }
-    std::sort(depth_files.begin(), depth_files.end());
-    if (depth_files.empty()) return notFound("no frame-*.depth.png in " + dir.string());
-    if (frames > 0 && static_cast<size_t>(frames) < depth_files.size()) depth_files.resize(frames);
-    seq.k = recon::Intrinsics{640, 480, 585.0f, 585.0f, 320.0f, 240.0f};
-    std::optional<Pose> T_w_c0;
-    for (size_t i = 0; i < depth_files.size(); ++i) {
-        const std::string stem = depth_files[i].string().substr(0, depth_files[i].string().size() - 10);
-        const cv::Mat raw = cv::imread(depth_files[i].string(), cv::IMREAD_UNCHANGED);
-        if (raw.type() != CV_16UC1) return dataLoss("not a 16-bit depth PNG: " + depth_files[i].string());
-        recon::RgbdFrame f;
-        cv::Mat raw_clean = raw.clone();
-        raw_clean.setTo(0, raw == 65535);
-        recon::depthRawToMetres(raw_clean, 0.001f, f.depth_m);
-        f.timestamp_ns = static_cast<int64_t>(i) * 33'333'333;  // 7-Scenes is 30 Hz; frames carry no time
-        // Colour is not registered to depth in 7-Scenes: left out rather than painted on the wrong voxels.
-        seq.frames.push_back(std::move(f));
-        seq.masks.emplace_back();
-        std::ifstream pose_in(stem + ".pose.txt");
-        std::optional<Pose> ref;
-        if (pose_in) {
-            const Pose T_w_ci = readMatrix4(pose_in);
-            if (!T_w_c0) T_w_c0 = T_w_ci;
-            ref = T_w_c0->inverse() * T_w_ci;
-        }
-        seq.T_ref_camera.push_back(ref);
-    }
-    return Status::ok();
-}
-
-// tum:DIR — rgb.txt / depth.txt (timestamp path), 16-bit depth with 5000 units per metre, optional intrinsics.txt
-// and groundtruth.txt (re-expressed relative to the first frame's pose).
-Status loadTum(const fs::path& dir, int frames, Sequence& seq) {
-    std::ifstream depth_list(dir / "depth.txt");
-    if (!depth_list) return notFound("no depth.txt in " + dir.string());
-    std::ifstream intr(dir / "intrinsics.txt");
-    if (intr) intr >> seq.k.fx_px >> seq.k.fy_px >> seq.k.cx_px >> seq.k.cy_px;
-    std::vector<std::pair<double, std::string>> rgb;
-    std::ifstream rgb_list(dir / "rgb.txt");
-    std::string line;
-    while (rgb_list && std::getline(rgb_list, line)) {
-        if (line.empty() || line[0] == '#') continue;
-        std::stringstream ss(line);
-        double t;
-        std::string p;
-        if (ss >> t >> p) rgb.emplace_back(t, p);
-    }
-    std::map<double, Pose> gt;
-    std::ifstream gt_in(dir / "groundtruth.txt");
-    while (gt_in && std::getline(gt_in, line)) {
-        if (line.empty() || line[0] == '#') continue;
-        std::stringstream ss(line);
-        double t;
-        float tx, ty, tz, qx, qy, qz, qw;
-        if (!(ss >> t >> tx >> ty >> tz >> qx >> qy >> qz >> qw)) continue;
-        Pose p = Pose::Identity();
-        p.linear() = Eigen::Quaternionf(qw, qx, qy, qz).normalized().toRotationMatrix();
-        p.translation() = Eigen::Vector3f(tx, ty, tz);
-        gt[t] = p;
-    }
-    std::optional<Pose> T_w_c0;
-    while (std::getline(depth_list, line)) {
-        if (line.empty() || line[0] == '#') continue;
-        if (frames > 0 && static_cast<int>(seq.frames.size()) >= frames) break;
-        std::stringstream ss(line);
-        double t;
-        std::string path;
-        if (!(ss >> t >> path)) continue;
-        const cv::Mat raw = cv::imread((dir / path).string(), cv::IMREAD_UNCHANGED);
-        if (raw.type() != CV_16UC1) return dataLoss("not a 16-bit depth PNG: " + (dir / path).string());
-        recon::RgbdFrame f;
-        recon::depthRawToMetres(raw, 1.0f / 5000.0f, f.depth_m);
-        f.timestamp_ns = static_cast<int64_t>(std::llround(t * 1e9));
-        if (!rgb.empty()) {
-            const auto best = std::min_element(rgb.begin(), rgb.end(), [&](const auto& a, const auto& b) {
-                return std::fabs(a.first - t) < std::fabs(b.first - t);
-            });
-            f.colour_bgr = cv::imread((dir / best->second).string(), cv::IMREAD_COLOR);
-            if (f.colour_bgr.size() != f.depth_m.size()) f.colour_bgr.release();
-        }
-        seq.k.width_px = raw.cols;
-        seq.k.height_px = raw.rows;
-        std::optional<Pose> ref;
-        if (!gt.empty()) {
-            auto it = gt.lower_bound(t - 0.02);
-            if (it != gt.end() && std::fabs(it->first - t) < 0.02) {
-                if (!T_w_c0) T_w_c0 = it->second;
-                ref = T_w_c0->inverse() * it->second;
-            }
-        }
-        seq.frames.push_back(std::move(f));
-        seq.masks.emplace_back();
-        seq.T_ref_camera.push_back(ref);
-    }
-    if (seq.frames.empty()) return notFound("no frames listed in depth.txt");
-    return Status::ok();
-}
-
-Status loadSequence(const Options& o, Sequence& seq) {
-    const std::string& in = o.input;
-    if (in.rfind("synthetic", 0) == 0) {
-        return loadSynthetic(in.size() > 10 ? in.substr(10) : "", o.frames, seq);
-    }
-    if (in.rfind("tum:", 0) == 0) return loadTum(in.substr(4), o.frames, seq);
-    if (in.rfind("7scenes:", 0) == 0) return load7Scenes(in.substr(8), o.frames, seq);
-    return invalidArgument("unknown --input '" + in + "' (synthetic[:k=v,...], tum:DIR, 7scenes:DIR)");
 }
 
 // Via the quaternion: acos of the trace loses everything below ~0.03 deg in float.
@@ -308,6 +124,110 @@ void printAccuracy(const char* what, const eval::AccuracyReport& r) {
         "", r.unaligned.mean_mm, r.unaligned.rms_mm, r.unaligned.median_mm, r.unaligned.p90_mm, r.offset_mm);
 }
 
+void printFrame(int i, const Sequence& seq, const recon::FrameResult& r, const recon::HeadObservation* head,
+                const char* advice) {
+    const float err_mm =
+        seq.T_ref_camera[i]
+            ? 1000.0f * (r.tracking.T_world_camera.translation() - seq.T_ref_camera[i]->translation()).norm()
+            : -1.0f;
+    std::printf("frame %3d %-18s inliers %6d rmse %.3f mm it %2d fail %d pose err %.2f mm %s", i,
+                recon::trackingStatusName(r.tracking.status), r.tracking.inliers, 1000 * r.tracking.rmse_m,
+                r.tracking.iterations, r.consecutive_failures, err_mm, r.reason);
+    if (head && !head->found) std::printf(" [%s]", head->reason.c_str());
+    if (r.verified) {
+        std::printf(" verify: inliers %.2f conflicts %.3f rmse %.2f mm%s", r.check.agreeShare(),
+                    r.check.conflictShare(), 1000 * r.check.rmse_m, r.reacquired ? " (re-acquired)" : "");
+    }
+    if (r.hypotheses > 0) std::printf(" %d hypotheses %.0f ms", r.hypotheses, r.reacquire_ms);
+    if (r.occluding_pixels > 0) std::printf(" occluder px %d", r.occluding_pixels);
+    if (*advice) std::printf(" -> \"%s\"", advice);
+    std::printf("\n");
+}
+
+struct LoopResult {
+    std::vector<std::optional<Pose>> estimate;  // per frame, when integrated
+    recon::StageTimesMs sum;                    // summed over frames
+    int rejected = 0, warmup = 0;
+    long allocations_after_warmup = 0;
+    std::map<std::string, int> reasons;
+    double loop_s = 0;         // wall clock over the loop
+    int reacquisitions = 0;    // frames re-acquired by the hypothesis search
+    double search_ms_max = 0;  // slowest verification/search of a frame
+};
+
+// Every frame through the reconstructor, timed: with the server's FacePipeline (recon/scan_step.hpp, as the
+// session worker runs it) when `pipeline` is given, else with the input's own masks.
+LoopResult runLoop(const Sequence& seq, recon::Reconstructor& rec, recon::FacePipeline* pipeline, bool verbose) {
+    const int n = static_cast<int>(seq.frames.size());
+    LoopResult out;
+    out.estimate.resize(static_cast<size_t>(n));
+    out.warmup = std::min(n, 5);
+    recon::StageTimesMs& sum = out.sum;
+    recon::ScanStep step;
+    long allocations_at_warmup = 0;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (int i = 0; i < n; ++i) {
+        if (i == out.warmup) allocations_at_warmup = testing::heapAllocations();
+        recon::FrameResult r;
+        const char* advice = "";
+        if (pipeline) {
+            recon::scanFrame(*pipeline, rec, seq.frames[i], step);
+            sum.detect += step.head.detect_ms;
+            sum.segment += step.head.segment_ms;
+            r = step.frame;
+            advice = step.advice;
+        } else {
+            r = rec.processFrame(seq.frames[i], seq.masks[i]);
+        }
+        sum.filter += r.ms.filter;
+        sum.icp += r.ms.icp;
+        sum.integrate += r.ms.integrate;
+        sum.raycast += r.ms.raycast;
+        out.reacquisitions += r.reacquired;
+        out.search_ms_max = std::max(out.search_ms_max, static_cast<double>(r.reacquire_ms));
+        if (verbose) printFrame(i, seq, r, pipeline ? &step.head : nullptr, advice);
+        if (r.integrated) {
+            out.estimate[static_cast<size_t>(i)] = r.tracking.T_world_camera;
+        } else {
+            ++out.rejected;
+            ++out.reasons[r.reason];
+        }
+    }
+    out.loop_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    out.allocations_after_warmup = n > out.warmup ? testing::heapAllocations() - allocations_at_warmup : 0;
+    return out;
+}
+
+// The twin of a scenario: the same motion without its event (the gap's subject turns in view instead of leaving;
+// the occluder is removed). Empty when the sequence has no event.
+std::string twinInput(const Sequence& seq, const std::string& input) {
+    if (!seq.sim) return "";
+    const synth::SequenceParams& p = seq.sim->params();
+    const std::string sep = input.find(':') == std::string::npos ? ":" : ",";
+    if (p.gap_start_frame >= 0 && p.gap_leave) return input + sep + "gap_leave=0";
+    if (p.occluder_start_frame >= 0) return input + sep + "occluder_start=-1";
+    return "";
+}
+
+// The mean accuracy of the scan of `input` (the twin of a scenario), run as the main sequence was.
+StatusOr<double> twinMean(const Options& o, const recon::ReconParams& params, const std::string& input) {
+    Sequence seq;
+    RETURN_IF_ERROR(loadSequence(input, o.frames, seq));
+    recon::Reconstructor rec(seq.k, params);
+    RETURN_IF_ERROR(rec.initStatus());
+    std::optional<recon::FacePipeline> pipeline;
+    if (o.pipeline_mask) {
+        ASSIGN_OR_RETURN(recon::FacePipeline created,
+                         recon::FacePipeline::create({}, seq.k, recon::ColourCamera::registeredTo(seq.k)));
+        pipeline.emplace(std::move(created));
+    }
+    (void)runLoop(seq, rec, pipeline ? &*pipeline : nullptr, false);
+    const recon::Mesh& gt = seq.sim->head().mesh;
+    ASSIGN_OR_RETURN(const eval::AccuracyReport acc, eval::measureAccuracy(rec.extractMesh(), gt, eval::findNoseTip(gt),
+                                                                           {}, seq.sim->poseAt(0).inverse()));
+    return acc.mean_mm;
+}
+
 int runRecon(const std::vector<std::string>& args) {
     Options o;
     for (size_t i = 0; i < args.size(); ++i) {
@@ -335,6 +255,8 @@ int runRecon(const std::vector<std::string>& args) {
             o.json = true;
         else if (a == "--verbose")
             o.verbose = true;
+        else if (a == "--twin")
+            o.twin = o.gt_accuracy = true;
         else if (a == "--volume-m")
             o.volume_m = std::stof(next());
         else if (a == "--trunc-m")
@@ -343,11 +265,15 @@ int runRecon(const std::vector<std::string>& args) {
             std::printf(
                 "usage: facescan-bench recon [--input SRC] [--frames N] [--preset face|fast] [--mesh OUT.ply]\n"
                 "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply] [--observed-tol-m M]\n"
-                "       [--volume-m M] [--trunc-m M] [--mask input|pipeline] [--verbose] [--json]\n"
-                "SRC: synthetic[:distance=0.7,yaw=35,pitch=12,yaw_period=300,pitch_period=150,frames=300,seed=1,\n"
-                "     noise=1,head=lps|builtin] | tum:DIR | 7scenes:DIR\n"
+                "       [--volume-m M] [--trunc-m M] [--mask input|pipeline] [--twin] [--verbose] [--json]\n"
+                "SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR\n"
+                "Synthetic input also reports the robustness figures of issue 18 (tracked share, re-acquisition,\n"
+                "wrong poses, foreign surface). --twin (implies --gt-accuracy) also scans the same motion without the\n"
+                "scenario's event (the gap's subject turns in view; no occluder) and prints the difference of means.\n"
                 "--mask pipeline: find the head per frame with the server's FacePipeline (timed in the loop)\n"
-                "     instead of the input's mask (synthetic: the renderer's head label; tum/7scenes: none).\n");
+                "     instead of the input's mask (synthetic: the renderer's head label; tum/7scenes: none).\n"
+                "%s\n",
+                synth::syntheticOptionsHelp());
             return a == "--help" ? 0 : 2;
         }
     }
@@ -359,7 +285,7 @@ int runRecon(const std::vector<std::string>& args) {
     }
     const double rss_start_mb = currentRssMb();
     Sequence seq;
-    if (const Status s = loadSequence(o, seq); !s.isOk()) {
+    if (const Status s = loadSequence(o.input, o.frames, seq); !s.isOk()) {
         std::fprintf(stderr, "recon: %s\n", s.toString().c_str());
         return 1;
     }
@@ -394,55 +320,12 @@ int runRecon(const std::vector<std::string>& args) {
     }
 
     const int n = static_cast<int>(seq.frames.size());
-    std::vector<std::optional<Pose>> estimate(static_cast<size_t>(n));
-    recon::StageTimesMs sum;
-    int rejected = 0;
-    const int warmup = std::min(n, 5);
-    long allocations_after_warmup = 0;
-    std::map<std::string, int> reasons;
-    const auto t0 = std::chrono::steady_clock::now();
-    for (int i = 0; i < n; ++i) {
-        if (i == warmup) allocations_after_warmup = testing::heapAllocations();
-        recon::FrameResult r;
-        std::string head_reason;  // outlives r.reason's use below
-        if (pipeline) {
-            // As the server's session worker does: the tracked pose seeds the segmenter; detection otherwise.
-            cv::Rect box;
-            const bool tracked = rec.predictedHeadBox(box);
-            const recon::HeadObservation head = pipeline->process(seq.frames[i], tracked ? &box : nullptr);
-            sum.detect += head.detect_ms;
-            sum.segment += head.segment_ms;
-            if (head.found) {
-                r = rec.processFrame(seq.frames[i], head.mask);
-            } else {
-                head_reason = head.reason;
-                r.reason = head_reason.c_str();
-            }
-        } else {
-            r = rec.processFrame(seq.frames[i], seq.masks[i]);
-        }
-        sum.filter += r.ms.filter;
-        sum.icp += r.ms.icp;
-        sum.integrate += r.ms.integrate;
-        sum.raycast += r.ms.raycast;
-        if (o.verbose) {
-            const float err_mm =
-                seq.T_ref_camera[i]
-                    ? 1000.0f * (r.tracking.T_world_camera.translation() - seq.T_ref_camera[i]->translation()).norm()
-                    : -1.0f;
-            std::printf("frame %3d %-18s inliers %6d rmse %.3f mm it %2d fail %d pose err %.2f mm %s\n", i,
-                        recon::trackingStatusName(r.tracking.status), r.tracking.inliers, 1000 * r.tracking.rmse_m,
-                        r.tracking.iterations, r.consecutive_failures, err_mm, r.reason);
-        }
-        if (r.integrated) {
-            estimate[i] = r.tracking.T_world_camera;
-        } else {
-            ++rejected;
-            ++reasons[r.reason];
-        }
-    }
-    const double loop_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    allocations_after_warmup = n > warmup ? testing::heapAllocations() - allocations_after_warmup : 0;
+    const LoopResult loop = runLoop(seq, rec, pipeline ? &*pipeline : nullptr, o.verbose);
+    const std::vector<std::optional<Pose>>& estimate = loop.estimate;
+    const recon::StageTimesMs& sum = loop.sum;
+    const int rejected = loop.rejected, warmup = loop.warmup;
+    const long allocations_after_warmup = loop.allocations_after_warmup;
+    const double loop_s = loop.loop_s;
     const double rss_recon_mb = currentRssMb() - rss_frames_mb;
 
     const auto tm = std::chrono::steady_clock::now();
@@ -464,7 +347,7 @@ int runRecon(const std::vector<std::string>& args) {
     std::printf("%-10s %10.3f   (wall clock over the whole loop)\n", "total", 1000.0 * loop_s / n);
     std::printf("fps %.1f (wall clock, every frame processed), rejected %d, mesh %zu vertices %zu faces in %.1f ms\n",
                 fps, rejected, mesh.n_vertices(), mesh.n_faces(), mesh_ms);
-    for (const auto& [why, count] : reasons) std::printf("  rejected %d x: %s\n", count, why.c_str());
+    for (const auto& [why, count] : loop.reasons) std::printf("  rejected %d x: %s\n", count, why.c_str());
     std::printf("heap allocations in the loop after %d warm-up frames: %ld\n", warmup, allocations_after_warmup);
     std::printf("memory: peak RSS %.1f MB (frames held in memory %.1f MB, reconstructor %.1f MB)\n", peakRssMb(),
                 rss_frames_mb - rss_start_mb, rss_recon_mb);
@@ -487,6 +370,7 @@ int runRecon(const std::vector<std::string>& args) {
     }
 
     std::string acc_json, base_json;
+    double own_accuracy_mean = -1.0;
     if (o.gt_accuracy && seq.sim) {
         const recon::Mesh& gt = seq.sim->head().mesh;
         const Eigen::Vector3f nose = eval::findNoseTip(gt);
@@ -522,6 +406,7 @@ int runRecon(const std::vector<std::string>& args) {
                 100.0 * acc->gt_observed_vertices / acc->gt_face_vertices, seq.frames.size(), sight_s);
             printAccuracy("accuracy (all frames)", *acc);
             acc_json = eval::accuracyJson(*acc);
+            own_accuracy_mean = acc->mean_mm;
             if (!o.misses_out.empty() && sightings.isOk()) {
                 if (const Status s = eval::writeMisses(gt, *sightings, mesh, *acc, nose, acc_params, o.misses_out);
                     !s.isOk())
@@ -533,6 +418,34 @@ int runRecon(const std::vector<std::string>& args) {
         if (base.isOk()) {
             printAccuracy("baseline (1 frame)", *base);
             base_json = eval::accuracyJson(*base);
+        }
+    }
+    // Robustness figures (issue 18) and, with --twin, the same motion without the scenario's event.
+    std::string scenario_json, twin_json;
+    if (seq.sim) {
+        const eval::ScenarioFigures figures =
+            eval::scenarioFigures(*seq.sim, seq.head_pixels, seq.T_ref_camera, estimate, mesh);
+        eval::printScenario(figures);
+        std::printf("re-acquisitions: %d frames fitted by the hypothesis search; slowest verification/search %.1f ms\n",
+                    loop.reacquisitions, loop.search_ms_max);
+        scenario_json = eval::scenarioJson(figures);
+    }
+    if (o.twin && seq.sim) {
+        const std::string twin = twinInput(seq, o.input);
+        const double own_mean = acc_json.empty() ? -1.0 : own_accuracy_mean;
+        seq.frames.clear();  // the twin renders its own frames
+        seq.masks.clear();
+        if (twin.empty()) {
+            std::printf("twin: %s has no event (gap, occluder) to leave out\n", o.input.c_str());
+        } else if (const auto twin_mean = twinMean(o, params, twin); !twin_mean.isOk()) {
+            std::printf("twin: %s\n", twin_mean.status().toString().c_str());
+        } else {
+            std::printf("twin (%s): mean %.4f mm; this run %.4f mm; difference %+.4f mm\n", twin.c_str(), *twin_mean,
+                        own_mean, own_mean - *twin_mean);
+            char buf[256];
+            std::snprintf(buf, sizeof(buf), "{\"mean_mm\":%.4f,\"mean_diff_mm\":%.4f}", *twin_mean,
+                          own_mean - *twin_mean);
+            twin_json = buf;
         }
     }
     if (o.json) {
@@ -547,6 +460,8 @@ int runRecon(const std::vector<std::string>& args) {
                         pe.rpe_deg);
         if (!acc_json.empty()) std::printf(",\"accuracy\":%s", acc_json.c_str());
         if (!base_json.empty()) std::printf(",\"baseline\":%s", base_json.c_str());
+        if (!scenario_json.empty()) std::printf(",\"scenario\":%s", scenario_json.c_str());
+        if (!twin_json.empty()) std::printf(",\"twin\":%s", twin_json.c_str());
         std::printf("}\n");
     }
     return 0;

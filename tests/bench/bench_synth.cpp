@@ -6,11 +6,14 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/objdetect.hpp>
+#include <set>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include "bench_command.hpp"
 #include "synth/kinect_simulator.hpp"
+#include "synth/sequence_options.hpp"
 
 namespace {
 
@@ -19,11 +22,14 @@ using facescan::synth::HeadModel;
 int usage(std::FILE* out) {
     std::fprintf(
         out,
-        "usage: facescan-bench synth [--frames N] [--head builtin|scan|FILE] [--distance M] [--no-detect]\n"
-        "                            [--dump DIR] [--tum DIR] [--json]\n"
-        "  Renders the default synthetic sequence (300 frames, 0.7 m, yaw +-35, pitch +-12 deg) and reports\n"
+        "usage: facescan-bench synth [--sequence OPTIONS] [--frames N] [--head builtin|scan|FILE] [--distance M]\n"
+        "                            [--no-detect] [--dump DIR] [--dump-frames A,B,...] [--tum DIR] [--json]\n"
+        "  Renders a synthetic sequence (default: 300 frames, 0.7 m, yaw +-35, pitch +-12 deg) and reports\n"
         "  render frames/s and the stock Viola-Jones detection rate (a hit: IoU >= 0.3 with the true face box).\n"
-        "  --dump DIR writes frame 0 and a few others as PNG; --tum DIR writes the sequence as a TUM folder.\n");
+        "  --sequence takes the options of `synthetic:` sources (e.g. scenario=chin); --frames, --head and\n"
+        "  --distance override them. --dump DIR writes every 25th frame (or --dump-frames) as PNG: colour, depth,\n"
+        "  labels; --tum DIR writes the sequence as a TUM folder.\n%s\n",
+        facescan::synth::syntheticOptionsHelp());
     return out == stdout ? 0 : 2;
 }
 
@@ -34,8 +40,10 @@ double iou(const cv::Rect& a, const cv::Rect& b) {
 }
 
 int runSynth(const std::vector<std::string>& args) {
-    facescan::synth::SequenceParams params;
-    std::string head_arg = "default", dump_dir, tum_dir;
+    std::string sequence_text, head_arg, dump_dir, tum_dir;
+    int frames = 0;
+    float distance_m = 0;
+    std::set<int> dump_frames;
     bool json = false, detect = true;
     for (size_t i = 0; i < args.size(); ++i) {
         const std::string& a = args[i];
@@ -44,14 +52,19 @@ int runSynth(const std::vector<std::string>& args) {
             json = true;
         } else if (a == "--no-detect") {
             detect = false;
+        } else if (a == "--sequence" && has_value) {
+            sequence_text = args[++i];
         } else if (a == "--frames" && has_value) {
-            params.frames = std::atoi(args[++i].c_str());
+            frames = std::atoi(args[++i].c_str());
         } else if (a == "--distance" && has_value) {
-            params.distance_m = std::strtof(args[++i].c_str(), nullptr);
+            distance_m = std::strtof(args[++i].c_str(), nullptr);
         } else if (a == "--head" && has_value) {
             head_arg = args[++i];
         } else if (a == "--dump" && has_value) {
             dump_dir = args[++i];
+        } else if (a == "--dump-frames" && has_value) {
+            std::stringstream list(args[++i]);
+            for (std::string item; std::getline(list, item, ',');) dump_frames.insert(std::atoi(item.c_str()));
         } else if (a == "--tum" && has_value) {
             tum_dir = args[++i];
         } else if (a == "--help" || a == "-h") {
@@ -61,29 +74,24 @@ int runSynth(const std::vector<std::string>& args) {
             return usage(stderr);
         }
     }
-    if (const auto st = params.validate(); !st.isOk()) {
-        std::fprintf(stderr, "synth: %s\n", st.toString().c_str());
+    auto spec = facescan::synth::parseSyntheticOptions(sequence_text);
+    if (spec.isOk()) {
+        if (frames > 0) spec->sequence.frames = frames;
+        if (distance_m > 0) spec->sequence.distance_m = distance_m;
+        if (!head_arg.empty()) spec->subject = head_arg == "default" ? "auto" : head_arg;
+    }
+    const auto valid = spec.isOk() ? spec->sequence.validate() : spec.status();
+    if (!valid.isOk()) {
+        std::fprintf(stderr, "synth: %s\n", valid.toString().c_str());
         return 2;
     }
-    HeadModel head;
-    if (head_arg == "builtin") {
-        head = facescan::synth::builtinHead();
-    } else if (head_arg == "default") {
-        head = facescan::synth::defaultHead();
-    } else {
-        const auto dir =
-            head_arg == "scan" ? facescan::synth::findLeePerrySmith() : std::optional(std::filesystem::path(head_arg));
-        if (!dir) {
-            std::fprintf(stderr, "synth: the Lee Perry-Smith scan was not found (set FACESCAN_DATA_DIR)\n");
-            return 1;
-        }
-        auto loaded = facescan::synth::loadHeadScan(*dir);
-        if (!loaded.isOk()) {
-            std::fprintf(stderr, "synth: %s\n", loaded.status().toString().c_str());
-            return 1;
-        }
-        head = std::move(loaded).value();
+    const facescan::synth::SequenceParams params = spec->sequence;
+    auto loaded = facescan::synth::loadSubject(spec->subject);
+    if (!loaded.isOk()) {
+        std::fprintf(stderr, "synth: %s\n", loaded.status().toString().c_str());
+        return 1;
     }
+    HeadModel head = std::move(loaded).value();
     const std::string head_name = head.name;
     const facescan::synth::KinectSimulator sim(std::move(head), params);
     if (!tum_dir.empty()) {
@@ -112,7 +120,7 @@ int runSynth(const std::vector<std::string>& args) {
         cv::Mat grey;
         for (int i = 0; i < sim.frameCount(); ++i) {
             sim.render(i, frame, &truth);
-            if (!dump_dir.empty() && i % 25 == 0) {
+            if (!dump_dir.empty() && (dump_frames.empty() ? i % 25 == 0 : dump_frames.count(i) > 0)) {
                 std::filesystem::create_directories(dump_dir);
                 cv::imwrite(dump_dir + "/colour_" + std::to_string(i) + ".png", frame.colour_bgr);
                 cv::Mat d8;

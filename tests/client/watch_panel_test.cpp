@@ -54,6 +54,17 @@ TEST(WatchPanel, LogLineIsOneLineWithTheSameFigures) {
     }
 }
 
+// Issue 18: the server puts what the person should do first in the detail; panel and log line show it whole.
+TEST(WatchPanel, ShowsWhatThePersonShouldDo) {
+    WatchView view = scanningView();
+    view.status.state = facescan_wire_STATE_LOST;
+    view.status.detail = "face lost: hold still (frame rejected: lost: no fit of the head passed verification)";
+    EXPECT_TRUE(contains(panelLines(view)[0], "LOST - face lost: hold still (frame rejected"));
+    EXPECT_TRUE(contains(logLine(view), "(face lost: hold still (frame rejected"));
+    view.status.detail = "turn back toward the camera (face found)";
+    EXPECT_TRUE(contains(panelLines(view)[0], "turn back toward the camera"));
+}
+
 TEST(WatchPanel, SaysWhenNothingHasArrivedYetAndWhenTheServerIsGone) {
     WatchView waiting;
     waiting.status.session_id = "s1";

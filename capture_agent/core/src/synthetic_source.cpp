@@ -1,11 +1,11 @@
 // The synthetic Kinect as a frame source: the project's one renderer (facescan_synth) filming a head scan.
 // Depth leaves here in units of 0.2 mm (TUM's 5000 per metre), finer than the Kinect's own quantisation at
 // face range (about 1.4 mm at 0.7 m), so converting to raw units adds no error of its own.
-#include <cstdlib>
-#include <sstream>
+#include <algorithm>
 
 #include "capture/frame_source.hpp"
 #include "synth/kinect_simulator.hpp"
+#include "synth/sequence_options.hpp"
 
 namespace facescan::capture {
 namespace {
@@ -41,68 +41,14 @@ class SyntheticSource final : public FrameSource {
     int next_ = 0;
 };
 
-// Parses "frames=120,distance=0.7,yaw=35,pitch=12,seed=3,noise=0,subject=builtin".
-Status parseOptions(const std::string& text, synth::SequenceParams& seq, std::string& subject) {
-    std::stringstream items(text);
-    std::string item;
-    while (std::getline(items, item, ',')) {
-        if (item.empty()) continue;
-        const auto eq = item.find('=');
-        if (eq == std::string::npos) return invalidArgument("synthetic option '" + item + "' is not key=value");
-        const std::string key = item.substr(0, eq);
-        const std::string value = item.substr(eq + 1);
-        char* end = nullptr;
-        const double number = std::strtod(value.c_str(), &end);
-        const bool numeric = end && *end == '\0' && !value.empty();
-        if (key == "subject") {
-            subject = value;
-            continue;
-        }
-        if (!numeric) return invalidArgument("synthetic option " + key + "=" + value + ": expected a number");
-        if (key == "frames") {
-            seq.frames = static_cast<int>(number);
-        } else if (key == "distance") {
-            seq.distance_m = static_cast<float>(number);
-        } else if (key == "yaw") {
-            seq.yaw_amplitude_deg = static_cast<float>(number);
-        } else if (key == "pitch") {
-            seq.pitch_amplitude_deg = static_cast<float>(number);
-        } else if (key == "seed") {
-            seq.seed = static_cast<uint64_t>(number);
-        } else if (key == "noise") {
-            seq.noise = number != 0;
-        } else if (key == "period") {
-            seq.yaw_period_frames = static_cast<float>(number);
-            seq.pitch_period_frames = static_cast<float>(number / 2);
-        } else {
-            return invalidArgument("unknown synthetic option '" + key +
-                                   "' (known: frames, distance, yaw, pitch, period, seed, noise, subject)");
-        }
-    }
-    return seq.validate();
-}
-
 }  // namespace
 
 StatusOr<std::unique_ptr<FrameSource>> openSyntheticSource(const std::string& options_text,
                                                            const SourceOptions& options) {
-    synth::SequenceParams seq;
-    std::string subject = "auto";
-    RETURN_IF_ERROR(parseOptions(options_text, seq, subject));
+    ASSIGN_OR_RETURN(synth::SyntheticSpec spec, synth::parseSyntheticOptions(options_text));
+    synth::SequenceParams& seq = spec.sequence;
     if (options.max_frames > 0) seq.frames = std::min(seq.frames, options.max_frames);
-
-    synth::HeadModel head;
-    if (subject == "auto") {
-        head = synth::defaultHead();
-    } else if (subject == "builtin") {
-        head = synth::builtinHead();
-    } else if (subject == "scan") {
-        const auto dir = synth::findLeePerrySmith();
-        if (!dir) return notFound("subject=scan: the Lee Perry-Smith scan was not found (set FACESCAN_DATA_DIR)");
-        ASSIGN_OR_RETURN(head, synth::loadHeadScan(*dir));
-    } else {
-        ASSIGN_OR_RETURN(head, synth::loadHeadScan(subject));
-    }
+    ASSIGN_OR_RETURN(synth::HeadModel head, synth::loadSubject(spec.subject));
 
     SourceInfo info;
     info.intrinsics = recon::Intrinsics::kinectV1();

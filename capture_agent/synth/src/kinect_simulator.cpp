@@ -21,6 +21,10 @@ const Eigen::Vector3f kPivotHead(0.0f, -0.07f, -0.03f);
 constexpr float kSkinTopY = -0.12f, kSkinBottomY = -0.18f;
 // Periods (frames) of the slow body sway; the phases come from the seed.
 constexpr float kSwayPeriodX = 230.0f, kSwayPeriodY = 170.0f;
+// The occluder: ellipsoid semi-axes (a hand: 9 cm wide, 18 cm tall, 3 cm thick) and how far either side of the
+// nose its centre starts and ends its crossing (metres).
+constexpr float kOccluderRadiiM[3] = {0.045f, 0.09f, 0.015f};
+constexpr float kOccluderSweepM = 0.17f;
 
 using Vec3 = Eigen::Vector3f;
 
@@ -53,22 +57,33 @@ Status SequenceParams::validate() const {
     if (wall && !(wall_distance_m > distance_m + 0.25f && wall_distance_m < 10)) {
         return invalidArgument("synthetic: the wall must be at least 0.25 m behind the head and within 10 m");
     }
+    if (gap_start_frame >= 0 && !(gap_frames >= 0 && gap_walk_frames >= 0 && std::abs(gap_turn_deg) <= 90 &&
+                                  gap_side_m >= 0 && gap_side_m <= 5)) {
+        return invalidArgument("synthetic: gap frames >= 0, walk frames >= 0, |turn| <= 90 deg, side 0-5 m");
+    }
+    if (occluder_start_frame >= 0 &&
+        !(occluder_frames >= 1 && occluder_front_m >= 0.02f && occluder_front_m <= distance_m - 0.45f)) {
+        return invalidArgument(
+            "synthetic: occluder frames >= 1, 0.02 m <= occluder_front <= distance - 0.45 m (the sensor's range)");
+    }
     return noise_model.validate();
 }
 
 struct KinectSimulator::Scene {
-    // Vertices of head [0, head_end), torso [head_end, torso_end), wall [torso_end, end).
+    // Vertices of head [0, head_end), torso [head_end, torso_end), wall [torso_end, wall_end), occluder
+    // [wall_end, end).
     std::vector<Vec3> points, normals, colours;  // object frame; colours BGR 0-255
     std::vector<Eigen::Vector2f> uvs;            // head only, when textured
     std::vector<float> head_weight;              // skinning weight of head vertices (1 = rigid with the head)
     std::vector<Eigen::Vector3i> tris;
     std::vector<uint8_t> tri_label;  // PixelLabel
-    int head_end = 0, torso_end = 0, head_tri_end = 0;
+    int head_end = 0, torso_end = 0, wall_end = 0, head_tri_end = 0;
     std::vector<int> face_vertices;  // head vertices of the face box (brows to chin, cheek to cheek)
     float sway_phase_x = 0, sway_phase_y = 0;
 
     void addTorso(const recon::Mesh& head_mesh);
     void addWall(float distance_m);
+    void addOccluder();
 };
 
 // A torso continuing the head mesh downwards: an elliptic cylinder sized from the mesh's lowest band
@@ -128,6 +143,32 @@ void KinectSimulator::Scene::addWall(float distance_m) {
     tri_label.insert(tri_label.end(), 2, static_cast<uint8_t>(PixelLabel::kNone));
 }
 
+// The occluder: a flattened ellipsoid about the size of a hand (9 x 18 x 3 cm), skin-coloured, in its own frame
+// (axes of the camera), centred on the origin.
+void KinectSimulator::Scene::addOccluder() {
+    const Vec3 radii(kOccluderRadiiM[0], kOccluderRadiiM[1], kOccluderRadiiM[2]);
+    constexpr int kSectors = 32, kRings = 16;
+    const int base = static_cast<int>(points.size());
+    for (int r = 0; r <= kRings; ++r) {
+        const float theta = static_cast<float>(M_PI) * r / kRings;
+        for (int j = 0; j < kSectors; ++j) {
+            const float phi = 2.0f * static_cast<float>(M_PI) * j / kSectors;
+            const Vec3 unit(std::sin(theta) * std::cos(phi), std::cos(theta), std::sin(theta) * std::sin(phi));
+            points.push_back(unit.cwiseProduct(radii));
+            normals.push_back(unit.cwiseQuotient(radii).normalized());
+            colours.emplace_back(120, 150, 205);
+        }
+    }
+    for (int r = 0; r < kRings; ++r) {
+        for (int j = 0; j < kSectors; ++j) {
+            const int a = base + r * kSectors + j, b = base + r * kSectors + (j + 1) % kSectors;
+            tris.emplace_back(a, b, b + kSectors);
+            tris.emplace_back(a, b + kSectors, a + kSectors);
+            tri_label.insert(tri_label.end(), 2, static_cast<uint8_t>(PixelLabel::kOccluder));
+        }
+    }
+}
+
 KinectSimulator::KinectSimulator(HeadModel head, SequenceParams params, recon::Intrinsics intrinsics)
     : head_(std::move(head)), params_(params), intrinsics_(intrinsics), scene_(std::make_unique<Scene>()) {
     Scene& s = *scene_;
@@ -169,6 +210,8 @@ KinectSimulator::KinectSimulator(HeadModel head, SequenceParams params, recon::I
     if (params_.torso) s.addTorso(m);
     s.torso_end = static_cast<int>(s.points.size());
     if (params_.wall) s.addWall(params_.wall_distance_m);
+    s.wall_end = static_cast<int>(s.points.size());
+    if (params_.occluder_start_frame >= 0) s.addOccluder();
     const uint64_t r = detail::mix64(params_.seed ^ 0x5157A7ull);
     s.sway_phase_x = static_cast<float>(r & 0xFFFF) / 65536.0f * 2.0f * static_cast<float>(M_PI);
     s.sway_phase_y = static_cast<float>((r >> 16) & 0xFFFF) / 65536.0f * 2.0f * static_cast<float>(M_PI);
@@ -178,29 +221,83 @@ KinectSimulator::~KinectSimulator() = default;
 KinectSimulator::KinectSimulator(KinectSimulator&&) noexcept = default;
 KinectSimulator& KinectSimulator::operator=(KinectSimulator&&) noexcept = default;
 
-// The body (torso, and the head at rest) relative to the camera: facing it at the set distance, swaying.
-static recon::Pose bodyPose(const SequenceParams& p, float phase_x, float phase_y, int index) {
+// Rotation by `deg` about the head-frame axis `axis` through the neck pivot (head frame at rest).
+static recon::Pose aboutNeck(const Vec3& axis, float deg) {
+    recon::Pose m = recon::Pose::Identity();
+    m.linear() = Eigen::AngleAxisf(deg * kDegToRad, axis).toRotationMatrix();
+    m.translation() = kPivotHead - m.linear() * kPivotHead;
+    return m;
+}
+
+// 0 -> 1 smoothly (zero slope at both ends) as t goes 0 -> 1.
+static float smoothStep(float t) {
+    t = std::clamp(t, 0.0f, 1.0f);
+    return t * t * (3.0f - 2.0f * t);
+}
+
+recon::Pose KinectSimulator::bodyPoseAt(int index) const {
+    const SequenceParams& p = params_;
     const float two_pi = 2.0f * static_cast<float>(M_PI);
-    const Vec3 sway(p.sway_amplitude_m * (std::sin(two_pi * index / kSwayPeriodX + phase_x) - std::sin(phase_x)),
-                    p.sway_amplitude_m * (std::sin(two_pi * index / kSwayPeriodY + phase_y) - std::sin(phase_y)), 0);
+    const float px = scene_->sway_phase_x, py = scene_->sway_phase_y;
+    const Vec3 sway(p.sway_amplitude_m * (std::sin(two_pi * index / kSwayPeriodX + px) - std::sin(px)),
+                    p.sway_amplitude_m * (std::sin(two_pi * index / kSwayPeriodY + py) - std::sin(py)), 0);
+    // The gap: walk out over W frames, stay out G frames, walk back in over W frames; turned on the way back.
+    float side = 0.0f, turn = 0.0f;
+    if (p.gap_start_frame >= 0 && index >= p.gap_start_frame) {
+        const int w = p.gap_walk_frames, g = p.gap_frames, t = index - p.gap_start_frame;
+        const float walk = static_cast<float>(w + 1);
+        if (p.gap_leave) {
+            if (t < w) {
+                side = static_cast<float>(t + 1) / walk;
+            } else if (t < w + g) {
+                side = 1.0f;
+            } else if (t < 2 * w + g) {
+                side = static_cast<float>(2 * w + g - t) / walk;
+            }
+            turn = t >= w + g ? 1.0f : 0.0f;
+        } else {
+            turn = smoothStep(static_cast<float>(t + 1) / static_cast<float>(2 * w + g + 1));
+        }
+    }
     recon::Pose T = recon::Pose::Identity();
-    T.translation() = Vec3(0, 0, p.distance_m) + sway;
+    T.translation() = Vec3(side * p.gap_side_m, 0, p.distance_m) + sway;
     // Head frame (y up, face along +z) to camera (y down, looking along +z): 180 deg about x.
     T.linear() = Eigen::Vector3f(1, -1, -1).asDiagonal();
-    return T;
+    return turn != 0.0f ? T * aboutNeck(Vec3::UnitY(), turn * p.gap_turn_deg) : T;
+}
+
+float KinectSimulator::yawDegAt(int index) const {
+    const float two_pi = 2.0f * static_cast<float>(M_PI);
+    return params_.yaw_amplitude_deg * std::sin(two_pi * index / params_.yaw_period_frames);
+}
+
+float KinectSimulator::pitchDegAt(int index) const {
+    const float phase = 2.0f * static_cast<float>(M_PI) * index / params_.pitch_period_frames;
+    return params_.pitch_amplitude_deg * (params_.nod ? 0.5f * (1.0f - std::cos(phase)) : std::sin(phase));
 }
 
 recon::Pose KinectSimulator::poseAt(int index) const {
-    const float two_pi = 2.0f * static_cast<float>(M_PI);
-    const float yaw = params_.yaw_amplitude_deg * kDegToRad * std::sin(two_pi * index / params_.yaw_period_frames);
-    const float pitch =
-        params_.pitch_amplitude_deg * kDegToRad * std::sin(two_pi * index / params_.pitch_period_frames);
-    const Eigen::Matrix3f R =
-        (Eigen::AngleAxisf(yaw, Vec3::UnitY()) * Eigen::AngleAxisf(pitch, Vec3::UnitX())).toRotationMatrix();
+    const Eigen::Matrix3f R = (Eigen::AngleAxisf(yawDegAt(index) * kDegToRad, Vec3::UnitY()) *
+                               Eigen::AngleAxisf(pitchDegAt(index) * kDegToRad, Vec3::UnitX()))
+                                  .toRotationMatrix();
     recon::Pose motion = recon::Pose::Identity();  // rotation about the neck pivot, in the head frame
     motion.linear() = R;
     motion.translation() = kPivotHead - R * kPivotHead;
-    return bodyPose(params_, scene_->sway_phase_x, scene_->sway_phase_y, index) * motion;
+    return bodyPoseAt(index) * motion;
+}
+
+bool KinectSimulator::occluderActiveAt(int index) const {
+    const int start = params_.occluder_start_frame;
+    return start >= 0 && index >= start && index < start + params_.occluder_frames;
+}
+
+Eigen::Vector3f KinectSimulator::occluderCentreAt(int index) const {
+    // Across the face at the nose's height, from the person's right (camera -x) to their left.
+    const Vec3 nose = poseAt(index) * head_.nose_tip_head;
+    const float t = params_.occluder_frames > 1 ? static_cast<float>(index - params_.occluder_start_frame) /
+                                                      static_cast<float>(params_.occluder_frames - 1)
+                                                : 0.5f;
+    return {nose.x() + kOccluderSweepM * (2.0f * t - 1.0f), nose.y(), nose.z() - params_.occluder_front_m};
 }
 
 recon::Mesh KinectSimulator::headInFirstCamera() const {
@@ -215,11 +312,18 @@ recon::Mesh KinectSimulator::headInFirstCamera() const {
     return out;
 }
 
+std::vector<uint8_t> KinectSimulator::headVertexMask(float below_cut_m) const {
+    std::vector<uint8_t> mask(head_.mesh.n_vertices(), 0);
+    for (const auto vh : head_.mesh.vertices())
+        mask[static_cast<size_t>(vh.idx())] = head_.mesh.point(vh)[1] >= head_.neck_cut_y_m - below_cut_m;
+    return mask;
+}
+
 void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth) const {
     const Scene& s = *scene_;
     const recon::Intrinsics& k = intrinsics_;
     const recon::Pose T_camera_head = poseAt(index);
-    const recon::Pose T_camera_body = bodyPose(params_, s.sway_phase_x, s.sway_phase_y, index);
+    const recon::Pose T_camera_body = bodyPoseAt(index);
 
     // Vertices into the camera frame; the neck blends between head and body (linear-blend skinning).
     std::vector<Vec3> pc(s.points.size()), nc(s.points.size());
@@ -238,7 +342,13 @@ void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth
         pc[i] = T_camera_body * s.points[i];
         nc[i] = T_camera_body.linear() * s.normals[i];
     }
-    for (int i = s.torso_end; i < static_cast<int>(s.points.size()); ++i) pc[i] = s.points[i], nc[i] = s.normals[i];
+    for (int i = s.torso_end; i < s.wall_end; ++i) pc[i] = s.points[i], nc[i] = s.normals[i];
+    // The occluder when it is in the scene; otherwise behind the camera, where the rasteriser skips it.
+    const Vec3 occluder_at = occluderActiveAt(index) ? occluderCentreAt(index) : Vec3(0, 0, -10);
+    for (int i = s.wall_end; i < static_cast<int>(s.points.size()); ++i) {
+        pc[i] = s.points[i] + occluder_at;
+        nc[i] = s.normals[i];
+    }
 
     detail::GBuffer g;
     detail::rasterise(pc, s.tris, k, g);
@@ -311,9 +421,9 @@ void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth
         truth->T_camera_head = T_camera_head;
         truth->label = label;
         truth->depth_true_m = g.depth_m;
-        const float two_pi = 2.0f * static_cast<float>(M_PI);
-        truth->yaw_deg = params_.yaw_amplitude_deg * std::sin(two_pi * index / params_.yaw_period_frames);
-        truth->pitch_deg = params_.pitch_amplitude_deg * std::sin(two_pi * index / params_.pitch_period_frames);
+        truth->yaw_deg = yawDegAt(index);
+        truth->pitch_deg = pitchDegAt(index);
+        truth->head_pixels = cv::countNonZero(label == static_cast<uint8_t>(PixelLabel::kHead));
         // Face box: the visible face-region vertices (not hidden in the ideal depth), projected.
         int u_lo = w, v_lo = h, u_hi = -1, v_hi = -1, visible = 0;
         for (const int i : s.face_vertices) {

@@ -15,6 +15,7 @@ Status FacePipelineParams::validate() const {
     RETURN_IF_ERROR(detector.validate());
     RETURN_IF_ERROR(segmenter.validate());
     RETURN_IF_ERROR(finder.validate());
+    RETURN_IF_ERROR(model.validate());
     if (redetect_every_frames < 0) return invalidArgument("redetect_every_frames must be >= 0");
     return Status::ok();
 }
@@ -106,6 +107,32 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
     }
     obs.found = false;
     obs.reason = detect_reason;
+    return obs;
+}
+
+HeadObservation FacePipeline::process(const RgbdFrame& frame, const HeadPrediction& prediction) {
+    const bool redetect_due =
+        params_.redetect_every_frames > 0 && frames_since_detection_ >= params_.redetect_every_frames;
+    if (redetect_due || prediction.model == nullptr) return process(frame, nullptr);
+    const auto t0 = Clock::now();
+    model_segmenter_.segment(frame.depth_m, depth_, prediction, params_.segmenter, model_segmentation_);
+    const float ms = msSince(t0);
+    if (!model_segmentation_.found) {
+        // Not confirmed: find the head afresh (detection, width criterion, depth-only finder).
+        HeadObservation obs = process(frame, nullptr);
+        obs.segment_ms += ms;
+        return obs;
+    }
+    ++frames_since_detection_;
+    HeadObservation obs;
+    obs.found = true;
+    obs.from_model = true;
+    obs.segment_ms = ms;
+    obs.mask = model_segmentation_.mask;
+    obs.depth_m = model_segmentation_.depth_m;
+    obs.centroid_m = model_segmentation_.centroid_m;
+    obs.extent_m = model_segmentation_.extent_m;
+    obs.face_box = model_segmentation_.head_box_px;
     return obs;
 }
 

@@ -257,25 +257,33 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
         ++row_hist_[static_cast<size_t>(y)];
         ++col_hist_[static_cast<size_t>(idx - y * w)];
     }
-    auto span = [&](const std::vector<int>& hist) {
-        const int lo_n = out.pixels / 100, hi_n = out.pixels - out.pixels / 100;
-        int acc = 0, lo = -1, hi = -1;
-        for (int i = 0; i < static_cast<int>(hist.size()); ++i) {
-            acc += hist[static_cast<size_t>(i)];
-            if (lo < 0 && acc > lo_n) lo = i;
-            if (hi < 0 && acc >= hi_n) hi = i;
-        }
-        return static_cast<float>(hi - lo + 1);
-    };
-    out.extent_m = {span(col_hist_) * z_c / k.fx_px, span(row_hist_) * z_c / k.fy_px, z_hi - z_lo};
-    const float width_m = out.extent_m.x(), height_m = out.extent_m.y();
-    if (width_m < params_.head_width_min_m || width_m > params_.head_width_max_m ||
-        height_m < params_.head_height_min_m || height_m > params_.head_height_max_m) {
-        const std::string size = metres(width_m) + " wide, " + metres(height_m) + " tall";
-        out.reason = "region at the face is not head-sized (" + size + ")";
+    out.extent_m = {percentileSpanPx(col_hist_, out.pixels) * z_c / k.fx_px,
+                    percentileSpanPx(row_hist_, out.pixels) * z_c / k.fy_px, z_hi - z_lo};
+    if (!params_.headSized(out.extent_m)) {
+        out.reason = "region at the face is not head-sized (" + sizeText(out.extent_m) + ")";
         return;  // mask kept for inspection; found stays false
     }
     out.found = true;
+}
+
+float percentileSpanPx(const std::vector<int>& hist, int pixels) {
+    const int lo_n = pixels / 100, hi_n = pixels - pixels / 100;
+    int acc = 0, lo = -1, hi = -1;
+    for (int i = 0; i < static_cast<int>(hist.size()); ++i) {
+        acc += hist[static_cast<size_t>(i)];
+        if (lo < 0 && acc > lo_n) lo = i;
+        if (hi < 0 && acc >= hi_n) hi = i;
+    }
+    return static_cast<float>(hi - lo + 1);
+}
+
+bool HeadSegmenterParams::headSized(const Eigen::Vector3f& extent_m) const {
+    return extent_m.x() >= head_width_min_m && extent_m.x() <= head_width_max_m && extent_m.y() >= head_height_min_m &&
+           extent_m.y() <= head_height_max_m;
+}
+
+std::string sizeText(const Eigen::Vector3f& extent_m) {
+    return metres(extent_m.x()) + " wide, " + metres(extent_m.y()) + " tall";
 }
 
 }  // namespace facescan::recon

@@ -42,6 +42,7 @@ const char* trackingStatusName(TrackingStatus s) {
         case TrackingStatus::kLargeMotion: return "large_motion";
         case TrackingStatus::kNoHead: return "no_head";
         case TrackingStatus::kInvalidInput: return "invalid_input";
+        case TrackingStatus::kUnverified: return "unverified";
     }
     return "unknown";
 }

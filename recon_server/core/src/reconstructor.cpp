@@ -10,6 +10,21 @@ namespace facescan::recon {
 namespace {
 
 constexpr size_t kTrajectoryReserve = 18000;  // 10 minutes at 30 frames/s before the vector ever grows
+// Visibility: the head's valid pixels at pyramid level 2 (a sixteenth of the pixels, plenty for a share) against
+// their running mean over fused frames (rate per fused frame), which drifts slowly towards the count while the
+// head is hidden (rate per unfused frame).
+constexpr int kVisibilityLevel = 2;
+constexpr float kVisibleRefRate = 0.05f, kVisibleRefDecay = 0.02f;
+
+// Valid vertices of a level inside its ROI.
+int countValid(const SurfaceLevel& lv) {
+    int n = 0;
+    for (int v = lv.roi.y; v < lv.roi.y + lv.roi.height; ++v) {
+        const auto* row = lv.vertex.ptr<cv::Vec3f>(v);
+        for (int u = lv.roi.x; u < lv.roi.x + lv.roi.width; ++u) n += std::isnan(row[u][0]) ? 0 : 1;
+    }
+    return n;
+}
 
 }  // namespace
 
@@ -33,7 +48,15 @@ Status ReconParams::validate() const {
     RETURN_IF_ERROR(tsdf.validate());
     RETURN_IF_ERROR(raycast.validate());
     RETURN_IF_ERROR(mesh.validate());
+    RETURN_IF_ERROR(head_region.validate());
+    RETURN_IF_ERROR(reacquire.validate());
     if (icp.levels > filter.levels) return invalidArgument("icp.levels must not exceed filter.levels");
+    if (reacquire.enabled && filter.levels < 3) return invalidArgument("re-acquisition needs filter.levels >= 3");
+    if (!(occluder_band_m >= 0.0f && confident_weight > 0.0f && occluder_prefilter_m > 0.0f))
+        return invalidArgument("occluder_band_m must be >= 0, occluder_prefilter_m and confident_weight > 0");
+    if (predict_max_failures < 0) return invalidArgument("predict_max_failures must be >= 0");
+    if (!(min_visible_share >= 0.0f && resume_visible_share >= min_visible_share && resume_visible_share <= 1.0f))
+        return invalidArgument("need 0 <= min_visible_share <= resume_visible_share <= 1");
     if (min_head_pixels < 1) return invalidArgument("min_head_pixels must be >= 1");
     if (roi_margin_px < 0) return invalidArgument("roi_margin_px must be >= 0");
     return Status::ok();
@@ -46,10 +69,13 @@ Reconstructor::Reconstructor(const Intrinsics& k, const ReconParams& p)
       filter_(k.valid() ? k : Intrinsics{}, p.filter),
       icp_(p.icp),
       volume_(init_status_.isOk() ? p.tsdf : TsdfParams{}),
-      raycaster_(p.raycast) {
+      raycaster_(p.raycast),
+      reacquirer_(k.valid() ? k : Intrinsics{}, p.reacquire, p.icp) {
     const Intrinsics kk = k.valid() ? k : Intrinsics{};
     frame_.allocate(kk, p.filter.levels);
     model_.allocate(kk, p.filter.levels);
+    hint_m_.create(kk.height_px, kk.width_px, CV_32FC1);
+    hint_m_.setTo(0.0f);
     trajectory_.reserve(kTrajectoryReserve);
 }
 
@@ -100,31 +126,45 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         // The first frame defines the reference orientation (thesis 4.1): world = this camera.
         if (!volume_.placed() && !volume_.place(frame_.levels[0]))
             return reject(TrackingStatus::kNoHead, "no valid head point to place the volume");
+        HeadRegion::fromFirstFrame(frame_.levels[0], params_.head_region, region_);
+        visible_ref_px_ = static_cast<float>(countValid(frame_.levels[std::min(kVisibilityLevel, frame_.count - 1)]));
         T_world_camera_ = Pose::Identity();
         result.tracking.status = TrackingStatus::kFirstFrame;
         result.tracking.inliers = valid;
     } else {
-        // Registration against the ray-cast model (thesis 4.1.3, frame-to-model).
-        const bool reacquiring = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
-        // The prediction is the last pose, as in the thesis. A constant-velocity prediction was tried and made
-        // tracking unstable on the synthetic head: it re-applies the error along the head's weakly constrained
-        // (sliding) direction every frame, and the error grew twofold per frame.
-        Pose guess = T_world_camera_;
-        if (reacquiring || frames_integrated_ == 1) {
-            // Eq. 4.11 for the first frame pair and for re-acquisition after a loss: align the centroids.
-            guess = T_world_camera_;
-            centroidAlignment(frame_.levels[0], model_.levels[0], guess);
+        // Robust integration, part 1: whatever lies well in front of the confident model at the predicted pose
+        // (further than any head motion between frames could put it: a hand in front of the face) is an occluder;
+        // it leaves the frame before registration, so it cannot pull the fit either.
+        if (params_.robust_integration) {
+            const cv::Rect& roi = frame_.levels[0].roi;
+            frame_.levels[0].depth_m(roi).copyTo(hint_m_(roi));
+            result.occluding_pixels =
+                rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_, volume_.grid(),
+                                     params_.occluder_prefilter_m, params_.confident_weight, &hint_m_);
         }
-        Pose estimate = guess;
-        // Motion limits are measured from the last good pose, not from the centroid-shifted start.
-        result.tracking = icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate);
-        result.ms.icp = watch.lapMs();
-        if (!result.tracking.ok()) {
+        // A head mostly hidden (a hand across the face, a head half out of view) leaves too little surface to pin
+        // down all six degrees of freedom: a fit may slide along the visible part, and so may a search. Such a
+        // frame is held: neither registered nor fused; the last good pose stays the next frame's start, and the
+        // next fit is verified before it is fused (after a real loss, the head back in view is searched for
+        // whatever part of it shows).
+        const int visible = countValid(frame_.levels[std::min(kVisibilityLevel, frame_.count - 1)]);
+        const bool long_loss = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
+        if (!long_loss && headMostlyHidden(visible)) {
+            result.ms.icp = watch.lapMs();
+            result.tracking.status = TrackingStatus::kNotEnoughPoints;
+            result.tracking.T_world_camera = T_world_camera_;
+            result.reason = "head mostly hidden: held, not fused";
+            result.consecutive_failures = consecutive_failures_;
+            return result;
+        }
+        Pose estimate = T_world_camera_;
+        if (!registerFrame(valid, result, estimate)) {
             const char* why = "registration failed";
             switch (result.tracking.status) {
                 case TrackingStatus::kNotEnoughPoints: why = "too few correspondences with the model"; break;
                 case TrackingStatus::kDiverged: why = "registration diverged (residual too large)"; break;
                 case TrackingStatus::kLargeMotion: why = "motion larger than the limits"; break;
+                case TrackingStatus::kUnverified: why = "lost: no fit of the head passed verification"; break;
                 default: break;
             }
             const TrackingStatus status = result.tracking.status;
@@ -132,7 +172,22 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
             result.ms.icp = watch.elapsedMs();
             return result;
         }
+        // After a real loss the verified re-acquisition starts the visibility count afresh (the head may be nearer
+        // or further than before).
+        if (result.reacquired && long_loss) visible_ref_px_ = static_cast<float>(visible);
+        visible_ref_px_ += kVisibleRefRate * (static_cast<float>(visible) - visible_ref_px_);
+        verify_next_ = false;
         T_world_camera_ = estimate;
+        // Robust integration, part 2: at the fitted pose, what lies in front of the confident model by more than
+        // the truncation band (a hand near the face) is left out of this frame's fusion. The next cast looks for
+        // the model behind such pixels (their hint is the model's depth), so the comparison holds for as long as
+        // the occluder stays.
+        if (params_.robust_integration) {
+            const float band = params_.occluder_band_m > 0.0f ? params_.occluder_band_m : params_.tsdf.trunc_dist_m;
+            result.occluding_pixels += rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_,
+                                                            volume_.grid(), band, params_.confident_weight, &hint_m_);
+        }
+        result.ms.icp = watch.lapMs();
     }
 
     // Volumetric integration (thesis 4.2.1) and ray casting for the next registration (4.2.2).
@@ -148,15 +203,131 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     trajectory_.emplace_back(frame.timestamp_ns, T_world_camera_);
     const cv::Rect& roi0 = frame_.levels[0].roi;
     const int m = params_.roi_margin_px;
-    raycastModel(cv::Rect(roi0.x - m, roi0.y - m, roi0.width + 2 * m, roi0.height + 2 * m));
+    raycastModel(cv::Rect(roi0.x - m, roi0.y - m, roi0.width + 2 * m, roi0.height + 2 * m),
+                 result.occluding_pixels > 0 ? hint_m_ : frame_.levels[0].depth_m);
     result.ms.raycast = watch.lapMs();
     result.tracking.T_world_camera = T_world_camera_;
     result.consecutive_failures = 0;
     return result;
 }
 
-void Reconstructor::raycastModel(const cv::Rect& roi) {
-    raycaster_.cast(volume_.grid(), k_, T_world_camera_, roi, frame_.levels[0].depth_m, model_.levels[0]);
+bool Reconstructor::headMostlyHidden(int visible) {
+    const float needed = verify_next_ ? params_.resume_visible_share : params_.min_visible_share;
+    if (static_cast<float>(visible) >= needed * visible_ref_px_) return false;
+    // The reference drifts slowly towards what is seen, so a head that stays small (it moved away while hidden)
+    // is fused again after a while, once a fit of it is verified.
+    visible_ref_px_ += kVisibleRefDecay * (static_cast<float>(visible) - visible_ref_px_);
+    verify_next_ = params_.reacquire.enabled;
+    return true;
+}
+
+bool Reconstructor::registerFrame(int valid, FrameResult& result, Pose& estimate) {
+    // Registration against the ray-cast model (thesis 4.1.3, frame-to-model). The prediction is the last pose, as
+    // in the thesis. A constant-velocity prediction was tried and made tracking unstable on the synthetic head: it
+    // re-applies the error along the head's weakly constrained (sliding) direction every frame, and the error grew
+    // twofold per frame.
+    const bool reacquiring = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
+    if (reacquiring || frames_integrated_ == 1) {
+        // Eq. 4.11 for the first frame pair and for re-acquisition after a loss: align the centroids.
+        centroidAlignment(frame_.levels[0], model_.levels[0], estimate);
+    }
+    // Motion limits are measured from the last good pose, not from the centroid-shifted start.
+    result.tracking = icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate);
+    if (!params_.reacquire.enabled) return result.tracking.ok();
+    if (consecutive_failures_ > 0 || verify_next_) {
+        // After a loss (or hidden frames) nothing is fused before a fit is verified: the plain fit, else the best
+        // verified hypothesis (issue 18).
+        const bool icp_ok = result.tracking.ok();
+        if (reacquire(icp_ok, estimate, valid, result)) {
+            estimate = T_world_camera_;
+            return true;
+        }
+        if (icp_ok || result.hypotheses > 0) result.tracking.status = TrackingStatus::kUnverified;
+        return false;
+    }
+    if (result.tracking.ok()) return true;
+    // The first failed frame: the head may have turned fast. One search, bounded like any other.
+    const TrackingStatus failed = result.tracking.status;
+    if (reacquire(false, estimate, valid, result)) {
+        estimate = T_world_camera_;
+        return true;
+    }
+    result.tracking.status = failed;
+    return false;
+}
+
+bool Reconstructor::reacquire(bool icp_ok, const Pose& icp_estimate, int valid_px, FrameResult& result) {
+    Stopwatch watch;
+    // The plain fit from the last good pose first: its own inlier share must pass too (a fit that converged on
+    // part of the head only, sliding over the rest, can look consistent along each ray).
+    const bool icp_converged = icp_ok && static_cast<float>(result.tracking.inliers) >=
+                                             params_.reacquire.min_agree_share * static_cast<float>(valid_px);
+    if (icp_converged) {
+        result.verified = true;
+        result.check = reacquirer_.verify(volume_.grid(), frame_, icp_estimate);
+        if (reacquirer_.accepts(result.check)) {
+            T_world_camera_ = icp_estimate;
+            result.reacquire_ms = watch.elapsedMs();
+            return true;
+        }
+    }
+    const ReacquireResult found = reacquirer_.search(volume_.grid(), frame_, T_world_camera_, region_);
+    result.hypotheses = found.hypotheses;
+    if (found.refined > 0) {
+        result.verified = true;
+        result.check = found.check;
+    }
+    if (!found.found) {
+        result.reacquire_ms = watch.elapsedMs();
+        return false;
+    }
+    // The model as seen from the verified pose, then the tracker's own ICP against it for the last millimetre;
+    // robust integration compares against this cast.
+    T_world_camera_ = found.T_world_camera;
+    const cv::Rect& roi0 = frame_.levels[0].roi;
+    const int m = params_.roi_margin_px;
+    raycastModel(cv::Rect(roi0.x - m, roi0.y - m, roi0.width + 2 * m, roi0.height + 2 * m), frame_.levels[0].depth_m);
+    Pose polished = found.T_world_camera;
+    const TrackingResult r = icp_.align(frame_, model_, T_world_model_, found.T_world_camera, polished);
+    if (r.ok()) {
+        T_world_camera_ = polished;
+        result.tracking = r;
+    } else {
+        result.tracking.status = TrackingStatus::kTracked;
+        result.tracking.T_world_camera = found.T_world_camera;
+    }
+    result.reacquired = true;
+    result.reacquire_ms = watch.elapsedMs();
+    return true;
+}
+
+PoseCheck Reconstructor::verifyPose(const Pose& T_world_camera) {
+    return reacquirer_.verify(volume_.grid(), frame_, T_world_camera);
+}
+
+FrameResult Reconstructor::noHead(const char* why) {
+    FrameResult result;
+    result.tracking.status = TrackingStatus::kNoHead;
+    result.tracking.T_world_camera = T_world_camera_;
+    result.reason = why;
+    if (init_status_.isOk() && have_model_) ++consecutive_failures_;
+    result.consecutive_failures = consecutive_failures_;
+    result.reacquiring = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
+    return result;
+}
+
+bool Reconstructor::predictHead(HeadPrediction& out) const {
+    if (!have_model_ || !region_.valid || consecutive_failures_ > params_.predict_max_failures) return false;
+    if (model_.levels[0].roi.empty()) return false;
+    out.model = &model_.levels[0];
+    out.T_world_camera = T_world_model_;
+    out.region = region_;
+    out.box = model_.levels[0].roi;
+    return true;
+}
+
+void Reconstructor::raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_m) {
+    raycaster_.cast(volume_.grid(), k_, T_world_camera_, roi, depth_hint_m, model_.levels[0]);
     // The hint is only valid inside the frame's ROI; outside it the rays march the cube (see RaycastParams).
     for (int l = 1; l < model_.count; ++l) {
         downsampleVertexMap(model_.levels[l - 1].vertex, model_.levels[l - 1].roi, model_.levels[l].vertex,
@@ -172,8 +343,11 @@ void Reconstructor::reset() {
     volume_.reset();
     T_world_camera_ = T_world_model_ = Pose::Identity();
     have_model_ = false;
+    visible_ref_px_ = 0.0f;
+    verify_next_ = false;
     frames_integrated_ = 0;
     consecutive_failures_ = 0;
+    region_ = HeadRegion{};
     trajectory_.clear();
     for (int l = 0; l < model_.count; ++l) model_.levels[l].roi = cv::Rect();
 }

@@ -307,15 +307,17 @@ void Session::processFrame(PendingFrame& pending) {
         stats_.detail = "frame " + std::to_string(pending.seq) + " dropped: " + decoded.message();
         return;
     }
-    cv::Rect box;
-    const bool tracked = recon_->predictedHeadBox(box);
-    const recon::HeadObservation head = pipeline_->process(frame_, tracked ? &box : nullptr);
-    recon::FrameResult r;
-    if (head.found) r = recon_->processFrame(frame_, head.mask);
+    // The model's prediction seeds the segmentation, detection otherwise; a frame without a head counts as
+    // rejected, and the next head after a loss is verified before it is fused (recon/scan_step.hpp).
+    recon::scanFrame(*pipeline_, *recon_, frame_, step_);
+    const recon::HeadObservation& head = step_.head;
+    const recon::FrameResult& r = step_.frame;
     const int64_t pose_known_ns = realtimeNowNs();
-    r.ms.detect = head.detect_ms;
-    r.ms.segment = head.segment_ms;
     const int64_t now = steadyNowNs();
+    // What the person should do comes first in the status detail ("face lost: hold still (...)").
+    auto detail = [&](std::string what) {
+        return *step_.advice ? std::string(step_.advice) + " (" + what + ")" : what;
+    };
 
     std::lock_guard lk(mutex_);
     if (processed_count_ == 0) first_processed_ns_ = t0;
@@ -329,13 +331,13 @@ void Session::processFrame(PendingFrame& pending) {
     if (!head.found) {
         ++stats_.frames_rejected;
         stats_.state = stats_.frames_integrated > 0 ? SessionState::kLost : SessionState::kWaiting;
-        stats_.detail = "no face: " + head.reason;
+        stats_.detail = detail("no face: " + head.reason);
         return;
     }
     if (r.integrated) {
         ++stats_.frames_integrated;
         stats_.state = SessionState::kScanning;
-        stats_.detail = head.depth_only ? "face found (depth only)" : "face found";
+        stats_.detail = detail(head.depth_only ? "face found (depth only)" : "face found");
         if (!recon_->trajectory().empty()) trajectory_.push_back(recon_->trajectory().back());
         last_pose_ = recon_->lastPose();
         recordLatency(static_cast<float>(pose_known_ns - pending.capture_time_ns) * 1e-6f);
@@ -343,7 +345,7 @@ void Session::processFrame(PendingFrame& pending) {
     }
     ++stats_.frames_rejected;
     stats_.state = r.reacquiring ? SessionState::kLost : SessionState::kScanning;
-    stats_.detail = std::string("frame rejected: ") + r.reason;
+    stats_.detail = detail(std::string("frame rejected: ") + r.reason);
 }
 
 void Session::recordLatency(float ms) {

@@ -1,12 +1,15 @@
 // The synthetic Kinect v1: THE renderer of the project (tests, capture agent `synthetic` source, benchmarks).
-// A head turns in front of a fixed camera, with a static torso below it and a wall behind it; the output is
-// 640x480 depth (metres) and colour registered to depth, with the Kinect v1 noise model of DESIGN.md s6
-// (Nguyen, Izadi, Lovell 2012), plus ground truth (pose, labels, noise-free depth, face box).
+// A head turns in front of a fixed camera, with a torso below it and a wall behind it; the output is 640x480
+// depth (metres) and colour registered to depth, with the Kinect v1 noise model of DESIGN.md s6 (Nguyen, Izadi,
+// Lovell 2012), plus ground truth (pose, labels, noise-free depth, face box). Events for robustness tests: a nod
+// onto the chest, a gap in which the subject walks out of view and comes back turned, and a hand-sized occluder
+// crossing in front of the face (issue 18).
 #pragma once
 
 #include <cstdint>
 #include <memory>
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "recon/camera.hpp"
 #include "recon/frame.hpp"
@@ -49,11 +52,30 @@ struct SequenceParams {
     float wall_distance_m = 1.6f;        // metres, camera to wall
     NoiseParams noise_model;             // used when noise == true
 
+    // A nod instead of a symmetric pitch: pitch goes 0 -> pitch_amplitude_deg -> 0 over each pitch period (a
+    // positive amplitude lowers the chin onto the chest).
+    bool nod = false;
+    // The gap: from gap_start_frame the subject walks sideways out of view (gap_walk_frames), stays out for
+    // gap_frames, and walks back in turned by gap_turn_deg (yaw of the whole body about the neck). With
+    // gap_leave = false the subject stays in view and turns smoothly over the same frames instead (the gap's
+    // twin without the loss, for comparisons). -1 = no gap.
+    int gap_start_frame = -1;   // frame index
+    int gap_frames = 30;        // frames with the subject out of view (1 s at 30 Hz)
+    int gap_walk_frames = 5;    // frames to walk out, and again to walk back in
+    float gap_turn_deg = 0.0f;  // degrees; the body comes back turned by this (positive: towards the person's left)
+    float gap_side_m = 1.2f;    // metres; how far sideways the subject goes (out of view at face range)
+    bool gap_leave = true;      // false: no walk, the subject turns in view
+    // A hand-sized occluder (an ellipsoid 9 x 18 x 3 cm, skin-coloured) that crosses in front of the face from the
+    // person's right to left over occluder_frames, starting at occluder_start_frame (-1 = none).
+    int occluder_start_frame = -1;   // frame index
+    int occluder_frames = 30;        // frames (1 s at 30 Hz)
+    float occluder_front_m = 0.08f;  // metres in front of the nose tip (towards the camera)
+
     Status validate() const;
 };
 
 // Per-pixel labels of FrameTruth::label.
-enum class PixelLabel : uint8_t { kNone = 0, kHead = 1, kBody = 2 };
+enum class PixelLabel : uint8_t { kNone = 0, kHead = 1, kBody = 2, kOccluder = 3 };
 
 struct FrameTruth {
     recon::Pose T_camera_head = recon::Pose::Identity();  // true head pose of this frame
@@ -62,6 +84,7 @@ struct FrameTruth {
     cv::Rect face_box_px;  // box of the visible face (brows to chin, cheek to cheek); empty when not visible
     float yaw_deg = 0;     // degrees, head yaw of this frame (0 = frontal)
     float pitch_deg = 0;   // degrees
+    int head_pixels = 0;   // pixels labelled kHead (0 while the subject is out of view)
 };
 
 class KinectSimulator {
@@ -77,10 +100,21 @@ class KinectSimulator {
     const SequenceParams& params() const { return params_; }
     const HeadModel& head() const { return head_; }
 
-    // T_camera_head of frame `index` (any integer; the motion is periodic and smooth).
+    // T_camera_head of frame `index` (any integer; the motion is periodic and smooth apart from the gap).
     recon::Pose poseAt(int index) const;
+    // T_camera_body: the torso (and the head at rest) of frame `index`; includes sway, the gap's walk and turn.
+    recon::Pose bodyPoseAt(int index) const;
+    // Head yaw and pitch of frame `index` relative to the body (degrees), and whether the occluder is in the scene.
+    float yawDegAt(int index) const;
+    float pitchDegAt(int index) const;
+    bool occluderActiveAt(int index) const;
+    // Where the occluder's centre is (camera frame, metres) at `index`; meaningful when occluderActiveAt(index).
+    Eigen::Vector3f occluderCentreAt(int index) const;
     // The head mesh in the first camera frame (T_camera0_head applied): what a reconstruction should produce.
     recon::Mesh headInFirstCamera() const;
+    // Per head mesh vertex, 1 where it belongs to the head proper: at most below_cut_m under the neck cut (just
+    // under the chin), 0 on the neck and shoulders below. What a scan may hold; anything else is not the head.
+    std::vector<uint8_t> headVertexMask(float below_cut_m = 0.03f) const;
 
     // Renders frame `index` into `out` (depth metres CV_32F, colour CV_8UC3 registered, timestamp).
     // Thread-safe: several threads may render different (or equal) indices at once. Deterministic.

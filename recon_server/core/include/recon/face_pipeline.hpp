@@ -1,12 +1,15 @@
 // The per-frame head policy in front of the reconstructor (DESIGN.md s4): decide whether to detect, segment the
-// head, and report it. Independent of the Reconstructor: the caller passes the head box that the tracked pose
-// predicts (Reconstructor::predictedHeadBox), so detection runs only when tracking cannot seed the segmenter.
+// head, and report it. Independent of the Reconstructor: the caller passes what the tracked model predicts
+// (Reconstructor::predictHead), so while tracking the head is segmented from the model's prediction
+// (ModelSegmenter, issue 18) and detection with the width criterion runs only to start a scan, when the
+// prediction is not confirmed, and every redetect_every_frames as a check.
 //
 //   recon::FacePipeline pipeline = *recon::FacePipeline::create({}, depth_intrinsics, colour_camera);
-//   cv::Rect box;
-//   const bool tracked = reconstructor.predictedHeadBox(box);
-//   recon::HeadObservation head = pipeline.process(frame, tracked ? &box : nullptr);
-//   if (head.found) integrate(head.depth_m) ... else log(head.reason);
+//   recon::HeadPrediction prediction;
+//   const bool tracked = reconstructor.predictHead(prediction);
+//   recon::HeadObservation head = tracked ? pipeline.process(frame, prediction) : pipeline.process(frame);
+//   if (head.found) reconstructor.processFrame(frame, head.mask) ... else reconstructor.noHead(...);
+// (recon/scan_step.hpp does exactly this, with the advice for the person being scanned.)
 #pragma once
 
 #include <Eigen/Core>
@@ -18,6 +21,7 @@
 #include "recon/frame.hpp"
 #include "recon/head_finder.hpp"
 #include "recon/head_segmenter.hpp"
+#include "recon/model_segmenter.hpp"
 #include "recon/status.hpp"
 
 namespace facescan::recon {
@@ -26,6 +30,7 @@ struct FacePipelineParams {
     FaceDetectorParams detector;
     HeadSegmenterParams segmenter;
     HeadFinderParams finder;
+    ModelSegmenterParams model;       // segmentation from the tracked model's prediction
     bool depth_only_fallback = true;  // find the head by depth when there is no colour or the cascade misses
     // Re-detect at least this often even while tracking, to notice a second, nearer person (frames; 0 = never).
     int redetect_every_frames = 0;
@@ -44,6 +49,7 @@ struct HeadObservation {
     float segment_ms = 0;
     bool detection_ran = false;
     bool depth_only = false;                               // found without colour (depth-only finder)
+    bool from_model = false;                               // segmented from the tracked model's prediction
     Eigen::Vector3f centroid_m = Eigen::Vector3f::Zero();  // head centroid, depth camera frame (metres)
     Eigen::Vector3f extent_m = Eigen::Vector3f::Zero();    // head width, height, depth (metres)
 };
@@ -55,6 +61,9 @@ class FacePipeline {
 
     // predicted_head_box: the head box (depth pixels) from the tracked pose, or nullptr when not tracking.
     HeadObservation process(const RgbdFrame& frame, const cv::Rect* predicted_head_box = nullptr);
+    // While tracking: the head from the model's prediction; when the frame does not confirm it (the head left,
+    // turned away or is hidden, or the result is not head-sized), detection and the width criterion as above.
+    HeadObservation process(const RgbdFrame& frame, const HeadPrediction& prediction);
     // Forget the tracking state (new scan).
     void reset() { frames_since_detection_ = 0; }
 
@@ -74,7 +83,9 @@ class FacePipeline {
     FaceDetector detector_;
     HeadSegmenter segmenter_;
     HeadFinder finder_;
+    ModelSegmenter model_segmenter_{params_.model};
     HeadSegmentation segmentation_;
+    HeadSegmentation model_segmentation_;  // separate buffers: ModelSegmenter clears only what it wrote
     int frames_since_detection_ = 0;
 };
 

@@ -38,6 +38,8 @@ struct HeadSegmenterParams {
     float head_height_max_m = 0.30f;  // metres
 
     Status validate() const;
+    // Whether a region of this width and height (x, y of extent_m, metres) is head-sized.
+    bool headSized(const Eigen::Vector3f& extent_m) const;
 };
 
 struct HeadSegmentation {
@@ -78,6 +80,12 @@ class HeadSegmenter {
     std::vector<int> row_count_, col_hist_, row_hist_;
     std::vector<float> scratch_;
 };
+
+// The span (in bins) between the 1st and 99th percentile of a histogram of `pixels` samples: a region's extent
+// without the few stray pixels (flying pixels at the silhouette) that would make a head look too wide.
+float percentileSpanPx(const std::vector<int>& hist, int pixels);
+// "0.59 m wide, 0.51 m tall" for a region's extent (x, y of extent_m, metres).
+std::string sizeText(const Eigen::Vector3f& extent_m);
 
 // Eq. 3.9-3.13: given per-row pixel counts of a region (rows with 0 pixels allowed), the split row y (last head
 // row) maximising w_H w_T (mu_H - mu_T)^2 over y in [first, last]; -1 when no row qualifies. Exposed for tests.

@@ -16,7 +16,10 @@
 #include "recon/icp.hpp"
 #include "recon/marching_cubes.hpp"
 #include "recon/mesh.hpp"
+#include "recon/model_agreement.hpp"
+#include "recon/model_segmenter.hpp"
 #include "recon/raycaster.hpp"
+#include "recon/reacquirer.hpp"
 #include "recon/status.hpp"
 #include "recon/tsdf_volume.hpp"
 
@@ -28,8 +31,25 @@ struct ReconParams {
     TsdfParams tsdf;
     RaycastParams raycast;
     MeshParams mesh;
-    int min_head_pixels = 500;  // count; fewer valid head pixels after filtering = kNoHead
-    int roi_margin_px = 8;      // pixels; margin around the head mask's box for filtering and ray casting
+    HeadRegionParams head_region;  // where the head can be, fixed at the first frame (model-based segmentation)
+    ReacquireParams reacquire;     // re-acquisition after a loss (hypothesis search, verification)
+    int min_head_pixels = 500;     // count; fewer valid head pixels after filtering = kNoHead
+    int roi_margin_px = 8;         // pixels; margin around the head mask's box for filtering and ray casting
+    // Robust integration: a measurement more than occluder_band_m (0 = the truncation distance mu) in front of a
+    // model surface whose weight is at least confident_weight is not fused; one more than occluder_prefilter_m in
+    // front of it at the predicted pose is removed before registration too.
+    bool robust_integration = true;
+    float occluder_band_m = 0.0f;        // metres
+    float occluder_prefilter_m = 0.03f;  // metres; beyond a 3 deg/frame turn's and the sensor noise's reach
+    float confident_weight = 3.0f;       // TSDF weight (a frontal view adds ~0.9, a grazing one ~0.2)
+    // The model keeps predicting the head (predictHead) for this many rejected frames after the last good one;
+    // then callers find the head by detection again.
+    int predict_max_failures = 3;  // count
+    // A tracked frame whose head shows fewer pixels than this share of the usual (running mean over fused
+    // frames: a hand across the face, a head half out of view) is tracked but not fused: too little surface to
+    // trust the pose for fusion.
+    float min_visible_share = 0.5f;     // ratio
+    float resume_visible_share = 0.8f;  // ratio; after such frames, fusion resumes only above this share
 
     // Meyer's values (DESIGN.md section 1): 256^3 voxels over 0.386 m, mu 5 mm, W max 256, bilateral 1 px / 50 mm,
     // 3 levels, ICP 20/15/10 iterations, gates 50-200 mm and 30-45 deg, re-acquire after 5 failed frames.
@@ -52,6 +72,12 @@ struct FrameResult {
                                    // re-detect the head; the frame is registered against the model from the last
                                    // good pose with centroid pre-alignment (eq. 4.11), never by starting over
     int consecutive_failures = 0;  // count; rejected frames in a row, this one included
+    bool reacquired = false;       // after a loss: the pose came from the hypothesis search (and was verified)
+    bool verified = false;         // after a loss: the fit was verified before fusing (check holds the figures)
+    PoseCheck check;               // the verification's figures (the winner's, or the best rejected fit's)
+    int hypotheses = 0;            // count; re-acquisition hypotheses tried this frame
+    float reacquire_ms = 0;        // milliseconds of verification and search (included in ms.icp)
+    int occluding_pixels = 0;      // count; measurements not fused: in front of a confident model (occluders)
     StageTimesMs ms;
     const char* reason = "";  // empty when tracked; otherwise why, a static string (no allocation per frame)
 };
@@ -67,6 +93,11 @@ class Reconstructor {
     // One frame: depth (CV_32F metres, 0/NaN invalid, camera size), optional colour (CV_8UC3, camera size),
     // head_mask CV_8U nonzero = head, or empty for the whole frame. Bad input gives kInvalidInput, never a crash.
     FrameResult processFrame(const RgbdFrame& frame, const cv::Mat& head_mask);
+
+    // A frame in which the caller found no head (the pipeline could not segment one): counts as a rejected
+    // frame (kNoHead), so a loss is noticed and the next head seen is verified before it is fused. `why` must
+    // outlive the result (a static string or the caller's).
+    FrameResult noHead(const char* why);
 
     void reset();  // starts a new scan (clears the model and trajectory)
 
@@ -89,6 +120,18 @@ class Reconstructor {
     // Where the model projects in the last camera (the box of the last ray cast): lets callers skip detection
     // while tracking. False before the first frame, while re-acquiring, or when the model is not visible.
     bool predictedHeadBox(cv::Rect& box) const;
+    // The model's prediction of the next frame's head for model-based segmentation (FacePipeline): the last ray
+    // cast, the pose it was cast from and the head region. False before the first frame and once more than
+    // predict_max_failures frames in a row were rejected. `out.model` points into this object and is valid
+    // until the next processFrame/reset (frame thread only).
+    bool predictHead(HeadPrediction& out) const;
+    // Where the head can be (world frame), fixed at the first frame; invalid before it.
+    const HeadRegion& headRegion() const { return region_; }
+    int consecutiveFailures() const { return consecutive_failures_; }
+    // Verifies a pose for the current frame as re-acquisition does (for tests and diagnostics): run after a
+    // processFrame of that frame, which leaves the filtered frame in place.
+    PoseCheck verifyPose(const Pose& T_world_camera);
+    bool acceptsCheck(const PoseCheck& check) const { return reacquirer_.accepts(check); }
 
     const ReconParams& params() const { return params_; }
     const Intrinsics& intrinsics() const { return k_; }
@@ -96,7 +139,14 @@ class Reconstructor {
 
  private:
     bool checkInput(const RgbdFrame& frame, const cv::Mat& head_mask, FrameResult& result) const;
-    void raycastModel(const cv::Rect& roi);
+    void raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_m);
+    // True (and the hold recorded) when the frame shows too little of the head to register or fuse.
+    bool headMostlyHidden(int visible_px);
+    // ICP from `estimate` (in: the start, out: the fit), with verification and search after a loss; false with
+    // result.tracking.status saying why.
+    bool registerFrame(int valid_px, FrameResult& result, Pose& estimate);
+    // After a loss: verify a plain ICP fit, else search hypotheses; true with T_world_camera_ set when verified.
+    bool reacquire(bool icp_ok, const Pose& icp_estimate, int valid_px, FrameResult& result);
 
     Intrinsics k_;
     ReconParams params_;
@@ -105,14 +155,19 @@ class Reconstructor {
     Icp icp_;
     TsdfVolume volume_;
     Raycaster raycaster_;
+    Reacquirer reacquirer_;
     SurfacePyramid frame_;  // the current frame, camera frame
     SurfacePyramid model_;  // the ray-cast model, world frame, seen from T_world_model_
     cv::Mat depth_clean_;   // CV_32F: the input with NaN/inf replaced by 0
+    cv::Mat hint_m_;        // CV_32F: the frame's depth with occluded pixels replaced by the model's (next cast)
     Pose T_world_camera_ = Pose::Identity();
     Pose T_world_model_ = Pose::Identity();
     bool have_model_ = false;
     int frames_integrated_ = 0;
     int consecutive_failures_ = 0;
+    HeadRegion region_;            // fixed at the first frame (part of the scan's state, like the volume and the pose)
+    float visible_ref_px_ = 0.0f;  // running mean of the head's pixels (pyramid level 2) over fused frames
+    bool verify_next_ = false;     // a mostly hidden frame was not fused: verify the next fit before fusing
     std::vector<std::pair<int64_t, Pose>> trajectory_;
     mutable std::mutex volume_mutex_;  // guards volume_ between processFrame and snapshot/preview callers
 };

@@ -17,6 +17,7 @@
 
 #include "recon/face_pipeline.hpp"
 #include "recon/reconstructor.hpp"
+#include "recon/scan_step.hpp"
 #include "service/server_params.hpp"
 #include "wire/messages.hpp"
 
@@ -165,6 +166,7 @@ class Session {
     std::unique_ptr<recon::FacePipeline> pipeline_;
     wire::FrameDecoder decoder_;
     recon::RgbdFrame frame_;
+    recon::ScanStep step_;  // the frame worker's last frame (head, result, advice); reused
     PendingFrame working_;
     // The snapshot's volume copy is made by the WORKER between two frames when the snapshot thread asks for it
     // (guarded by mutex_): the snapshot thread runs at nice 10, and a copy made there while holding the volume

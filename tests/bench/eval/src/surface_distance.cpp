@@ -143,4 +143,19 @@ SurfaceDistance::Hit SurfaceDistance::nearest(const Vec3& p, const Vec3* facing)
     return hit;
 }
 
+int countVerticesFarFrom(const recon::Mesh& mesh, const recon::Mesh& reference, float max_distance_m,
+                         const std::vector<uint8_t>* allowed) {
+    const SurfaceDistance distance(reference);
+    int far = 0;
+    for (const auto vh : mesh.vertices()) {
+        const auto& p = mesh.point(vh);
+        const SurfaceDistance::Hit hit = distance.query(Eigen::Vector3f(p[0], p[1], p[2]));
+        const bool not_allowed = allowed != nullptr && hit.nearest_vertex >= 0 &&
+                                 static_cast<size_t>(hit.nearest_vertex) < allowed->size() &&
+                                 (*allowed)[static_cast<size_t>(hit.nearest_vertex)] == 0;
+        far += hit.distance_m > max_distance_m || not_allowed;
+    }
+    return far;
+}
+
 }  // namespace facescan::eval

@@ -1,0 +1,40 @@
+// The text form of a synthetic sequence, shared by every program that renders one (the agent's `synthetic:`
+// source, facescan-bench recon and synth): "scenario=wide,frames=200,seed=3,subject=builtin". A scenario sets the
+// motion and events of one robustness case (issue 18); the other keys override single parameters after it,
+// whatever their order.
+#pragma once
+
+#include <string>
+
+#include "recon/status.hpp"
+#include "synth/head_model.hpp"
+#include "synth/kinect_simulator.hpp"
+
+namespace facescan::synth {
+
+struct SyntheticSpec {
+    SequenceParams sequence;
+    std::string scenario = "gentle";
+    std::string subject = "auto";  // auto (the scan when found, else built-in) | builtin | scan | FILE
+};
+
+// The named scenarios, one per row of issue 18's target table:
+//   gentle    the default: yaw +-35 deg, pitch +-12 deg, 300 frames (up to 0.7 deg a frame)
+//   wide      yaw +-60, pitch +-20, up to 2.8 deg a frame, torso, 300 frames
+//   chin      nods the chin 30 deg down onto the chest and back, twice (slight yaw), 180 frames
+//   gap       walks out of view for 1 s from frame 90 and back turned (head yaw +-20, pitch +-8, turn -20: the
+//             head returns 31 deg from its last pose before the gap), 240 frames
+//   occluder  the gentle sequence with a hand-sized occluder across the face for 1 s from frame 120
+// Unknown names give the list.
+Status applyScenario(const std::string& name, SequenceParams& p);
+
+// Parses "key=value,..." (see syntheticOptionsHelp()); validates the result.
+StatusOr<SyntheticSpec> parseSyntheticOptions(const std::string& text);
+
+// Loads the subject named by SyntheticSpec::subject ("lps" is an alias of "scan").
+StatusOr<HeadModel> loadSubject(const std::string& subject);
+
+// One paragraph for --help texts: the keys, their units and the scenarios.
+const char* syntheticOptionsHelp();
+
+}  // namespace facescan::synth

@@ -1,0 +1,154 @@
+#include "synth/sequence_options.hpp"
+
+#include <cstdlib>
+#include <sstream>
+#include <utility>
+#include <vector>
+
+namespace facescan::synth {
+namespace {
+
+// Splits "a=1,b=2" into pairs; an item without '=' is an error.
+Status splitItems(const std::string& text, std::vector<std::pair<std::string, std::string>>& items) {
+    std::stringstream in(text);
+    std::string item;
+    while (std::getline(in, item, ',')) {
+        if (item.empty()) continue;
+        const auto eq = item.find('=');
+        if (eq == std::string::npos) return invalidArgument("synthetic option '" + item + "' is not key=value");
+        items.emplace_back(item.substr(0, eq), item.substr(eq + 1));
+    }
+    return Status::ok();
+}
+
+}  // namespace
+
+Status applyScenario(const std::string& name, SequenceParams& p) {
+    p = SequenceParams{};
+    if (name == "gentle") return Status::ok();
+    if (name == "wide") {
+        // Peak speeds 60 * 2 pi / 150 = 2.51 deg/frame (yaw) and 20 * 2 pi / 110 = 1.14 (pitch): at most
+        // 2.76 deg a frame together.
+        p.yaw_amplitude_deg = 60.0f;
+        p.pitch_amplitude_deg = 20.0f;
+        p.yaw_period_frames = 150.0f;
+        p.pitch_period_frames = 110.0f;
+        return Status::ok();
+    }
+    if (name == "chin") {
+        p.frames = 180;
+        p.nod = true;
+        p.pitch_amplitude_deg = 30.0f;
+        p.pitch_period_frames = 90.0f;
+        p.yaw_amplitude_deg = 10.0f;
+        return Status::ok();
+    }
+    if (name == "gap") {
+        p.frames = 240;
+        p.yaw_amplitude_deg = 20.0f;
+        p.pitch_amplitude_deg = 8.0f;
+        // Leaves at yaw +19 deg and comes back at 8 - 20 = -12 deg: 31 deg from the last pose before the gap.
+        p.gap_start_frame = 90;
+        p.gap_turn_deg = -20.0f;
+        return Status::ok();
+    }
+    if (name == "occluder") {
+        p.occluder_start_frame = 120;
+        return Status::ok();
+    }
+    return invalidArgument("unknown synthetic scenario '" + name + "' (known: gentle, wide, chin, gap, occluder)");
+}
+
+StatusOr<SyntheticSpec> parseSyntheticOptions(const std::string& text) {
+    std::vector<std::pair<std::string, std::string>> items;
+    RETURN_IF_ERROR(splitItems(text, items));
+    SyntheticSpec spec;
+    for (const auto& [key, value] : items) {
+        if (key == "scenario") spec.scenario = value;
+    }
+    RETURN_IF_ERROR(applyScenario(spec.scenario, spec.sequence));
+    SequenceParams& p = spec.sequence;
+    for (const auto& [key, value] : items) {
+        if (key == "scenario") continue;
+        if (key == "subject" || key == "head") {
+            spec.subject = value;
+            continue;
+        }
+        char* end = nullptr;
+        const double number = std::strtod(value.c_str(), &end);
+        if (value.empty() || end == nullptr || *end != '\0') {
+            return invalidArgument("synthetic option " + key + "=" + value + ": expected a number");
+        }
+        const float f = static_cast<float>(number);
+        const int i = static_cast<int>(number);
+        if (key == "frames") {
+            p.frames = i;
+        } else if (key == "distance") {
+            p.distance_m = f;
+        } else if (key == "yaw") {
+            p.yaw_amplitude_deg = f;
+        } else if (key == "pitch") {
+            p.pitch_amplitude_deg = f;
+        } else if (key == "period") {
+            p.yaw_period_frames = f;
+            p.pitch_period_frames = f / 2;
+        } else if (key == "yaw_period") {
+            p.yaw_period_frames = f;
+        } else if (key == "pitch_period") {
+            p.pitch_period_frames = f;
+        } else if (key == "nod") {
+            p.nod = number != 0;
+        } else if (key == "seed") {
+            p.seed = static_cast<uint64_t>(number);
+        } else if (key == "noise") {
+            p.noise = number != 0;
+        } else if (key == "torso") {
+            p.torso = number != 0;
+        } else if (key == "wall") {
+            p.wall = number != 0;
+        } else if (key == "gap_start") {
+            p.gap_start_frame = i;
+        } else if (key == "gap_frames") {
+            p.gap_frames = i;
+        } else if (key == "gap_walk") {
+            p.gap_walk_frames = i;
+        } else if (key == "gap_turn") {
+            p.gap_turn_deg = f;
+        } else if (key == "gap_leave") {
+            p.gap_leave = number != 0;
+        } else if (key == "occluder_start") {
+            p.occluder_start_frame = i;
+        } else if (key == "occluder_frames") {
+            p.occluder_frames = i;
+        } else if (key == "occluder_front") {
+            p.occluder_front_m = f;
+        } else {
+            return invalidArgument("unknown synthetic option '" + key + "'; " + syntheticOptionsHelp());
+        }
+    }
+    RETURN_IF_ERROR(p.validate());
+    return spec;
+}
+
+StatusOr<HeadModel> loadSubject(const std::string& subject) {
+    if (subject == "auto") return defaultHead();
+    if (subject == "builtin") return builtinHead();
+    if (subject == "scan" || subject == "lps") {
+        const auto dir = findLeePerrySmith();
+        if (!dir) return notFound("subject=scan: the Lee Perry-Smith scan was not found (set FACESCAN_DATA_DIR)");
+        return loadHeadScan(*dir);
+    }
+    return loadHeadScan(subject);
+}
+
+const char* syntheticOptionsHelp() {
+    return "synthetic options (key=value, comma-separated): scenario=gentle|wide|chin|gap|occluder (sets the\n"
+           "  motion and events; other keys override it), frames=N, distance=M (metres), yaw=DEG, pitch=DEG\n"
+           "  (amplitudes), period=FRAMES (yaw; pitch gets half), yaw_period=FRAMES, pitch_period=FRAMES, nod=0|1\n"
+           "  (pitch 0 -> amplitude -> 0), seed=N, noise=0|1, torso=0|1, wall=0|1, subject=auto|builtin|scan|FILE\n"
+           "  (head= is an alias), gap_start=FRAME (-1 none), gap_frames=N, gap_walk=N, gap_turn=DEG,\n"
+           "  gap_leave=0|1 (0: turn in view instead of leaving), occluder_start=FRAME (-1 none),\n"
+           "  occluder_frames=N, occluder_front=M (metres in front of the nose)";
+}
+
+}  // namespace facescan::synth

@@ -1,0 +1,224 @@
+#include "recon/model_segmenter.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "recon/parallel.hpp"
+
+namespace facescan::recon {
+namespace {
+
+constexpr int kStripes = 16;  // fixed stripe count of the seed pass's reduction (same sums on any core count)
+
+}  // namespace
+
+Status HeadRegionParams::validate() const {
+    if (!(radius_m > 0.05f)) return invalidArgument("head region radius_m must be > 0.05");
+    if (!(centre_behind_m >= 0.0f && below_lowest_m >= 0.0f && max_below_centre_m > 0.0f))
+        return invalidArgument("head region distances must be >= 0 (max_below_centre_m > 0)");
+    return Status::ok();
+}
+
+bool HeadRegion::fromFirstFrame(const SurfaceLevel& lv, const HeadRegionParams& p, HeadRegion& out) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    long n = 0;
+    for (int v = lv.roi.y; v < lv.roi.y + lv.roi.height; ++v) {
+        const auto* row = lv.vertex.ptr<cv::Vec3f>(v);
+        for (int u = lv.roi.x; u < lv.roi.x + lv.roi.width; ++u) {
+            if (std::isnan(row[u][0])) continue;
+            sum += Eigen::Vector3d(row[u][0], row[u][1], row[u][2]);
+            ++n;
+        }
+    }
+    if (n == 0) return false;
+    const Eigen::Vector3f centroid = (sum / static_cast<double>(n)).cast<float>();
+    out.centre_world = centroid + centroid.normalized() * p.centre_behind_m;
+    out.down_world = Eigen::Vector3f::UnitY();
+    float lowest = -1e9f;
+    for (int v = lv.roi.y; v < lv.roi.y + lv.roi.height; ++v) {
+        const auto* row = lv.vertex.ptr<cv::Vec3f>(v);
+        for (int u = lv.roi.x; u < lv.roi.x + lv.roi.width; ++u) {
+            if (!std::isnan(row[u][0])) lowest = std::max(lowest, row[u][1] - out.centre_world.y());
+        }
+    }
+    out.below_centre_m = std::min(lowest + p.below_lowest_m, p.max_below_centre_m);
+    out.radius_m = p.radius_m;
+    out.centre_behind_m = p.centre_behind_m;
+    out.valid = true;
+    return true;
+}
+
+Status ModelSegmenterParams::validate() const {
+    if (!(seed_margin_m > 0.0f && grow_jump_m > 0.0f && band_m >= 0.0f))
+        return invalidArgument("model segmenter margins must be > 0 (band_m >= 0)");
+    if (min_pixels < 1) return invalidArgument("model segmenter min_pixels must be >= 1");
+    if (!(min_seed_share >= 0.0f && min_seed_share <= 1.0f))
+        return invalidArgument("model segmenter min_seed_share must be in [0, 1]");
+    return Status::ok();
+}
+
+void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const HeadPrediction& prediction,
+                             const HeadSegmenterParams& limits, HeadSegmentation& out) {
+    out.found = false;
+    out.reason.clear();
+    out.pixels = 0;
+    out.split_row = -1;
+    out.head_box_px = {};
+    seeds_ = 0;
+    if (const char* problem = depthInputProblem(depth_m, k)) return out.markNotFound(depth_m, problem);
+    if (prediction.model == nullptr || prediction.model->roi.empty() || !prediction.region.valid ||
+        prediction.model->vertex.size() != depth_m.size()) {
+        return out.markNotFound(depth_m, "no model prediction");
+    }
+    const int w = depth_m.cols, h = depth_m.rows;
+    const cv::Rect bounds(0, 0, w, h);
+    // Outputs of our own, reused every frame: only the area written last time is cleared.
+    if (out.mask.data == nullptr || out.mask.size() != depth_m.size() || out.mask.type() != CV_8UC1 ||
+        out.depth_m.size() != depth_m.size() || out.depth_m.type() != CV_32FC1) {
+        out.mask.create(depth_m.size(), CV_8UC1);
+        out.depth_m.create(depth_m.size(), CV_32FC1);
+        out.mask.setTo(0);
+        out.depth_m.setTo(0);
+        cleared_roi_ = {};
+    }
+    if (!cleared_roi_.empty()) {
+        out.mask(cleared_roi_).setTo(0);
+        out.depth_m(cleared_roi_).setTo(0);
+    }
+    cleared_roi_ = {};
+    state_.create(depth_m.size(), CV_8UC1);
+
+    const SurfaceLevel& model = *prediction.model;
+    const cv::Rect roi_m = model.roi & bounds;
+    const Pose T_camera_world = prediction.T_world_camera.inverse();
+    const Pose& T_world_camera = prediction.T_world_camera;
+    const HeadRegion& region = prediction.region;
+    const float zmin = limits.min_depth_m, zmax = limits.max_depth_m, margin = params_.seed_margin_m;
+
+    // 1. Seeds: measured depth within the margin of the predicted surface, inside the head region. Parallel over
+    //    fixed stripes of rows; each stripe keeps its own counts and box (summed in order afterwards).
+    struct Partial {
+        int predicted = 0, seeds = 0, u0 = 1 << 30, v0 = 1 << 30, u1 = -1, v1 = -1;
+        double z_sum = 0;
+    };
+    std::array<Partial, kStripes> partial{};
+    state_(roi_m).setTo(0);
+    parallelFor(0, kStripes, [&](int s_lo, int s_hi) {
+        for (int s = s_lo; s < s_hi; ++s) {
+            Partial acc;
+            const int v_begin = roi_m.y + roi_m.height * s / kStripes;
+            const int v_end = roi_m.y + roi_m.height * (s + 1) / kStripes;
+            for (int v = v_begin; v < v_end; ++v) {
+                const auto* vert = model.vertex.ptr<cv::Vec3f>(v);
+                const float* z = depth_m.ptr<float>(v);
+                uint8_t* st = state_.ptr<uint8_t>(v);
+                for (int u = roi_m.x; u < roi_m.x + roi_m.width; ++u) {
+                    if (std::isnan(vert[u][0])) continue;
+                    const Eigen::Vector3f p_cam = T_camera_world * Eigen::Vector3f(vert[u][0], vert[u][1], vert[u][2]);
+                    ++acc.predicted;
+                    acc.z_sum += p_cam.z();
+                    acc.u0 = std::min(acc.u0, u), acc.u1 = std::max(acc.u1, u);
+                    acc.v0 = std::min(acc.v0, v), acc.v1 = std::max(acc.v1, v);
+                    const float zu = z[u];
+                    if (!(zu >= zmin && zu <= zmax) || std::fabs(zu - p_cam.z()) > margin) continue;
+                    if (!region.contains(T_world_camera *
+                                         k.backProject(static_cast<float>(u), static_cast<float>(v), zu)))
+                        continue;
+                    st[u] = 1;
+                    ++acc.seeds;
+                }
+            }
+            partial[static_cast<size_t>(s)] = acc;
+        }
+    });
+    Partial all;
+    for (const Partial& p : partial) {
+        all.predicted += p.predicted, all.seeds += p.seeds, all.z_sum += p.z_sum;
+        all.u0 = std::min(all.u0, p.u0), all.v0 = std::min(all.v0, p.v0);
+        all.u1 = std::max(all.u1, p.u1), all.v1 = std::max(all.v1, p.v1);
+    }
+    seeds_ = all.seeds;
+    if (all.predicted == 0) return out.markNotFound(depth_m, "the model predicts no head surface in view");
+    if (all.seeds < params_.min_seed_share * static_cast<float>(all.predicted) || all.seeds == 0) {
+        return out.markNotFound(depth_m, "the head is not where the tracked model predicts it");
+    }
+
+    // 2. Growth (Algorithm 1's depth-continuity test) from the seeds, inside the predicted box widened by the band
+    //    and inside the head region.
+    const float z_ref = static_cast<float>(all.z_sum / all.predicted);
+    const int band_px = static_cast<int>(params_.band_m * k.fx_px / z_ref);
+    const cv::Rect grow_roi =
+        cv::Rect(cv::Point(all.u0 - band_px, all.v0 - band_px), cv::Point(all.u1 + band_px + 1, all.v1 + band_px + 1)) &
+        bounds;
+    // state_ is 0 on the band outside roi_m from earlier frames' growth only where cleared: clear the rest.
+    for (int v = grow_roi.y; v < grow_roi.y + grow_roi.height; ++v) {
+        uint8_t* st = state_.ptr<uint8_t>(v);
+        for (int u = grow_roi.x; u < grow_roi.x + grow_roi.width; ++u) {
+            if (!roi_m.contains({u, v})) st[u] = 0;
+        }
+    }
+    queue_.clear();
+    queue_.reserve(static_cast<size_t>(w) * static_cast<size_t>(h));  // no-op after the first frame
+    for (int v = roi_m.y; v < roi_m.y + roi_m.height; ++v) {
+        const uint8_t* st = state_.ptr<uint8_t>(v);
+        for (int u = roi_m.x; u < roi_m.x + roi_m.width; ++u) {
+            if (st[u]) queue_.push_back(v * w + u);
+        }
+    }
+    const float jump = params_.grow_jump_m;
+    for (size_t head = 0; head < queue_.size(); ++head) {
+        const int idx = queue_[head];
+        const int y = idx / w, x = idx - y * w;
+        const float z = depth_m.ptr<float>(y)[x];
+        const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+        for (int n = 0; n < 4; ++n) {
+            if (!grow_roi.contains({nx[n], ny[n]})) continue;
+            uint8_t& st = state_.ptr<uint8_t>(ny[n])[nx[n]];
+            if (st) continue;
+            const float nz = depth_m.ptr<float>(ny[n])[nx[n]];
+            if (!(nz >= zmin && nz <= zmax) || std::fabs(nz - z) >= jump) continue;
+            st = 1;  // visited either way: a pixel outside the region is not tried again from another side
+            if (!region.contains(T_world_camera *
+                                 k.backProject(static_cast<float>(nx[n]), static_cast<float>(ny[n]), nz)))
+                continue;
+            queue_.push_back(ny[n] * w + nx[n]);
+        }
+    }
+
+    // 3. Mask, masked depth, box, centroid and extents (as HeadSegmenter reports them).
+    if (static_cast<int>(queue_.size()) < params_.min_pixels) {
+        return out.markNotFound(depth_m, "too few head pixels confirm the tracked model");
+    }
+    col_hist_.assign(static_cast<size_t>(w), 0);
+    row_hist_.assign(static_cast<size_t>(h), 0);
+    int umin = w, umax = -1, vmin = h, vmax = -1;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    float z_lo = 1e9f, z_hi = 0;
+    for (int idx : queue_) {
+        const int v = idx / w, u = idx - v * w;
+        const float z = depth_m.ptr<float>(v)[u];
+        out.mask.ptr<uint8_t>(v)[u] = 255;
+        out.depth_m.ptr<float>(v)[u] = z;
+        sum += k.backProject(static_cast<float>(u), static_cast<float>(v), z).cast<double>();
+        z_lo = std::min(z_lo, z), z_hi = std::max(z_hi, z);
+        umin = std::min(umin, u), umax = std::max(umax, u), vmin = std::min(vmin, v), vmax = std::max(vmax, v);
+        ++col_hist_[static_cast<size_t>(u)];
+        ++row_hist_[static_cast<size_t>(v)];
+    }
+    out.pixels = static_cast<int>(queue_.size());
+    out.head_box_px = cv::Rect(cv::Point(umin, vmin), cv::Point(umax + 1, vmax + 1));
+    cleared_roi_ = out.head_box_px;
+    out.centroid_m = (sum / out.pixels).cast<float>();
+    out.depth_median_m = out.centroid_m.z();
+    const float z_c = out.centroid_m.z();
+    out.extent_m = {percentileSpanPx(col_hist_, out.pixels) * z_c / k.fx_px,
+                    percentileSpanPx(row_hist_, out.pixels) * z_c / k.fy_px, z_hi - z_lo};
+    if (!limits.headSized(out.extent_m)) {
+        out.reason = "the tracked head region is not head-sized (" + sizeText(out.extent_m) + ")";
+        return;
+    }
+    out.found = true;
+}
+
+}  // namespace facescan::recon

@@ -1,0 +1,32 @@
+// Inputs of facescan-bench recon (DESIGN.md s6): synthetic[:OPTIONS] rendered by the project's synthetic Kinect
+// (with its ground truth), TUM RGB-D folders and 7-Scenes folders (with their reference poses). Everything is
+// loaded before the timed loop.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "recon/camera.hpp"
+#include "recon/frame.hpp"
+#include "recon/status.hpp"
+#include "synth/kinect_simulator.hpp"
+#include "synth/sequence_options.hpp"
+
+namespace facescan::bench {
+
+struct Sequence {
+    recon::Intrinsics k;
+    std::vector<recon::RgbdFrame> frames;
+    std::vector<cv::Mat> masks;                            // per frame, empty = whole frame
+    std::vector<std::optional<recon::Pose>> T_ref_camera;  // reference poses (first camera = identity), when known
+    std::string mask_source = "none";
+    std::optional<synth::KinectSimulator> sim;  // synthetic input only
+    synth::SyntheticSpec spec;                  // synthetic input only: what was rendered
+    std::vector<int> head_pixels;               // synthetic input only: head-labelled pixels per frame (truth)
+};
+
+// SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR; frames > 0 limits (synthetic: sets) the frame count.
+Status loadSequence(const std::string& input, int frames, Sequence& seq);
+
+}  // namespace facescan::bench

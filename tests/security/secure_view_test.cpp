@@ -1,0 +1,116 @@
+// `facescan view` on a secured site (issue 15 with issue 14's DDS Security): with the read-only viewer identity it
+// follows a secured scan (sessions, pushed snapshots that decode) and, since that role may not send commands, its
+// downloads are the session's latest snapshot: the final mesh once the scan is finished. The same viewer without
+// an identity sees nothing of the secured domain (the check can fail).
+#include <gtest/gtest.h>
+#include <tiny_gltf.h>
+
+#include <filesystem>
+#include <regex>
+
+#include "child_process.hpp"
+#include "client/web_assets.hpp"
+#include "http_client.hpp"
+#include "site_fixture.hpp"
+#include "test_domain.hpp"
+#include "wire/mesh_codec.hpp"
+
+namespace {
+
+using namespace facescan;
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+namespace ft = facescan::testing;
+
+bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+std::vector<std::string> withDds(std::vector<std::string> args, uint32_t domain, const fs::path& identity) {
+    args.insert(args.end(), {"--profile", "loopback", "--domain", std::to_string(domain)});
+    if (!identity.empty()) args.insert(args.end(), {"--security", identity.string()});
+    return args;
+}
+
+// The port `facescan view --port 0` printed in its log.
+uint16_t viewerPort(const fs::path& log) {
+    std::smatch match;
+    const std::regex serving(R"(serving http://127\.0\.0\.1:(\d+)/)");
+    std::string text;
+    if (!ft::pollUntilTrue(
+            [&] {
+                text = ft::readText(log);
+                return std::regex_search(text, match, serving);
+            },
+            20s)) {
+        ADD_FAILURE() << "the viewer did not start:\n" << text;
+        return 0;
+    }
+    return static_cast<uint16_t>(std::stoi(match[1].str()));
+}
+
+TEST(SecureView, TheViewerIdentityWatchesAScanAndDownloadsItsFinalSnapshot) {
+    if (auto root = client::findWebRoot(); !root.isOk()) GTEST_SKIP() << root.status().message();
+    ft::TempSite site("view");
+    ASSERT_TRUE(site.ok()) << site.initOutput();
+    const uint32_t domain = ft::privateDomain(23);
+    const fs::path dir = site.root();
+    const std::string session = "secure-view-" + std::to_string(::getpid());
+
+    ft::ChildProcess viewer(withDds({FACESCAN_CLI, "view", "--port", "0"}, domain, site.identity("viewer")),
+                            dir / "view.log");
+    ft::ChildProcess outsider(withDds({FACESCAN_CLI, "view", "--port", "0"}, domain, {}), dir / "outsider.log");
+    const uint16_t port = viewerPort(dir / "view.log");
+    const uint16_t outsider_port = viewerPort(dir / "outsider.log");
+    ASSERT_TRUE(port && outsider_port);
+    ft::WsClient ws(port);
+    ASSERT_TRUE(ws.connected()) << ws.error();
+    ASSERT_TRUE(ws.send("follow " + session));
+
+    ft::ChildProcess server(withDds({FACESCAN_SERVER_BIN, "--data-dir", (dir / "data").string(), "--snapshot-hz", "2"},
+                                    domain, site.identity("server")),
+                            dir / "server.log");
+    ft::ChildProcess agent(
+        withDds({FACESCAN_AGENT_BIN, "--session", session, "--source", "synthetic:frames=30,subject=builtin,seed=1",
+                 "--rate", "max", "--wait-for-server", "60"},
+                domain, site.identity("agent")),
+        dir / "agent.log");
+    auto logs = [&] {
+        return "\nview:\n" + ft::readText(dir / "view.log") + "\nserver:\n" + ft::readText(dir / "server.log") +
+               "\nagent:\n" + ft::readText(dir / "agent.log");
+    };
+
+    // The viewer role may not publish ScanCommand: the viewer says so at start and serves snapshots instead.
+    EXPECT_TRUE(contains(ft::readText(dir / "view.log"), "cannot ask servers for meshes")) << logs();
+    ASSERT_TRUE(ws.waitFor(
+        [](const auto& m) { return std::any_of(m.begin(), m.end(), [](const auto& x) { return x.binary; }); }, 90s))
+        << logs();
+    EXPECT_EQ(agent.wait(90s), 0) << logs();
+    ASSERT_TRUE(ft::pollUntilTrue(
+        [&] { return contains(ft::httpRequest(port, "/api/sessions/" + session).body, "\"state\":\"FINISHED\""); },
+        60s))
+        << logs();
+
+    // The download is the final snapshot: a GLB with colours, and the same bytes as snapshot.drc decode.
+    std::this_thread::sleep_for(1s);  // the final snapshot follows the FINISHED status
+    const auto drc = ft::httpRequest(port, "/api/sessions/" + session + "/mesh.drc");
+    ASSERT_EQ(drc.status, 200) << drc.body << logs();
+    EXPECT_EQ(drc.body, ft::httpRequest(port, "/api/sessions/" + session + "/snapshot.drc").body);
+    auto mesh = wire::decodeMeshDraco(reinterpret_cast<const uint8_t*>(drc.body.data()), drc.body.size());
+    ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
+    EXPECT_GT(mesh->n_faces(), 1000u);
+    const auto glb = ft::httpRequest(port, "/api/sessions/" + session + "/mesh.glb");
+    ASSERT_EQ(glb.status, 200) << glb.body;
+    tinygltf::Model model;
+    tinygltf::TinyGLTF reader;
+    std::string err, warn;
+    ASSERT_TRUE(reader.LoadBinaryFromMemory(&model, &err, &warn,
+                                            reinterpret_cast<const unsigned char*>(glb.body.data()),
+                                            static_cast<unsigned>(glb.body.size())))
+        << err;
+    EXPECT_TRUE(model.meshes.at(0).primitives.at(0).attributes.count("COLOR_0"));
+
+    // Without an identity, the same viewer on the same domain sees nothing of the secured scan.
+    EXPECT_FALSE(contains(ft::httpRequest(outsider_port, "/api/sessions").body, session));
+    EXPECT_EQ(ft::httpRequest(outsider_port, "/api/sessions/" + session).status, 404);
+}
+
+}  // namespace
