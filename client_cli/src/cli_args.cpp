@@ -26,9 +26,9 @@ struct CommandSpec {
 
 std::string globalOptions() {
     return "Options shared by every command (the DDS ones also by facescan-agent and facescan-server):\n" +
-           wire::ddsOptionsHelp(22) +
-           "  --timeout S         seconds to wait for a server before giving up (default 10)\n"
-           "  -h, --help          this help\n";
+           wire::ddsOptionsHelp(24) +
+           "  --timeout S           seconds to wait for a server before giving up (default 10)\n"
+           "  -h, --help            this help\n";
 }
 
 constexpr const char* kExitCodes =

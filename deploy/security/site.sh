@@ -136,20 +136,23 @@ EOF
 }
 
 # The topics of idl/include/wire/topics.hpp each role may publish and subscribe to (space-separated patterns).
+# The cluster's public topics (servers announce themselves and claim sessions) are published by servers and read
+# by everyone (an agent streams to its session's owner); facescan/cluster/* is between servers only.
+CLUSTER_PUBLIC="facescan/ServerAnnounce facescan/SessionOwner"
 role_publishes() {
     case $1 in
         agent) echo "facescan/CameraInfo facescan/RgbdFrame" ;;
-        server) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply facescan/cluster/*" ;;
+        server) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/cluster/*" ;;
         client) echo "facescan/ScanCommand" ;;
         viewer) echo "" ;;
     esac
 }
 role_subscribes() {
     case $1 in
-        agent) echo "facescan/ScanStatus facescan/ScanReply" ;;
-        server) echo "facescan/CameraInfo facescan/RgbdFrame facescan/ScanCommand facescan/cluster/*" ;;
-        client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply" ;;
-        viewer) echo "facescan/ScanStatus facescan/MeshSnapshot" ;;
+        agent) echo "facescan/ScanStatus facescan/ScanReply $CLUSTER_PUBLIC" ;;
+        server) echo "facescan/CameraInfo facescan/RgbdFrame facescan/ScanCommand $CLUSTER_PUBLIC facescan/cluster/*" ;;
+        client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC" ;;
+        viewer) echo "facescan/ScanStatus facescan/MeshSnapshot $CLUSTER_PUBLIC" ;;
     esac
 }
 

@@ -155,7 +155,7 @@ StatusOr<Participant> Participant::create(const DomainConfig& config) {
         // The identity's files were checked before; what is left is the plugins' own refusal (in Cyclone's log).
         if (!config.security.empty()) {
             return permissionDenied("DDS Security refused to create a participant in " + config.describe() +
-                                    " although its files check out; Cyclone's log (CYCLONEDDS_URI tracing) says why");
+                                    " although its files check out (Cyclone's own message above says why)");
         }
         return ddsStatus(h, "create DDS participant in " + config.describe());
     }

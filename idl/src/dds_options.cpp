@@ -69,7 +69,7 @@ std::string ddsOptionsHelp(size_t column) {
     std::string out;
     for (const OptionHelp& option : kOptions) {
         std::string line = "  " + std::string(option.flag);
-        line.resize(std::max(column, line.size() + 1), ' ');
+        line.resize(std::max(column, line.size() + 2), ' ');
         for (const char c : std::string(option.text)) {
             line += c;
             if (c == '\n') line += std::string(column, ' ');

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # What DDS Security costs (issue 14): the same live scan with and without it, in one run, alternating the two
-# (plain, secure, plain, secure, ...) so that the machine's load falls on both alike. facescan-server and one
-# agent streaming a TUM folder at 30 Hz (RATE; like a real camera's capture PC: it only decodes PNGs) over loopback DDS
-# in a private domain; the secured runs use a fresh site from deploy/security/site.sh.
+# (plain then secure, secure then plain, ...) so that the machine's load falls on both alike. facescan-server and
+# one agent streaming a TUM folder at 30 Hz (RATE; like a real camera's capture PC, it only decodes PNGs) over
+# loopback DDS in a private domain; the secured runs use a fresh site from deploy/security/site.sh.
 # Per run: discovery time (agent joins the domain -> a server matched; secured: authentication handshakes and key
 # exchange included), agent and server CPU (seconds, % of one core over the stream, and the server's ms per
 # integrated frame, which does not depend on how many frames a loaded machine let it integrate), fps,
@@ -84,8 +84,9 @@ run() {
 
 results=$work/results.txt
 : >"$results"
+order() { if [ $(($1 % 2)) -eq 1 ]; then echo plain secure; else echo secure plain; fi; }  # neither always first
 for r in $(seq 1 "$rounds"); do
-    for mode in plain secure; do
+    for mode in $(order "$r"); do
         line=$(run "$mode" "$r") || exit 1
         echo "$line" >>"$results"
         echo "security_overhead: round $r $line" >&2
@@ -118,7 +119,7 @@ echo "security_overhead: the transport alone (facescan-bench transport, 30 Hz fo
 transport=$work/transport.txt
 : >"$transport"
 for r in $(seq 1 "$rounds"); do
-    for mode in plain secure; do
+    for mode in $(order "$r"); do
         sec=()
         [ "$mode" = secure ] && sec=(--security "$work/site")
         json=$("$bench_bin" transport --seconds 10 --flat-out-seconds 5 --domain "$domain" "${sec[@]}" --json | tail -n 1)
@@ -141,3 +142,4 @@ awk '
              100 * (v["secure", "reader_cpu"] - v["plain", "reader_cpu"]) / n["plain"],
              (v["secure", "p50_ms"] - v["plain", "p50_ms"]) / n["plain"], (v["secure", "p99_ms"] - v["plain", "p99_ms"]) / n["plain"]
     }' "$transport"
+rm -rf "$work"

@@ -28,6 +28,18 @@ TEST(CliArgs, MeshWithGlobalOptionsAnywhere) {
     EXPECT_EQ(parsed->timeout.count(), 2500);
 }
 
+TEST(CliArgs, SecurityTakesAnIdentityFolderForEveryCommand) {
+    for (const std::string command : {"sessions", "watch", "view"}) {
+        auto parsed = parse({command, "--security", "/etc/facescan/site/viewer"});
+        ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+        EXPECT_EQ(parsed->domain.security, "/etc/facescan/site/viewer");
+    }
+    EXPECT_TRUE(parse({"sessions"})->domain.security.empty()) << "DDS Security is off unless asked for";
+    expectUsageError({"sessions", "--security"}, "--security needs a value");
+    expectUsageError({"sessions", "--security="}, "--security takes an identity folder");
+    expectUsageError({"sessions", "--security", "x", "--domain", "231"}, "DDS Security covers domain ids 0..230");
+}
+
 TEST(CliArgs, DefaultsAreLanDomainZeroTenSeconds) {
     auto parsed = parse({"sessions"});
     ASSERT_TRUE(parsed.isOk());

@@ -57,6 +57,17 @@ TEST(ServerParams, ConfigFileThenFlagsOverride) {
     EXPECT_FLOAT_EQ(p.recon.filter.sigma_depth_m, 0.03f);
 }
 
+TEST(ServerParams, SecurityIsAFlagAndAConfigKey) {
+    auto flag = parseServerArgs({"--security", "/etc/facescan/site/server"});
+    ASSERT_TRUE(flag.isOk()) << flag.status().toString();
+    EXPECT_EQ(flag->params.domain.security, "/etc/facescan/site/server");
+    auto key = parseServerArgs({"--set", "security=/srv/id"});
+    ASSERT_TRUE(key.isOk()) << key.status().toString();
+    EXPECT_EQ(key->params.domain.security, "/srv/id");
+    EXPECT_TRUE(parseServerArgs({})->params.domain.security.empty());
+    EXPECT_FALSE(parseServerArgs({"--security", ""}).isOk());
+}
+
 TEST(ServerParams, PresetFastChangesTheReconParams) {
     auto fast = parseServerArgs({"--preset", "fast"});
     ASSERT_TRUE(fast.isOk()) << fast.status().toString();

@@ -35,7 +35,7 @@ struct DomainConfig {
     // (authentication, access control, encryption) with it (wire/security.hpp). Empty: no DDS Security.
     std::string security;
     Status validate() const;
-    // "domain 7 (profile lan, secured as DIR/NAME)": for messages.
+    // "domain 7 (profile lan, DDS Security identity DIR/NAME)": for messages.
     std::string describe() const;
 };
 
