@@ -4,6 +4,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include "client/mesh_file.hpp"
 #include "client/watch_panel.hpp"
@@ -107,6 +108,9 @@ int runWatch(const CliOptions& options) {
     view.status.session_id = session;
     std::optional<Clock::time_point> snapshot_received;
     std::optional<Clock::time_point> last_draw;
+    // A change of state (scanning -> lost -> scanning) is drawn at once: a log line a second could miss a short
+    // loss and the advice that came with it ("face lost: come back in front of the camera").
+    std::optional<facescan_wire_ScanState> drawn_state;
     bool confirmed = false;  // a server said it owns the session (it may not have published a status yet)
     if (session.empty()) display.message("waiting for a scan to start (Ctrl-C to stop) ...");
 
@@ -149,9 +153,11 @@ int runWatch(const CliOptions& options) {
         }
         const bool finished = view.have_status && view.status.state == facescan_wire_STATE_FINISHED;
         const bool gone = view.have_status && !view.status.alive;
-        if (finished || gone || !last_draw || secondsSince(*last_draw) >= redraw_s) {
+        const bool state_changed = view.have_status && drawn_state != view.status.state;
+        if (finished || gone || state_changed || !last_draw || secondsSince(*last_draw) >= redraw_s) {
             display.draw(view);
             last_draw = Clock::now();
+            if (view.have_status) drawn_state = view.status.state;
         }
         if (finished) {
             display.message("scan " + session + " finished: " + groupThousands(view.status.frames_integrated) +

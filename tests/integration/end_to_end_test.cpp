@@ -161,4 +161,37 @@ TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
     fs::remove_all(dir);
 }
 
+// Issue 18, live: the subject walks out of view for a second and comes back turned by 20 deg. The server's status
+// tells the person what to do while the face is lost, `facescan watch` shows it the moment the scan is lost, and
+// the scan comes back by itself after the gap (re-acquisition), in real time at 30 Hz.
+TEST(EndToEnd, WatchShowsTheAdviceWhileTheFaceIsLostAndTheScanComesBack) {
+    const std::string domain = std::to_string(facescan::testing::privateDomain(6));
+    const std::string session = "gap-" + std::to_string(::getpid());
+    const std::string dds = " --profile loopback --domain " + domain;
+    const fs::path dir = fs::temp_directory_path() / ("facescan_e2e_gap_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    // 1.5 s of tracking, 5 frames walking out, 30 out of view, 5 walking back, then 2 s to come back.
+    ChildProcess server({FACESCAN_SERVER_BIN, "--profile", "loopback", "--domain", domain, "--data-dir",
+                         (dir / "data").string(), "--set", "status_hz=10"},
+                        dir / "server.log");
+    ChildProcess agent({FACESCAN_AGENT_BIN, "--profile", "loopback", "--domain", domain, "--session", session,
+                        "--source", "synthetic:scenario=gap,gap_start=45,frames=145,subject=builtin,seed=6", "--rate",
+                        "real", "--wait-for-server", "30"},
+                       dir / "agent.log");
+    const CliRun watch = runCli("watch " + session + dds + " --timeout 30");
+    ASSERT_EQ(watch.exit_code, 0) << watch.out << "\nserver:\n"
+                                  << readText(dir / "server.log") << "\nagent:\n"
+                                  << readText(dir / "agent.log");
+    EXPECT_EQ(agent.wait(30s), 0) << readText(dir / "agent.log");
+    std::printf("%s", watch.out.c_str());
+    const size_t lost = watch.out.find(" LOST ");
+    ASSERT_NE(lost, std::string::npos) << "the loss is not shown:\n" << watch.out;
+    const size_t advice = watch.out.find("(face lost: come back in front of the camera", lost);
+    EXPECT_NE(advice, std::string::npos) << "no advice with the loss:\n" << watch.out;
+    EXPECT_NE(watch.out.find(" SCANNING ", lost), std::string::npos) << "the scan never came back:\n" << watch.out;
+    server.stop();
+    fs::remove_all(dir);
+}
+
 }  // namespace

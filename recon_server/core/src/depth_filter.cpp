@@ -169,6 +169,21 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
     return valid;
 }
 
+int validCentroid(const SurfaceLevel& lv, Eigen::Vector3f& centroid) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    int n = 0;
+    for (int v = lv.roi.y; v < lv.roi.y + lv.roi.height; ++v) {
+        const auto* row = lv.vertex.ptr<cv::Vec3f>(v);
+        for (int u = lv.roi.x; u < lv.roi.x + lv.roi.width; ++u) {
+            if (std::isnan(row[u][0])) continue;
+            sum += Eigen::Vector3d(row[u][0], row[u][1], row[u][2]);
+            ++n;
+        }
+    }
+    if (n > 0) centroid = (sum / static_cast<double>(n)).cast<float>();
+    return n;
+}
+
 void computeVertexMap(const Intrinsics& k, const cv::Mat& depth_m, const cv::Rect& roi, cv::Mat& vertex) {
     parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
         for (int v = v_lo; v < v_hi; ++v) {

@@ -9,6 +9,16 @@ namespace {
 using Clock = std::chrono::steady_clock;
 float msSince(Clock::time_point t0) { return std::chrono::duration<float, std::milli>(Clock::now() - t0).count(); }
 
+// The observation of a segmentation (masks shared, not copied).
+void adopt(const HeadSegmentation& seg, HeadObservation& obs) {
+    obs.found = seg.found;
+    obs.mask = seg.mask;
+    obs.depth_m = seg.depth_m;
+    obs.centroid_m = seg.centroid_m;
+    obs.extent_m = seg.extent_m;
+    if (!seg.found) obs.reason = seg.reason;
+}
+
 }  // namespace
 
 Status FacePipelineParams::validate() const {
@@ -37,14 +47,6 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
     if (depth.cols != depth_.width_px || depth.rows != depth_.height_px) {
         return obs.reason = "depth size differs from the camera's intrinsics", obs;
     }
-    auto adopt = [&](const HeadSegmentation& seg) {
-        obs.found = seg.found;
-        obs.mask = seg.mask;
-        obs.depth_m = seg.depth_m;
-        obs.centroid_m = seg.centroid_m;
-        obs.extent_m = seg.extent_m;
-        if (!seg.found) obs.reason = seg.reason;
-    };
 
     // 1. Tracking: the predicted head box seeds the segmenter; no detection.
     const bool redetect_due =
@@ -55,7 +57,7 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
         obs.segment_ms = msSince(t0);
         ++frames_since_detection_;
         if (segmentation_.found) {
-            adopt(segmentation_);
+            adopt(segmentation_, obs);
             obs.face_box = segmentation_.head_box_px;
             return obs;
         }
@@ -81,7 +83,7 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
             const auto t1 = Clock::now();
             segmenter_.segment(depth, depth_, face.box_depth_px, segmentation_);
             obs.segment_ms += msSince(t1);
-            adopt(segmentation_);
+            adopt(segmentation_, obs);
             if (obs.found) return obs;
             detect_reason = "face found but " + segmentation_.reason;
         }
@@ -93,7 +95,7 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
         finder_.find(depth, depth_, segmentation_);
         obs.detect_ms += msSince(t0);
         if (segmentation_.found) {
-            adopt(segmentation_);
+            adopt(segmentation_, obs);
             obs.depth_only = true;
             obs.face_box = segmentation_.head_box_px;
             obs.reason.clear();
@@ -125,13 +127,9 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const HeadPredicti
     }
     ++frames_since_detection_;
     HeadObservation obs;
-    obs.found = true;
+    adopt(model_segmentation_, obs);
     obs.from_model = true;
     obs.segment_ms = ms;
-    obs.mask = model_segmentation_.mask;
-    obs.depth_m = model_segmentation_.depth_m;
-    obs.centroid_m = model_segmentation_.centroid_m;
-    obs.extent_m = model_segmentation_.extent_m;
     obs.face_box = model_segmentation_.head_box_px;
     return obs;
 }

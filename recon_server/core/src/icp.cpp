@@ -69,27 +69,12 @@ Status IcpParams::validate() const {
 }
 
 bool centroidAlignment(const SurfaceLevel& source, const SurfaceLevel& target_world, Pose& T_world_camera) {
-    auto centroid = [](const SurfaceLevel& lv, Eigen::Vector3d& c) {
-        c.setZero();
-        long n = 0;
-        for (int v = lv.roi.y; v < lv.roi.y + lv.roi.height; ++v) {
-            const auto* row = lv.vertex.ptr<cv::Vec3f>(v);
-            for (int u = lv.roi.x; u < lv.roi.x + lv.roi.width; ++u) {
-                if (std::isnan(row[u][0])) continue;
-                c += Eigen::Vector3d(row[u][0], row[u][1], row[u][2]);
-                ++n;
-            }
-        }
-        if (n == 0) return false;
-        c /= static_cast<double>(n);
-        return true;
-    };
-    Eigen::Vector3d mu_s, mu_d;
-    if (!centroid(source, mu_s) || !centroid(target_world, mu_d)) return false;
+    Eigen::Vector3f mu_s, mu_d;
+    if (validCentroid(source, mu_s) == 0 || validCentroid(target_world, mu_d) == 0) return false;
     // Eq. 4.11 with the source first moved by the current estimate: T = [I, mu_D - T mu_S] T.
-    const Eigen::Vector3f moved = T_world_camera * mu_s.cast<float>();
+    const Eigen::Vector3f moved = T_world_camera * mu_s;
     Pose shift = Pose::Identity();
-    shift.translation() = mu_d.cast<float>() - moved;
+    shift.translation() = mu_d - moved;
     T_world_camera = shift * T_world_camera;
     return true;
 }

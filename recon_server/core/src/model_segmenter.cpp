@@ -21,18 +21,8 @@ Status HeadRegionParams::validate() const {
 }
 
 bool HeadRegion::fromFirstFrame(const SurfaceLevel& lv, const HeadRegionParams& p, HeadRegion& out) {
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    long n = 0;
-    for (int v = lv.roi.y; v < lv.roi.y + lv.roi.height; ++v) {
-        const auto* row = lv.vertex.ptr<cv::Vec3f>(v);
-        for (int u = lv.roi.x; u < lv.roi.x + lv.roi.width; ++u) {
-            if (std::isnan(row[u][0])) continue;
-            sum += Eigen::Vector3d(row[u][0], row[u][1], row[u][2]);
-            ++n;
-        }
-    }
-    if (n == 0) return false;
-    const Eigen::Vector3f centroid = (sum / static_cast<double>(n)).cast<float>();
+    Eigen::Vector3f centroid;
+    if (validCentroid(lv, centroid) == 0) return false;
     out.centre_world = centroid + centroid.normalized() * p.centre_behind_m;
     out.down_world = Eigen::Vector3f::UnitY();
     float lowest = -1e9f;

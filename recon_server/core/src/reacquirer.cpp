@@ -101,21 +101,11 @@ ReacquireResult Reacquirer::search(const VoxelBlockGrid& grid, const SurfacePyra
     // The frame's head centre (camera frame): its points' centroid pushed back along the view ray, as the head
     // region's centre was found at the first frame.
     const SurfaceLevel& coarse = frame.levels[kCoarseLevel];
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    int n = 0;
-    for (int v = coarse.roi.y; v < coarse.roi.y + coarse.roi.height; ++v) {
-        const auto* row = coarse.vertex.ptr<cv::Vec3f>(v);
-        for (int u = coarse.roi.x; u < coarse.roi.x + coarse.roi.width; ++u) {
-            if (std::isnan(row[u][0])) continue;
-            sum += Eigen::Vector3d(row[u][0], row[u][1], row[u][2]);
-            ++n;
-        }
-    }
-    if (n < params_.min_points) {
+    Eigen::Vector3f centroid;
+    if (validCentroid(coarse, centroid) < params_.min_points) {
         result.why = "too few head points to re-acquire";
         return result;
     }
-    const Eigen::Vector3f centroid = (sum / n).cast<float>();
     const Eigen::Vector3f centre_cam = centroid + centroid.normalized() * region.centre_behind_m;
 
     // 1. Coarse: every hypothesis, cast and aligned at level 2; keep the best few by agreement.

@@ -18,12 +18,8 @@ constexpr float kVisibleRefRate = 0.05f, kVisibleRefDecay = 0.02f;
 
 // Valid vertices of a level inside its ROI.
 int countValid(const SurfaceLevel& lv) {
-    int n = 0;
-    for (int v = lv.roi.y; v < lv.roi.y + lv.roi.height; ++v) {
-        const auto* row = lv.vertex.ptr<cv::Vec3f>(v);
-        for (int u = lv.roi.x; u < lv.roi.x + lv.roi.width; ++u) n += std::isnan(row[u][0]) ? 0 : 1;
-    }
-    return n;
+    Eigen::Vector3f unused;
+    return validCentroid(lv, unused);
 }
 
 }  // namespace

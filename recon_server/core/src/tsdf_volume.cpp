@@ -123,18 +123,8 @@ void TsdfVolume::reset() {
 }
 
 bool TsdfVolume::place(const SurfaceLevel& first) {
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    long n = 0;
-    for (int v = first.roi.y; v < first.roi.y + first.roi.height; ++v) {
-        const auto* row = first.vertex.ptr<cv::Vec3f>(v);
-        for (int u = first.roi.x; u < first.roi.x + first.roi.width; ++u) {
-            if (std::isnan(row[u][0])) continue;
-            sum += Eigen::Vector3d(row[u][0], row[u][1], row[u][2]);
-            ++n;
-        }
-    }
-    if (n == 0) return false;
-    const Eigen::Vector3f centroid = (sum / static_cast<double>(n)).cast<float>();
+    Eigen::Vector3f centroid;
+    if (validCentroid(first, centroid) == 0) return false;
     const Eigen::Vector3f centre = centroid + centroid.normalized() * params_.centre_behind_surface_m;
     // Voxel centres sit at origin + i * voxel_size, i = 0..N-1, symmetric about the centre.
     grid_.origin_world = centre - Eigen::Vector3f::Constant(0.5f * (params_.volume_size_m - grid_.voxel_size_m));

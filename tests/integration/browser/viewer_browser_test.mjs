@@ -1,8 +1,9 @@
 // The web viewer in a real browser during a real scan: facescan-server and facescan-agent (synthetic Kinect, live
 // 30 Hz) and `facescan view` run as processes on loopback in a private domain; Debian's headless chromium opens
 // the page, waits for the mesh, takes two screenshots a few snapshots apart, checks that the face is drawn and
-// that the picture changed, that the console shows no error, downloads the GLB and reads it back with three.js'
-// glTF reader. Run by viewer_browser_test.sh (which skips when the browser cannot start).
+// that the picture changed, that the console shows no error, that the status says what to do while the subject is
+// out of view and that the scan comes back, downloads the GLB and reads it back with three.js' glTF reader. Run by
+// viewer_browser_test.sh (which skips when the browser cannot start).
 // Usage: node viewer_browser_test.mjs OUT_DIR DOMAIN   (env: FACESCAN_SERVER, FACESCAN_AGENT, FACESCAN_CLI,
 //        FACESCAN_WEB_NODE_MODULES, CHROMIUM)
 import assert from 'node:assert/strict';
@@ -25,7 +26,10 @@ const session = `browser-${process.pid}`;
 const server = start('server', env.FACESCAN_SERVER, [...ddsArgs(domain), '--data-dir', path.join(outDir, 'data'),
   '--snapshot-hz', '2'], outDir);
 const agent = start('agent', env.FACESCAN_AGENT, [...ddsArgs(domain), '--session', session, '--source',
-  'synthetic:frames=600,subject=builtin,seed=3', '--rate', 'real', '--wait-for-server', '30'], outDir);
+  // Some 7 s in, the subject walks out of view for a second and comes back turned (issue 18): the page must show
+  // the advice while the face is lost, and the scan must come back by itself.
+  'synthetic:scenario=gap,gap_start=200,frames=600,subject=builtin,seed=3', '--rate', 'real',
+  '--wait-for-server', '30'], outDir);
 const { viewer, url } = await startViewer(env.FACESCAN_CLI, domain, outDir);
 log(`viewer at ${url}`);
 
@@ -38,7 +42,21 @@ try {
   page.on('pageerror', (error) => problems.push(`page error: ${error.message}`));
   page.on('requestfailed', (request) => problems.push(`request failed: ${request.url()} ${request.failure()?.errorText}`));
 
+  // Every state and status line the page shows, in order (the loss may come while the checks below run).
+  await page.addInitScript(() => {
+    window.testStatusLines = [];
+    document.addEventListener('DOMContentLoaded', () => {
+      const [state, detail] = ['state', 'detail'].map((id) => document.getElementById(id));
+      new MutationObserver(() => {
+        const line = `${state.textContent}: ${detail.textContent}`;
+        if (window.testStatusLines.at(-1) !== line) window.testStatusLines.push(line);
+      }).observe(detail, { childList: true, characterData: true, subtree: true });
+    });
+  });
   await page.goto(`${url}?session=${session}`);
+  const lostShot = page.waitForFunction(() => document.getElementById('state').textContent === 'LOST', null,
+    { timeout: 90000, polling: 50 }).then(() => page.screenshot({ path: path.join(outDir, 'viewer-lost.png') }))
+    .catch((error) => error);  // kept for the check below, not an unhandled rejection meanwhile
   const webgl = await page.evaluate(() => {
     const gl = document.createElement('canvas').getContext('webgl2');
     const info = gl && gl.getExtension('WEBGL_debug_renderer_info');
@@ -130,6 +148,18 @@ try {
   assert.ok(Number(progress.integrated.replace(/\D/g, '')) > 0, 'no frames integrated shown');
   assert.notEqual(progress.server, '–', 'the session\'s server is not shown');
   assert.equal(progress.rows, 1);
+
+  // The face lost for a second: the page said what to do, then the scan came back by itself.
+  const lostError = await lostShot;
+  assert.ok(!(lostError instanceof Error), `the page never showed the scan as LOST: ${lostError?.message}`);
+  await page.waitForFunction(() => {
+    const lines = window.testStatusLines;
+    const lost = lines.findIndex((line) => line.startsWith('LOST: face lost: come back in front of the camera'));
+    return lost >= 0 && lines.slice(lost).some((line) => line.startsWith('SCANNING'));
+  }, null, { timeout: 60000 });
+  const statusLines = await page.evaluate(() => window.testStatusLines);
+  log(`status lines shown: ${statusLines.length}, around the loss: ${JSON.stringify(statusLines.filter(
+    (line, i, all) => line.startsWith('LOST') || (i > 0 && all[i - 1].startsWith('LOST'))).slice(0, 4))}`);
 
   // The GLB download, read back with three.js' own glTF reader.
   const [download] = await Promise.all([page.waitForEvent('download', { timeout: 30000 }),

@@ -63,6 +63,10 @@ class DepthFilter {
     float range_step_m_ = 0.0f;
 };
 
+// The mean of a level's valid vertices inside its ROI (in the level's frame) and how many there are; returns 0
+// and leaves `centroid` unchanged when there is none.
+int validCentroid(const SurfaceLevel& level, Eigen::Vector3f& centroid);
+
 // Thesis eq. 4.9 over an ROI: vertex map of a depth image (NaN where depth is 0).
 void computeVertexMap(const Intrinsics& k, const cv::Mat& depth_m, const cv::Rect& roi, cv::Mat& vertex);
 // Thesis eq. 4.10: n = (v[i+1,j] - v[i,j]) x (v[i,j+1] - v[i,j]), normalised and oriented toward the camera;
