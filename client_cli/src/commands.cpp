@@ -166,7 +166,7 @@ int runMesh(const CliOptions& options) {
                     "the server sent no mesh for '" + options.session + "' (nothing integrated yet?)");
     }
     // Decoded even for .drc: the bytes are checked before they land in a file, and the counts are reported.
-    auto mesh = wire::decodeMeshDraco(reply->payload.data(), reply->payload.size());
+    auto mesh = wire::decodeIndexedMesh(reply->payload.data(), reply->payload.size());
     if (!mesh.isOk()) return fail(kExitServerError, "the server's mesh cannot be decoded: " + mesh.status().message());
     if (Status s = writeMeshFile(*mesh, options.output, &reply->payload); !s.isOk()) {
         return fail(s.code() == StatusCode::kUnavailable ? kExitCannotWrite : kExitServerError, s.message());
@@ -174,8 +174,8 @@ int runMesh(const CliOptions& options) {
     std::error_code ec;
     const auto bytes = std::filesystem::file_size(options.output, ec);
     std::printf("wrote %s: %s vertices, %s triangles, %s (%s)\n", options.output.c_str(),
-                std::to_string(mesh->n_vertices()).c_str(), std::to_string(mesh->n_faces()).c_str(),
-                formatHasColours(format) && mesh->has_vertex_colors() ? "with colours" : "no colours",
+                std::to_string(mesh->vertexCount()).c_str(), std::to_string(mesh->triangleCount()).c_str(),
+                formatHasColours(format) && mesh->hasColours() ? "with colours" : "no colours",
                 sizeText(ec ? 0 : bytes).c_str());
     return kExitOk;
 }

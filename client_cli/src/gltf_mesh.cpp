@@ -40,22 +40,20 @@ int addAccessor(tinygltf::Model& model, const void* data, size_t count, size_t b
 
 }  // namespace
 
-StatusOr<std::string> meshToGlb(const recon::Mesh& mesh) {
-    // Live vertices numbered densely (OpenMesh may keep deleted elements until garbage collection).
-    std::vector<uint32_t> index_of(mesh.n_vertices(), std::numeric_limits<uint32_t>::max());
+StatusOr<std::string> meshToGlb(const recon::IndexedMesh& mesh) {
     std::vector<float> positions, normals;
     std::vector<uint8_t> colours;
-    const bool has_normals = mesh.has_vertex_normals();
-    const bool has_colours = mesh.has_vertex_colors();
+    // glTF viewers light with NORMAL: always send it, from the triangles when the mesh has none.
+    const std::vector<Eigen::Vector3f> vertex_normals = mesh.hasNormals() ? mesh.normals : recon::vertexNormals(mesh);
+    const bool has_colours = mesh.hasColours();
+    const bool has_normals = true;
     std::array<double, 3> lo{}, hi{};
     lo.fill(std::numeric_limits<double>::max());
     hi.fill(std::numeric_limits<double>::lowest());
-    uint32_t n = 0;
-    for (const auto vh : mesh.vertices()) {
-        const auto& p = mesh.point(vh);
-        if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
-            return invalidArgument("glTF export: vertex " + std::to_string(vh.idx()) + " is not finite");
-        }
+    const uint32_t n = static_cast<uint32_t>(mesh.vertexCount());
+    for (uint32_t i = 0; i < n; ++i) {
+        const Eigen::Vector3f& p = mesh.positions_m[i];
+        if (!p.allFinite()) return invalidArgument("glTF export: vertex " + std::to_string(i) + " is not finite");
         // 180 degrees about x: camera frame (y down, z forward) to glTF's (y up, viewer on +z).
         const float q[3] = {p[0], -p[1], -p[2]};
         for (int k = 0; k < 3; ++k) {
@@ -63,22 +61,21 @@ StatusOr<std::string> meshToGlb(const recon::Mesh& mesh) {
             lo[k] = std::min(lo[k], double(q[k]));
             hi[k] = std::max(hi[k], double(q[k]));
         }
-        if (has_normals) {
-            OpenMesh::Vec3f nv = mesh.normal(vh);
-            if (!std::isfinite(nv.sqrnorm()) || nv.sqrnorm() < 1e-12f) nv = OpenMesh::Vec3f(0, 0, -1);
-            nv.normalize();
-            normals.insert(normals.end(), {nv[0], -nv[1], -nv[2]});
-        }
+        Eigen::Vector3f nv = vertex_normals[i];
+        if (!nv.allFinite() || nv.squaredNorm() < 1e-12f) nv = Eigen::Vector3f(0, 0, -1);
+        nv.normalize();
+        normals.insert(normals.end(), {nv[0], -nv[1], -nv[2]});
         if (has_colours) {
-            const auto& c = mesh.color(vh);
+            const recon::Rgb8& c = mesh.colours_rgb[i];
             colours.insert(colours.end(), {c[0], c[1], c[2], 255});
         }
-        index_of[vh.idx()] = n++;
     }
     std::vector<uint32_t> indices;
-    for (const auto fh : mesh.faces()) {
-        if (mesh.valence(fh) != 3) continue;
-        for (const auto vh : mesh.fv_range(fh)) indices.push_back(index_of[vh.idx()]);
+    indices.reserve(mesh.triangleCount() * 3);
+    for (const recon::Triangle& t : mesh.triangles) {
+        if (t[0] >= n || t[1] >= n || t[2] >= n)
+            return invalidArgument("glTF export: a triangle indexes past the vertices");
+        indices.insert(indices.end(), t.begin(), t.end());
     }
     if (indices.empty()) return invalidArgument("glTF export: the mesh has no triangles");
 
@@ -135,5 +132,7 @@ StatusOr<std::string> meshToGlb(const recon::Mesh& mesh) {
     }
     return out.str();
 }
+
+StatusOr<std::string> meshToGlb(const recon::Mesh& mesh) { return meshToGlb(recon::fromOpenMesh(mesh)); }
 
 }  // namespace facescan::client

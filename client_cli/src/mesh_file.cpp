@@ -5,14 +5,13 @@
 #include <fcntl.h>
 #include <unistd.h>
 
-#include <OpenMesh/Core/IO/MeshIO.hh>
-#include <OpenMesh/Core/System/omstream.hh>
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <sstream>
 
 #include "client/gltf_mesh.hpp"
+#include "recon/mesh_writer.hpp"
 #include "wire/mesh_codec.hpp"
 
 namespace facescan::client {
@@ -33,44 +32,6 @@ Status cannotWrite(const fs::path& path, const std::string& why) {
 fs::path folderOf(const fs::path& path) {
     const fs::path parent = path.parent_path();
     return parent.empty() ? fs::path(".") : parent;
-}
-
-// OBJ written here: OpenMesh's OBJ writer keeps colours only as per-face materials in a separate .mtl file, and
-// cannot write those into a stream. Vertex colours go on the `v` lines (x y z r g b, colours in [0, 1]), the
-// extension MeshLab, Blender, Open3D and OpenMesh's own reader understand.
-std::string objText(const recon::Mesh& mesh) {
-    std::ostringstream out;
-    out.precision(9);
-    out << "# facescan mesh: metres, " << mesh.n_vertices() << " vertices, " << mesh.n_faces() << " triangles\n";
-    const bool colours = mesh.has_vertex_colors();
-    const bool normals = mesh.has_vertex_normals();
-    for (const auto vh : mesh.vertices()) {
-        const auto& p = mesh.point(vh);
-        out << "v " << p[0] << ' ' << p[1] << ' ' << p[2];
-        if (colours) {
-            const auto& c = mesh.color(vh);
-            out.precision(6);
-            out << ' ' << c[0] / 255.0 << ' ' << c[1] / 255.0 << ' ' << c[2] / 255.0;
-            out.precision(9);
-        }
-        out << '\n';
-    }
-    if (normals) {
-        for (const auto vh : mesh.vertices()) {
-            const auto& n = mesh.normal(vh);
-            out << "vn " << n[0] << ' ' << n[1] << ' ' << n[2] << '\n';
-        }
-    }
-    for (const auto fh : mesh.faces()) {
-        out << 'f';
-        for (const auto vh : mesh.fv_range(fh)) {
-            const int i = vh.idx() + 1;  // OBJ indices start at 1
-            out << ' ' << i;
-            if (normals) out << "//" << i;
-        }
-        out << '\n';
-    }
-    return out.str();
 }
 
 }  // namespace
@@ -161,44 +122,33 @@ Status writeFileAtomically(const fs::path& path, std::string_view bytes) {
     return Status::ok();
 }
 
-StatusOr<std::string> encodeMeshFile(const recon::Mesh& mesh, MeshFormat format,
+StatusOr<std::string> encodeMeshFile(const recon::IndexedMesh& mesh, MeshFormat format,
                                      const std::vector<uint8_t>* draco_bytes) {
     if (format == MeshFormat::kDrc && draco_bytes) {
         return std::string(reinterpret_cast<const char*>(draco_bytes->data()), draco_bytes->size());
     }
-    if (mesh.n_faces() == 0) return invalidArgument("the mesh has no triangles");
-    if (format == MeshFormat::kDrc) {
-        std::vector<uint8_t> encoded;
-        RETURN_IF_ERROR(wire::encodeMeshDraco(mesh, wire::MeshCodecParams{}, encoded));
-        return std::string(reinterpret_cast<const char*>(encoded.data()), encoded.size());
-    }
-    if (format == MeshFormat::kObj) return objText(mesh);
-    if (format == MeshFormat::kGlb) return meshToGlb(mesh);
-
-    using OpenMesh::IO::Options;
-    Options opts;
+    if (mesh.triangles.empty()) return invalidArgument("the mesh has no triangles");
     switch (format) {
-        case MeshFormat::kPly: opts = Options(Options::Binary | Options::VertexNormal | Options::VertexColor); break;
-        case MeshFormat::kOff: opts = Options(Options::VertexNormal | Options::VertexColor); break;
-        case MeshFormat::kStl: opts = Options(Options::Binary); break;
-        case MeshFormat::kObj:
-        case MeshFormat::kDrc:
-        case MeshFormat::kGlb: break;
+        case MeshFormat::kDrc: {
+            std::vector<uint8_t> encoded;
+            RETURN_IF_ERROR(wire::encodeMeshDraco(mesh, wire::MeshCodecParams{}, encoded));
+            return std::string(reinterpret_cast<const char*>(encoded.data()), encoded.size());
+        }
+        case MeshFormat::kGlb: return meshToGlb(mesh);
+        case MeshFormat::kPly: return recon::meshFileBytes(mesh, recon::MeshFileFormat::kPly);
+        case MeshFormat::kObj: return recon::meshFileBytes(mesh, recon::MeshFileFormat::kObj);
+        case MeshFormat::kStl: return recon::meshFileBytes(mesh, recon::MeshFileFormat::kStl);
+        case MeshFormat::kOff: return recon::meshFileBytes(mesh, recon::MeshFileFormat::kOff);
     }
-    if (!mesh.has_vertex_normals()) opts -= Options::VertexNormal;
-    if (!mesh.has_vertex_colors()) opts -= Options::VertexColor;
-    // OpenMesh writes into memory: its writers report failure only as a bool, so the file itself is written (and
-    // its errors reported) by writeFileAtomically.
-    std::ostringstream out(std::ios::binary);
-    omlog().disable();  // OpenMesh's writers chatter on the log stream ("[STLWriter] : write binary file")
-    // Positions in metres: 6 significant digits would round to 1 micron at 1 m; 9 keep floats exact.
-    if (!OpenMesh::IO::write_mesh(mesh, out, std::string(".") + meshFormatName(format), opts, 9)) {
-        return internalError(std::string("OpenMesh could not encode the mesh as ") + meshFormatName(format));
-    }
-    return std::move(out).str();
+    return invalidArgument("unknown mesh format");
 }
 
-Status writeMeshFile(const recon::Mesh& mesh, const fs::path& path, const std::vector<uint8_t>* draco_bytes) {
+StatusOr<std::string> encodeMeshFile(const recon::Mesh& mesh, MeshFormat format,
+                                     const std::vector<uint8_t>* draco_bytes) {
+    return encodeMeshFile(recon::fromOpenMesh(mesh), format, draco_bytes);
+}
+
+Status writeMeshFile(const recon::IndexedMesh& mesh, const fs::path& path, const std::vector<uint8_t>* draco_bytes) {
     ASSIGN_OR_RETURN(const MeshFormat format, meshFormatFor(path));
     auto bytes = encodeMeshFile(mesh, format, draco_bytes);
     if (!bytes.isOk()) {
@@ -206,6 +156,14 @@ Status writeMeshFile(const recon::Mesh& mesh, const fs::path& path, const std::v
         return invalidArgument(bytes.status().message() + "; nothing to write to '" + path.string() + "'");
     }
     return writeFileAtomically(path, *bytes);
+}
+
+}  // namespace facescan::client
+
+namespace facescan::client {
+
+Status writeMeshFile(const recon::Mesh& mesh, const fs::path& path, const std::vector<uint8_t>* draco_bytes) {
+    return writeMeshFile(recon::fromOpenMesh(mesh), path, draco_bytes);
 }
 
 }  // namespace facescan::client

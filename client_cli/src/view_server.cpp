@@ -175,7 +175,7 @@ int ViewServer::Impl::sendMesh(mg_connection* conn, const std::string& session, 
                                                                                                      : 502;
         return respondError(conn, http, draco.status().message());
     }
-    auto mesh = wire::decodeMeshDraco(draco->data(), draco->size());
+    auto mesh = wire::decodeIndexedMesh(draco->data(), draco->size());
     if (!mesh.isOk()) return respondError(conn, 502, "the server's mesh cannot be decoded: " + mesh.status().message());
     auto bytes = encodeMeshFile(*mesh, *format, &*draco);
     if (!bytes.isOk()) return respondError(conn, 502, bytes.status().message());

@@ -78,7 +78,7 @@ Status saveSnapshot(const MeshSnapshotData& snap, const fs::path& dir, const std
         return writeFileAtomically(
             path, std::string_view(reinterpret_cast<const char*>(snap.draco.data()), snap.draco.size()));
     }
-    ASSIGN_OR_RETURN(const recon::Mesh mesh, wire::decodeMeshDraco(snap.draco.data(), snap.draco.size()));
+    ASSIGN_OR_RETURN(const recon::IndexedMesh mesh, wire::decodeIndexedMesh(snap.draco.data(), snap.draco.size()));
     return writeMeshFile(mesh, path);
 }
 

@@ -64,78 +64,115 @@ int positionBitsFor(float extent_m, float max_error_m) {
     return 30;
 }
 
-Status encodeMeshDraco(const recon::Mesh& mesh, const MeshCodecParams& params, std::vector<uint8_t>& out) {
-    RETURN_IF_ERROR(params.validate());
-    if (mesh.n_faces() == 0) return invalidArgument("Draco encoder: mesh has no faces");
-    // OpenMesh may hold deleted elements until garbage collection: number the live vertices densely.
-    std::vector<uint32_t> index_of(mesh.n_vertices(), std::numeric_limits<uint32_t>::max());
-    uint32_t nv = 0;
-    OpenMesh::Vec3f lo(std::numeric_limits<float>::max());
-    OpenMesh::Vec3f hi(std::numeric_limits<float>::lowest());
-    for (const auto vh : mesh.vertices()) {
-        const auto& p = mesh.point(vh);
-        if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
-            return invalidArgument("Draco encoder: vertex " + num(vh.idx()) + " is not finite");
-        }
-        lo.minimize(p);
-        hi.maximize(p);
-        index_of[vh.idx()] = nv++;
+namespace {
+
+// Draco's quantiser (AttributeQuantizationTransform + Quantizer, float arithmetic): per axis the minimum, one
+// range for all axes (the largest extent), max = 2^bits - 1 steps, q = floor((v - min) * max / range + 0.5),
+// decoded v' = q * (range / max) + min. Reproduced here so that the encoder sees the positions the receiver will
+// get, and cleans the mesh on them (issue 16: close vertices collapsed and left zero-area triangles).
+struct DracoGrid {
+    float min[3] = {0, 0, 0};
+    float inverse_delta = 1.0f;
+    float delta = 1.0f;
+    float snap(float v, int axis) const {
+        const int32_t q = static_cast<int32_t>(std::floor((v - min[axis]) * inverse_delta + 0.5f));
+        return static_cast<float>(q) * delta + min[axis];
     }
-    size_t nf = 0;
-    for (const auto fh : mesh.faces()) nf += (mesh.valence(fh) == 3) ? 1 : 0;
-    if (nf == 0) return invalidArgument("Draco encoder: mesh has no triangles");
+};
+
+}  // namespace
+
+Status encodeMeshDraco(const recon::IndexedMesh& mesh, const MeshCodecParams& params, std::vector<uint8_t>& out,
+                       recon::IndexedMesh* encoded) {
+    RETURN_IF_ERROR(params.validate());
+    if (mesh.triangles.empty()) return invalidArgument("Draco encoder: mesh has no triangles");
+    const size_t nv_in = mesh.vertexCount();
+    for (const recon::Triangle& t : mesh.triangles) {
+        if (t[0] >= nv_in || t[1] >= nv_in || t[2] >= nv_in) {
+            return invalidArgument("Draco encoder: a triangle indexes past the " + num(nv_in) + " vertices");
+        }
+    }
+    float lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) lo[a] = std::numeric_limits<float>::max(), hi[a] = std::numeric_limits<float>::lowest();
+    for (size_t i = 0; i < nv_in; ++i) {
+        const Eigen::Vector3f& p = mesh.positions_m[i];
+        if (!p.allFinite()) return invalidArgument("Draco encoder: vertex " + num(i) + " is not finite");
+        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+    }
+    float range = 0.0f;
+    for (int a = 0; a < 3; ++a) range = std::max(range, hi[a] - lo[a]);
+    if (range == 0.0f) range = 1.0f;  // Draco's own choice for a single point
+    const int position_bits =
+        params.position_bits > 0 ? params.position_bits : positionBitsFor(range, params.max_position_error_m);
+    const float max_quantized = static_cast<float>((1u << position_bits) - 1u);
+    DracoGrid grid;
+    for (int a = 0; a < 3; ++a) grid.min[a] = lo[a];
+    grid.inverse_delta = max_quantized / range;
+    grid.delta = range / max_quantized;
+
+    // The mesh as the receiver will see it: positions on Draco's grid, then welded and cleaned there (no
+    // zero-area or duplicate triangle, no unreferenced vertex). Draco quantises these snapped positions to the
+    // same grid again (set explicitly below), so what the receiver decodes is this mesh, vertex order aside.
+    recon::IndexedMesh work;
+    work.positions_m.resize(nv_in);
+    for (size_t i = 0; i < nv_in; ++i) {
+        for (int a = 0; a < 3; ++a) work.positions_m[i][a] = grid.snap(mesh.positions_m[i][a], a);
+    }
+    if (params.colours && mesh.hasColours()) work.colours_rgb = mesh.colours_rgb;
+    const bool send_normals = params.normal_bits > 0 && mesh.hasNormals();
+    if (send_normals) work.normals = mesh.normals;
+    work.triangles = mesh.triangles;
+    recon::removeDefects(work);
+    if (work.triangles.empty()) return invalidArgument("Draco encoder: no triangle survives quantisation");
+    const uint32_t nv = static_cast<uint32_t>(work.vertexCount());
+    const size_t nf = work.triangleCount();
 
     draco::Mesh dm;
     dm.set_num_points(nv);
     dm.SetNumFaces(nf);
-    size_t fi = 0;
-    for (const auto fh : mesh.faces()) {
-        if (mesh.valence(fh) != 3) continue;
-        draco::Mesh::Face face;
-        int k = 0;
-        for (const auto vh : mesh.fv_range(fh)) face[k++] = draco::PointIndex(index_of[vh.idx()]);
-        dm.SetFace(draco::FaceIndex(static_cast<uint32_t>(fi++)), face);
+    for (size_t f = 0; f < nf; ++f) {
+        const recon::Triangle& t = work.triangles[f];
+        dm.SetFace(draco::FaceIndex(static_cast<uint32_t>(f)),
+                   {draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
     }
-
-    auto addAttribute = [&](draco::GeometryAttribute::Type type, draco::DataType dt, bool normalized, int bytes) {
+    auto addAttribute = [&](draco::GeometryAttribute::Type type, draco::DataType dt, bool normalized, int bytes,
+                            const void* values) {
         draco::GeometryAttribute ga;
         ga.Init(type, nullptr, 3, dt, normalized, 3 * bytes, 0);
-        return dm.attribute(dm.AddAttribute(ga, true, nv));
+        draco::PointAttribute* att = dm.attribute(dm.AddAttribute(ga, true, nv));
+        att->buffer()->Write(0, values, size_t(nv) * 3 * size_t(bytes));
+        return att;
     };
-    draco::PointAttribute* pos = addAttribute(draco::GeometryAttribute::POSITION, draco::DT_FLOAT32, false, 4);
-    draco::PointAttribute* nrm = params.normal_bits > 0 && mesh.has_vertex_normals()
-                                     ? addAttribute(draco::GeometryAttribute::NORMAL, draco::DT_FLOAT32, false, 4)
-                                     : nullptr;
-    draco::PointAttribute* col = params.colours && mesh.has_vertex_colors()
-                                     ? addAttribute(draco::GeometryAttribute::COLOR, draco::DT_UINT8, true, 1)
-                                     : nullptr;
-    for (const auto vh : mesh.vertices()) {
-        const draco::AttributeValueIndex i(index_of[vh.idx()]);
-        pos->SetAttributeValue(i, mesh.point(vh).data());
-        if (nrm) {
-            OpenMesh::Vec3f n = mesh.normal(vh);
-            if (!std::isfinite(n.sqrnorm())) n = OpenMesh::Vec3f(0, 0, 0);
-            nrm->SetAttributeValue(i, n.data());
+    static_assert(sizeof(Eigen::Vector3f) == 12 && sizeof(recon::Rgb8) == 3);
+    addAttribute(draco::GeometryAttribute::POSITION, draco::DT_FLOAT32, false, 4, work.positions_m.data());
+    if (send_normals) {
+        for (Eigen::Vector3f& n : work.normals) {
+            if (!n.allFinite()) n.setZero();
         }
-        if (col) col->SetAttributeValue(i, mesh.color(vh).data());
+        addAttribute(draco::GeometryAttribute::NORMAL, draco::DT_FLOAT32, false, 4, work.normals.data());
     }
-
-    const OpenMesh::Vec3f extent = hi - lo;
-    const float extent_m = std::max({extent[0], extent[1], extent[2]});
-    const int position_bits =
-        params.position_bits > 0 ? params.position_bits : positionBitsFor(extent_m, params.max_position_error_m);
+    if (work.hasColours()) {
+        addAttribute(draco::GeometryAttribute::COLOR, draco::DT_UINT8, true, 1, work.colours_rgb.data());
+    }
 
     draco::Encoder encoder;
     encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
     encoder.SetSpeedOptions(params.speed, params.speed);
-    encoder.SetAttributeQuantization(draco::GeometryAttribute::POSITION, position_bits);
-    if (nrm) encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, params.normal_bits);
+    // The grid is given explicitly: Draco would otherwise take origin and range from the cleaned vertices, and a
+    // dropped extreme vertex would move its grid off the one the mesh was cleaned on.
+    encoder.SetAttributeExplicitQuantization(draco::GeometryAttribute::POSITION, position_bits, 3, grid.min, range);
+    if (send_normals) encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, params.normal_bits);
     draco::EncoderBuffer buffer;
     const draco::Status st = encoder.EncodeMeshToBuffer(dm, &buffer);
     if (!st.ok()) return internalError("Draco encoding failed: " + st.error_msg_string());
     out.assign(reinterpret_cast<const uint8_t*>(buffer.data()),
                reinterpret_cast<const uint8_t*>(buffer.data()) + buffer.size());
+    if (encoded) *encoded = std::move(work);
     return Status::ok();
+}
+
+Status encodeMeshDraco(const recon::Mesh& mesh, const MeshCodecParams& params, std::vector<uint8_t>& out) {
+    return encodeMeshDraco(recon::fromOpenMesh(mesh), params, out);
 }
 
 StatusOr<DracoMeshInfo> inspectDracoMesh(const uint8_t* data, size_t size) {
@@ -193,7 +230,7 @@ StatusOr<DracoMeshInfo> inspectDracoMesh(const uint8_t* data, size_t size) {
     return info;
 }
 
-Status decodeMeshDraco(const uint8_t* data, size_t size, recon::Mesh& mesh, size_t max_vertices) {
+Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mesh, size_t max_vertices) {
     ASSIGN_OR_RETURN(const DracoMeshInfo info, inspectDracoMesh(data, size));
     const size_t max_faces = 4 * max_vertices;
     if (info.claimed_vertices > max_vertices || info.claimed_faces > max_faces) {
@@ -229,42 +266,47 @@ Status decodeMeshDraco(const uint8_t* data, size_t size, recon::Mesh& mesh, size
     if (col && !usable(col, draco::DT_UINT8)) col = nullptr;
 
     mesh.clear();
-    mesh.reserve(nv, 3 * nf / 2 + 3, nf);
-    std::vector<recon::Mesh::VertexHandle> handles(nv);
+    mesh.positions_m.resize(nv);
+    if (nrm) mesh.normals.resize(nv);
+    if (col) mesh.colours_rgb.resize(nv);
     for (size_t i = 0; i < nv; ++i) {
         const draco::PointIndex pi(static_cast<uint32_t>(i));
-        OpenMesh::Vec3f p;
-        if (!pos->ConvertValue<float>(pos->mapped_index(pi), 3, p.data()) || !std::isfinite(p.sqrnorm())) {
-            return dataLoss("Draco vertex " + num(i) + " has no finite position");
-        }
-        handles[i] = mesh.add_vertex(p);
+        Eigen::Vector3f& p = mesh.positions_m[i];
+        pos->GetValue(pos->mapped_index(pi), p.data());
+        if (!p.allFinite()) return dataLoss("Draco vertex " + num(i) + " has no finite position");
         if (nrm) {
-            OpenMesh::Vec3f n;
-            if (nrm->ConvertValue<float>(nrm->mapped_index(pi), 3, n.data()) && std::isfinite(n.sqrnorm())) {
-                mesh.set_normal(handles[i], n);
-            }
+            Eigen::Vector3f& n = mesh.normals[i];
+            nrm->GetValue(nrm->mapped_index(pi), n.data());
+            if (!n.allFinite()) n.setZero();
         }
-        if (col) {
-            OpenMesh::Vec3uc c;
-            if (col->ConvertValue<uint8_t>(col->mapped_index(pi), 3, c.data())) mesh.set_color(handles[i], c);
-        }
+        if (col) col->GetValue(col->mapped_index(pi), mesh.colours_rgb[i].data());
     }
-    size_t rejected = 0;
+    mesh.triangles.resize(nf);
+    size_t degenerate = 0;
     for (size_t f = 0; f < nf; ++f) {
         const auto& face = dm->face(draco::FaceIndex(static_cast<uint32_t>(f)));
-        const uint32_t a = face[0].value();
-        const uint32_t b = face[1].value();
-        const uint32_t c = face[2].value();
-        if (a >= nv || b >= nv || c >= nv) return dataLoss("Draco face " + num(f) + " indexes past the vertices");
-        if (a == b || b == c || a == c || !mesh.add_face(handles[a], handles[b], handles[c]).is_valid()) ++rejected;
+        const recon::Triangle t = {face[0].value(), face[1].value(), face[2].value()};
+        if (t[0] >= nv || t[1] >= nv || t[2] >= nv)
+            return dataLoss("Draco face " + num(f) + " indexes past the vertices");
+        if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) ++degenerate;
+        mesh.triangles[f] = t;
     }
-    if (rejected > 0) {
-        return dataLoss("Draco mesh has " + num(rejected) + " degenerate or non-manifold faces of " + num(nf));
-    }
-    if (!nrm) {
-        mesh.update_face_normals();
-        mesh.update_vertex_normals();
-    }
+    // facescan's encoder never writes a face with a repeated vertex (it cleans the mesh on Draco's grid first).
+    if (degenerate > 0) return dataLoss("Draco mesh has " + num(degenerate) + " degenerate faces of " + num(nf));
+    if (!nrm) recon::computeVertexNormals(mesh);
+    return Status::ok();
+}
+
+StatusOr<recon::IndexedMesh> decodeIndexedMesh(const uint8_t* data, size_t size, size_t max_vertices) {
+    recon::IndexedMesh mesh;
+    RETURN_IF_ERROR(decodeMeshDraco(data, size, mesh, max_vertices));
+    return mesh;
+}
+
+Status decodeMeshDraco(const uint8_t* data, size_t size, recon::Mesh& mesh, size_t max_vertices) {
+    recon::IndexedMesh arrays;
+    RETURN_IF_ERROR(decodeMeshDraco(data, size, arrays, max_vertices));
+    mesh = recon::toOpenMesh(arrays);
     return Status::ok();
 }
 

@@ -350,8 +350,7 @@ bool measureMesh(const recon::Mesh& mesh, int repeat, MeshFigures& f) {
 // evidence for which of the mesh targets (150 KB, 30 ms, 15 ms for ~200k triangles) Draco can reach at all at
 // the required position error. "draco" decode is Draco's own decoder alone, without building the OpenMesh mesh.
 void printMeshBreakdown(const recon::Mesh& mesh) {
-    std::printf("  per attribute (positions at the error bound; normals %d bits; colours 8-bit):\n",
-                wire::MeshCodecParams{}.normal_bits);
+    std::printf("  per attribute (positions at the error bound; normals 10 bits; colours 8-bit):\n");
     std::printf("  %-26s %6s %10s %10s %10s %12s\n", "attributes", "speed", "KB", "encode_ms", "decode_ms",
                 "draco_dec_ms");
     struct Row {
@@ -365,7 +364,7 @@ void printMeshBreakdown(const recon::Mesh& mesh) {
             wire::MeshCodecParams p;
             p.speed = speed;
             p.colours = row.colours;
-            if (!row.normals) p.normal_bits = 0;
+            p.normal_bits = row.normals ? 10 : 0;
             std::vector<uint8_t> bytes;
             auto t0 = Clock::now();
             if (!wire::encodeMeshDraco(mesh, p, bytes).isOk()) continue;

@@ -246,5 +246,78 @@ TEST(Tum, LineHasTimestampTranslationAndUnitQuaternion) {
               "1.500000000 0.1000000 -0.2000000 0.3000000 0.0000000 0.0000000 0.0000000 1.0000000");
 }
 
+// Issue 16: live snapshots re-mesh only the blocks whose voxels changed, and the result is the full re-mesh.
+TEST_F(SphereTest, IncrementalMesherEqualsAFullRemeshAndSkipsUnchangedBlocks) {
+    MeshParams coarse;
+    coarse.stride_vox = 2;
+    IncrementalMesher mesher(coarse);
+    auto expectSame = [](const IndexedMesh& a, const IndexedMesh& b) {
+        ASSERT_EQ(a.triangleCount(), b.triangleCount());
+        ASSERT_EQ(a.vertexCount(), b.vertexCount());
+        EXPECT_TRUE(a.triangles == b.triangles);
+        EXPECT_TRUE(a.positions_m == b.positions_m);
+        EXPECT_TRUE(a.colours_rgb == b.colours_rgb);
+    };
+    TsdfSnapshot grid;
+    volume_->grid().copyTo(grid);
+    const IndexedMesh first = mesher.update(grid);
+    expectSame(first, extractTriangles(volume_->grid(), coarse));
+    EXPECT_EQ(mesher.lastStats().blocks_remeshed, volume_->grid().allocated_blocks);
+
+    volume_->grid().copyTo(grid);  // nothing changed
+    expectSame(mesher.update(grid), first);
+    EXPECT_EQ(mesher.lastStats().blocks_changed, 0);
+    EXPECT_EQ(mesher.lastStats().blocks_remeshed, 0);
+
+    // One more view changes the blocks it sees (and so the blocks whose cubes read them); the rest are reused.
+    DepthFilter f(kCam, FilterParams{});
+    SurfacePyramid pyr;
+    pyr.allocate(kCam, 1);
+    const Pose T = lookAt(centre_, Eigen::Vector3f(0.2f, 0.1f, 1.0f).normalized(), 0.6f);
+    ASSERT_GT(f.filter(sphereDepth(T, centre_, radius_), cv::Mat(), pyr), 1000);
+    volume_->integrate(pyr.levels[0], cv::Mat(), T);
+    volume_->grid().copyTo(grid);
+    expectSame(mesher.update(grid), extractTriangles(volume_->grid(), coarse));
+    EXPECT_GT(mesher.lastStats().blocks_changed, 0);
+    EXPECT_LT(mesher.lastStats().blocks_remeshed, mesher.lastStats().blocks);
+
+    // A reset volume starts over.
+    volume_->reset();
+    volume_->grid().copyTo(grid);
+    EXPECT_EQ(mesher.update(grid).triangleCount(), 0u);
+}
+
+// Defects are found by position, and removeDefects leaves none of the kinds the service promises to avoid.
+TEST(IndexedMesh, CountsAndRemovesDefects) {
+    IndexedMesh m;
+    m.positions_m = {{0, 0, 0},          {0.01f, 0, 0}, {0, 0.01f, 0},
+                     {0.01f, 0.01f, 0},  {0.02f, 0, 0}, {0, 0, 0},  // a copy of vertex 0's position
+                     {0.5f, 0.5f, 0.5f},                            // unreferenced
+                     {0, 0, 0.01f},      {0, 0, -0.01f}};
+    m.triangles = {{0, 1, 2}, {1, 3, 2}, {5, 2, 1},  // duplicate of the first by position (other orientation)
+                   {0, 1, 4},                        // collinear: zero area
+                   {1, 1, 3},                        // repeated vertex
+                   {0, 1, 7}, {0, 8, 1}};            // edge 0-1 now has four triangles: non-manifold
+    const MeshDefects d = countDefects(m);
+    EXPECT_EQ(d.zero_area_triangles, 2u);
+    EXPECT_EQ(d.duplicate_triangles, 1u);
+    EXPECT_EQ(d.unreferenced_vertices, 1u);
+    EXPECT_EQ(d.non_manifold_edges, 1u);
+    EXPECT_FALSE(d.clean());
+    removeDefects(m);
+    const MeshDefects after = countDefects(m);
+    EXPECT_TRUE(after.clean());
+    EXPECT_EQ(m.triangleCount(), 4u);
+    EXPECT_EQ(m.vertexCount(), 6u);
+    // Two fans meeting at one vertex (a bow tie) make it non-manifold.
+    IndexedMesh bow;
+    bow.positions_m = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {-1, 0, 0}, {-1, -1, 0}};
+    bow.triangles = {{0, 1, 2}, {0, 3, 4}};
+    EXPECT_EQ(countDefects(bow).non_manifold_vertices, 1u);
+    EXPECT_EQ(countDefects(bow).boundary_edges, 6u);
+    computeVertexNormals(bow);
+    EXPECT_NEAR(bow.normals[1].z(), 1.0f, 1e-6f);
+}
+
 }  // namespace
 }  // namespace facescan::recon

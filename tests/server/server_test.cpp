@@ -13,6 +13,7 @@
 #include <fstream>
 #include <thread>
 
+#include "recon/indexed_mesh.hpp"
 #include "test_agent.hpp"
 #include "wire/mesh_codec.hpp"
 
@@ -70,6 +71,8 @@ void expectSessionWritten(const std::filesystem::path& dir, bool with_mesh) {
     auto decoded = wire::decodeMeshDraco(reinterpret_cast<const uint8_t*>(drc.data()), drc.size());
     ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
     EXPECT_EQ(decoded->n_faces(), ply.n_faces());
+    // mesh.ply is the mesh the Draco bytes hold (cleaned on Draco's grid), so it is clean too.
+    EXPECT_TRUE(recon::countDefects(recon::fromOpenMesh(ply)).clean());
 }
 
 const EncodedSequence& sequence() {
@@ -134,6 +137,10 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
     auto snap_mesh = wire::decodeMeshDraco(snapshot->draco.data(), snapshot->draco.size());
     ASSERT_TRUE(snap_mesh.isOk()) << snap_mesh.status().toString();
     EXPECT_EQ(snap_mesh->n_faces(), snapshot->triangle_count);
+    // Issue 16: a live snapshot, as a client decodes it, is clean.
+    auto snap_arrays = wire::decodeIndexedMesh(snapshot->draco.data(), snapshot->draco.size());
+    ASSERT_TRUE(snap_arrays.isOk());
+    EXPECT_TRUE(recon::countDefects(*snap_arrays).clean());
 
     auto traj = rig.client->command("live-1", facescan_wire_CMD_GET_TRAJECTORY);
     ASSERT_TRUE(traj.isOk()) << traj.status().toString();
@@ -149,6 +156,9 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
     ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
     EXPECT_GT(decoded->n_faces(), 1000u);
     EXPECT_EQ(decoded->n_faces(), mesh->triangle_count);
+    auto mesh_arrays = wire::decodeIndexedMesh(mesh->payload.data(), mesh->payload.size());
+    ASSERT_TRUE(mesh_arrays.isOk());
+    EXPECT_TRUE(recon::countDefects(*mesh_arrays).clean());
     // The full-resolution mesh has more detail than the coarse snapshot.
     EXPECT_GT(decoded->n_faces(), snap_mesh->n_faces());
 

@@ -1,6 +1,8 @@
-// Mesh codec for MeshSnapshot.draco and ScanReply.payload: Draco (edgebreaker) with positions in metres, vertex
-// normals and 8-bit vertex colours. Positions are quantised on a grid derived from the mesh's bounding box and
-// the allowed error (default 0.05 mm, well under the 1.51 mm voxel of DESIGN.md section 1).
+// Mesh codec for MeshSnapshot.draco and ScanReply.payload: Draco (edgebreaker) with positions in metres and 8-bit
+// vertex colours; no normals (issue 16: receivers recompute them from the triangles, as three.js does). Positions
+// are quantised on a grid derived from the mesh's bounding box and the allowed error (default 0.05 mm, well under
+// the 1.51 mm voxel of DESIGN.md section 1). The encoder cleans the mesh on that grid before encoding, so the
+// decoded mesh has no zero-area or duplicate triangle and no unreferenced vertex (recon::MeshDefects::clean).
 //
 // Draco's own decoder sizes its tables from counts in the bitstream; decodeMeshDraco reads and caps those counts
 // (and the header fields) itself before Draco sees the bytes, so a lying header cannot make it over-allocate.
@@ -10,6 +12,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "recon/indexed_mesh.hpp"
 #include "recon/mesh.hpp"
 #include "recon/status.hpp"
 
@@ -21,9 +24,10 @@ inline constexpr size_t kMaxMeshVertices = 4'000'000;
 struct MeshCodecParams {
     float max_position_error_m = 0.05e-3f;  // metres, Euclidean; quantisation keeps every vertex within this
     int position_bits = 0;  // [0, 30] bits per coordinate; 0 = the fewest that honour max_position_error_m
-    int normal_bits = 10;   // [0, 30] octahedral normal bits; 0 = leave normals out (the receiver recomputes them)
+    int normal_bits = 0;    // [0, 30] octahedral normal bits; 0 = leave normals out (the receiver recomputes them)
     bool colours = true;    // send the 8-bit vertex colours (lossless)
-    int speed = 7;          // Draco encode/decode speed [0, 10]: 7 measured as the sweet spot for size vs. time
+    int speed = 8;  // Draco encode/decode speed [0, 10]: without normals 8 is smaller and faster than 7 (issue 16,
+                    // facescan-bench mesh --sweep: 143 vs 151 KB, 21 vs 22 ms); 0-1 save 8 % more at 3x the time
 
     Status validate() const;
 };
@@ -33,8 +37,13 @@ struct MeshCodecParams {
 // side. A face volume of 0.386 m at 0.05 mm gives 13 bits (47 um steps, at most 41 um error).
 int positionBitsFor(float extent_m, float max_error_m);
 
-// Encodes positions (+ normals, colours per params). INVALID_ARGUMENT for a mesh without faces or with non-finite
-// points. out is overwritten.
+// Encodes positions (+ colours, normals per params) after moving them onto Draco's quantisation grid and cleaning
+// the mesh there: vertices that land on one grid point are welded, the triangles that become zero-area or
+// duplicates are dropped, and so are the vertices left unused. `encoded`, when given, receives that cleaned mesh
+// (what a receiver decodes, vertex order aside). INVALID_ARGUMENT for a mesh without triangles, with non-finite
+// points or out-of-range indices. out is overwritten.
+Status encodeMeshDraco(const recon::IndexedMesh& mesh, const MeshCodecParams& params, std::vector<uint8_t>& out,
+                       recon::IndexedMesh* encoded = nullptr);
 Status encodeMeshDraco(const recon::Mesh& mesh, const MeshCodecParams& params, std::vector<uint8_t>& out);
 
 // What the Draco header and connectivity prefix claim, read without Draco (see the file comment).
@@ -45,9 +54,15 @@ struct DracoMeshInfo {
 };
 StatusOr<DracoMeshInfo> inspectDracoMesh(const uint8_t* data, size_t size);
 
-// Decodes a Draco triangle mesh of at most max_vertices vertices (and 4x as many faces) into `mesh` (replaced).
-// DATA_LOSS for corrupt or truncated bytes, OUT_OF_RANGE for claims over the caps; never crashes or over-allocates.
-// Normals are recomputed when the payload has none.
+// Decodes a Draco triangle mesh of at most max_vertices vertices (and 4x as many faces) into `mesh` (replaced):
+// flat arrays, ready to write (recon/mesh_writer.hpp), no half-edge structure. DATA_LOSS for corrupt or truncated
+// bytes or a face with a repeated vertex, OUT_OF_RANGE for claims over the caps; never crashes or over-allocates.
+// Normals are recomputed from the triangles (area-weighted) when the payload has none.
+Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mesh,
+                       size_t max_vertices = kMaxMeshVertices);
+StatusOr<recon::IndexedMesh> decodeIndexedMesh(const uint8_t* data, size_t size,
+                                               size_t max_vertices = kMaxMeshVertices);
+// The same as an OpenMesh mesh (recon::toOpenMesh: non-manifold faces get their own vertex copies).
 Status decodeMeshDraco(const uint8_t* data, size_t size, recon::Mesh& mesh, size_t max_vertices = kMaxMeshVertices);
 StatusOr<recon::Mesh> decodeMeshDraco(const uint8_t* data, size_t size, size_t max_vertices = kMaxMeshVertices);
 

@@ -91,8 +91,22 @@ facescan_wire_RgbdFrame PendingFrame::view() const {
     return msg;
 }
 
+namespace {
+
+// Live snapshots: the coarse stride of --snapshot-stride, otherwise the final mesh's parameters.
+recon::MeshParams snapshotMeshParams(const ServerParams& params) {
+    recon::MeshParams mp = params.recon.mesh;
+    mp.stride_vox = params.snapshot_stride_vox;
+    return mp;
+}
+
+}  // namespace
+
 Session::Session(std::string session_id, const ServerParams& params, std::function<void()> space_freed)
-    : id_(std::move(session_id)), params_(params), space_freed_(std::move(space_freed)) {
+    : id_(std::move(session_id)),
+      params_(params),
+      space_freed_(std::move(space_freed)),
+      snapshot_mesher_(snapshotMeshParams(params)) {
     stats_.session_id = id_;
     stats_.detail = "waiting for CameraInfo";
     latency_ms_.reserve(kLatencyWindow);
@@ -406,11 +420,11 @@ StatusOr<MeshResult> Session::mesh() {
         rec = recon_;
     }
     if (!rec) return unavailable("session '" + id_ + "' has no model yet (no CameraInfo)");
-    const recon::Mesh m = rec->extractMesh(params_.recon.mesh);  // copies the volume under its short lock
-    if (m.n_faces() == 0) return unavailable("session '" + id_ + "' has no surface yet");
-    auto bytes = std::make_shared<std::vector<uint8_t>>();
-    RETURN_IF_ERROR(wire::encodeMeshDraco(m, wire::MeshCodecParams{}, *bytes));
-    return MeshResult{std::move(bytes), static_cast<uint32_t>(m.n_vertices()), static_cast<uint32_t>(m.n_faces())};
+    recon::TsdfSnapshot grid;
+    rec->copyVolume(grid);  // under the volume's short lock; meshed without it
+    const recon::IndexedMesh m = recon::extractTriangles(grid, params_.recon.mesh);
+    if (m.triangles.empty()) return unavailable("session '" + id_ + "' has no surface yet");
+    return encodeMesh(m, wire::MeshCodecParams{});
 }
 
 StatusOr<std::vector<uint8_t>> Session::previewPng() {
@@ -450,6 +464,17 @@ void Session::copySnapshotIfAsked() {
     snapshot_copy_cv_.notify_all();
 }
 
+StatusOr<MeshResult> encodeMesh(const recon::IndexedMesh& mesh, const wire::MeshCodecParams& params,
+                                recon::IndexedMesh* encoded) {
+    auto bytes = std::make_shared<std::vector<uint8_t>>();
+    recon::IndexedMesh cleaned;
+    RETURN_IF_ERROR(wire::encodeMeshDraco(mesh, params, *bytes, &cleaned));
+    MeshResult result{std::move(bytes), static_cast<uint32_t>(cleaned.vertexCount()),
+                      static_cast<uint32_t>(cleaned.triangleCount())};
+    if (encoded) *encoded = std::move(cleaned);
+    return result;
+}
+
 std::optional<SnapshotResult> Session::makeSnapshot() {
     std::shared_ptr<recon::Reconstructor> rec;
     int integrated = 0;
@@ -478,17 +503,16 @@ std::optional<SnapshotResult> Session::makeSnapshot() {
         snapshot_copy_ = SnapshotCopy::kIdle;
         copy_ms = snapshot_copy_ms_;
     }
-    recon::MeshParams mp = params_.recon.mesh;
-    mp.stride_vox = params_.snapshot_stride_vox;
+    // Only the blocks whose voxels changed since the last snapshot are meshed again (issue 16).
     const int64_t t1 = steadyNowNs();
-    const recon::Mesh m = recon::extractMesh(snapshot_grid_, mp);
+    const recon::IndexedMesh m = snapshot_mesher_.update(snapshot_grid_);
     const float mesh_ms = msSince(t1);
-    if (m.n_faces() == 0) return std::nullopt;
+    if (m.triangles.empty()) return std::nullopt;
     wire::MeshCodecParams cp;
     cp.max_position_error_m = params_.snapshot_max_error_m;
-    auto bytes = std::make_shared<std::vector<uint8_t>>();
     const int64_t t2 = steadyNowNs();
-    if (!wire::encodeMeshDraco(m, cp, *bytes).isOk()) return std::nullopt;
+    auto encoded = encodeMesh(m, cp);
+    if (!encoded.isOk()) return std::nullopt;
     const float encode_ms = msSince(t2);
     std::lock_guard lk(mutex_);
     snapshot_frames_ = integrated;
@@ -499,7 +523,7 @@ std::optional<SnapshotResult> Session::makeSnapshot() {
     SnapshotResult out;
     out.seq = ++stats_.snapshot_seq;
     out.frames_integrated = static_cast<uint32_t>(integrated);
-    out.mesh = {std::move(bytes), static_cast<uint32_t>(m.n_vertices()), static_cast<uint32_t>(m.n_faces())};
+    out.mesh = std::move(*encoded);
     return out;
 }
 

@@ -34,18 +34,20 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         rec = recon_;
         pose = last_pose_;
     }
-    recon::Mesh mesh;
+    recon::IndexedMesh mesh;  // as encoded: cleaned on Draco's grid, so mesh.ply and mesh.drc hold one mesh
     MeshResult result;
     std::vector<uint8_t> png;
     Status status;
     if (rec) {
-        mesh = rec->extractMesh(params_.recon.mesh);
-        if (mesh.n_faces() > 0) {
-            auto bytes = std::make_shared<std::vector<uint8_t>>();
-            status = wire::encodeMeshDraco(mesh, wire::MeshCodecParams{}, *bytes);
-            if (status.isOk()) {
-                result = {std::move(bytes), static_cast<uint32_t>(mesh.n_vertices()),
-                          static_cast<uint32_t>(mesh.n_faces())};
+        recon::TsdfSnapshot grid;
+        rec->copyVolume(grid);
+        const recon::IndexedMesh extracted = recon::extractTriangles(grid, params_.recon.mesh);
+        if (!extracted.triangles.empty()) {
+            auto encoded = encodeMesh(extracted, wire::MeshCodecParams{}, &mesh);
+            if (encoded.isOk()) {
+                result = std::move(*encoded);
+            } else {
+                status = encoded.status();
             }
         }
         cv::Mat shaded;

@@ -3,10 +3,11 @@
 #include <fcntl.h>
 #include <unistd.h>
 
-#include <OpenMesh/Core/IO/MeshIO.hh>
 #include <cerrno>
 #include <cstring>
 #include <sstream>
+
+#include "recon/mesh_writer.hpp"
 
 namespace facescan::service {
 namespace {
@@ -56,19 +57,15 @@ Status writeFileAtomic(const std::filesystem::path& path, const void* bytes, siz
     return Status::ok();
 }
 
-StatusOr<std::string> meshToPly(const recon::Mesh& mesh) {
-    std::ostringstream out(std::ios::binary);
-    OpenMesh::IO::Options opts =
-        OpenMesh::IO::Options::Binary | OpenMesh::IO::Options::VertexNormal | OpenMesh::IO::Options::VertexColor;
-    if (!OpenMesh::IO::write_mesh(mesh, out, ".ply", opts)) return internalError("OpenMesh could not write the PLY");
-    return out.str();
+StatusOr<std::string> meshToPly(const recon::IndexedMesh& mesh) {
+    return recon::meshFileBytes(mesh, recon::MeshFileFormat::kPly);
 }
 
 Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& files) {
     std::error_code ec;
     std::filesystem::create_directories(dir, ec);
     if (ec) return internalError("cannot create " + dir.string() + ": " + ec.message());
-    if (files.mesh && files.mesh->n_faces() > 0) {
+    if (files.mesh && !files.mesh->triangles.empty()) {
         ASSIGN_OR_RETURN(const std::string ply, meshToPly(*files.mesh));
         RETURN_IF_ERROR(writeFileAtomic(dir / "mesh.ply", ply));
         if (files.draco && !files.draco->empty()) {

@@ -16,9 +16,11 @@
 #include <vector>
 
 #include "recon/face_pipeline.hpp"
+#include "recon/marching_cubes.hpp"
 #include "recon/reconstructor.hpp"
 #include "recon/scan_step.hpp"
 #include "service/server_params.hpp"
+#include "wire/mesh_codec.hpp"
 #include "wire/messages.hpp"
 
 namespace facescan::service {
@@ -68,10 +70,14 @@ struct SessionStats {
 };
 
 struct MeshResult {
-    std::shared_ptr<const std::vector<uint8_t>> draco;  // Draco with normals and colours
-    uint32_t vertex_count = 0;
+    std::shared_ptr<const std::vector<uint8_t>> draco;  // Draco with positions and colours (no normals)
+    uint32_t vertex_count = 0;                          // of the mesh as encoded (cleaned on Draco's grid)
     uint32_t triangle_count = 0;
 };
+
+// Draco bytes of `mesh` and their counts; `encoded`, when given, receives the cleaned mesh the bytes hold.
+StatusOr<MeshResult> encodeMesh(const recon::IndexedMesh& mesh, const wire::MeshCodecParams& params,
+                                recon::IndexedMesh* encoded = nullptr);
 
 struct SnapshotResult {
     uint32_t seq = 0;
@@ -180,6 +186,7 @@ class Session {
     float snapshot_copy_ms_ = 0;
     // Snapshot-thread-only state (no lock).
     int snapshot_frames_ = -1;
+    recon::IncrementalMesher snapshot_mesher_;  // keeps unchanged blocks' triangles from snapshot to snapshot
 
     std::thread worker_;
 };

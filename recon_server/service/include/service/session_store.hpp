@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "recon/mesh.hpp"
+#include "recon/indexed_mesh.hpp"
 #include "recon/status.hpp"
 
 namespace facescan::service {
@@ -19,11 +19,11 @@ inline Status writeFileAtomic(const std::filesystem::path& path, const std::stri
     return writeFileAtomic(path, text.data(), text.size());
 }
 
-// Binary PLY with vertex normals and colours (OpenMesh writer, to memory).
-StatusOr<std::string> meshToPly(const recon::Mesh& mesh);
+// Binary PLY with vertex normals (from the triangles) and colours (recon/mesh_writer.hpp, to memory).
+StatusOr<std::string> meshToPly(const recon::IndexedMesh& mesh);
 
 struct SessionFiles {
-    const recon::Mesh* mesh = nullptr;            // the final full-resolution mesh (may be empty: no faces)
+    const recon::IndexedMesh* mesh = nullptr;     // the final full-resolution mesh (may be empty: no faces)
     const std::vector<uint8_t>* draco = nullptr;  // Draco bytes of mesh (empty when the mesh is empty)
     std::string trajectory_tum;                   // TUM lines
     std::string summary_json;                     // written last: its presence means the session is complete

@@ -1,0 +1,255 @@
+#include "recon/indexed_mesh.hpp"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cstring>
+#include <numeric>
+#include <unordered_map>
+#include <unordered_set>
+
+namespace facescan::recon {
+namespace {
+
+// Exact position as a hash key (-0 folded into +0 so that equal positions give equal keys).
+struct PosKey {
+    uint32_t bits[3];
+    bool operator==(const PosKey& o) const { return std::memcmp(bits, o.bits, sizeof bits) == 0; }
+};
+struct PosKeyHash {
+    size_t operator()(const PosKey& k) const {
+        uint64_t h = 0x9e3779b97f4a7c15ull;
+        for (const uint32_t b : k.bits) h = (h ^ b) * 0xff51afd7ed558ccdull;
+        return static_cast<size_t>(h ^ (h >> 29));
+    }
+};
+PosKey keyOf(const Eigen::Vector3f& p) {
+    PosKey k;
+    for (int i = 0; i < 3; ++i) {
+        const float v = p[i] + 0.0f;
+        std::memcpy(&k.bits[i], &v, sizeof v);
+    }
+    return k;
+}
+
+// canonical[i] = the first vertex with vertex i's position.
+std::vector<uint32_t> canonicalByPosition(const IndexedMesh& mesh) {
+    std::vector<uint32_t> canonical(mesh.vertexCount());
+    std::unordered_map<PosKey, uint32_t, PosKeyHash> first;
+    first.reserve(mesh.vertexCount());
+    for (uint32_t i = 0; i < mesh.vertexCount(); ++i) {
+        canonical[i] = first.try_emplace(keyOf(mesh.positions_m[i]), i).first->second;
+    }
+    return canonical;
+}
+
+double twiceArea(const IndexedMesh& mesh, const Triangle& t) {
+    const Eigen::Vector3d a = mesh.positions_m[t[0]].cast<double>();
+    const Eigen::Vector3d b = mesh.positions_m[t[1]].cast<double>();
+    const Eigen::Vector3d c = mesh.positions_m[t[2]].cast<double>();
+    return (b - a).cross(c - a).norm();
+}
+
+bool zeroArea(const IndexedMesh& mesh, const Triangle& t) {
+    return t[0] == t[1] || t[1] == t[2] || t[0] == t[2] || 0.5 * twiceArea(mesh, t) <= kZeroAreaM2;
+}
+
+uint64_t edgeKey(uint32_t a, uint32_t b) { return a < b ? (uint64_t(a) << 32 | b) : (uint64_t(b) << 32 | a); }
+
+struct TriKeyHash {
+    size_t operator()(const Triangle& t) const {
+        return std::hash<uint64_t>()((uint64_t(t[0]) * 0x9e3779b97f4a7c15ull) ^ (uint64_t(t[1]) << 21) ^
+                                     (uint64_t(t[2]) * 0xff51afd7ed558ccdull));
+    }
+};
+Triangle sorted(Triangle t) {
+    std::sort(t.begin(), t.end());
+    return t;
+}
+
+int findRoot(std::vector<uint32_t>& parent, uint32_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return static_cast<int>(i);
+}
+
+}  // namespace
+
+void IndexedMesh::clear() {
+    positions_m.clear();
+    normals.clear();
+    colours_rgb.clear();
+    triangles.clear();
+}
+
+std::vector<Eigen::Vector3f> vertexNormals(const IndexedMesh& mesh) {
+    std::vector<Eigen::Vector3f> normals(mesh.vertexCount(), Eigen::Vector3f::Zero());
+    for (const Triangle& t : mesh.triangles) {
+        const Eigen::Vector3f& a = mesh.positions_m[t[0]];
+        const Eigen::Vector3f n = (mesh.positions_m[t[1]] - a).cross(mesh.positions_m[t[2]] - a);
+        for (const uint32_t v : t) normals[v] += n;
+    }
+    for (Eigen::Vector3f& n : normals) {
+        const float len = n.norm();
+        if (len > 0.0f) n /= len;
+    }
+    return normals;
+}
+
+MeshDefects countDefects(const IndexedMesh& mesh) {
+    MeshDefects d;
+    const std::vector<uint32_t> canonical = canonicalByPosition(mesh);
+    std::vector<char> used(mesh.vertexCount(), 0);
+    std::unordered_set<Triangle, TriKeyHash> seen;
+    seen.reserve(mesh.triangleCount());
+    std::unordered_map<uint64_t, uint32_t> edge_faces;
+    edge_faces.reserve(mesh.triangleCount() * 2);
+    std::vector<Triangle> good;  // canonical, non-degenerate, first copies
+    good.reserve(mesh.triangleCount());
+    for (const Triangle& t : mesh.triangles) {
+        for (const uint32_t v : t) used[v] = 1;
+        const Triangle c = {canonical[t[0]], canonical[t[1]], canonical[t[2]]};
+        if (zeroArea(mesh, c)) {
+            ++d.zero_area_triangles;
+            continue;
+        }
+        if (!seen.insert(sorted(c)).second) {
+            ++d.duplicate_triangles;
+            continue;
+        }
+        good.push_back(c);
+        for (int i = 0; i < 3; ++i) ++edge_faces[edgeKey(c[i], c[(i + 1) % 3])];
+    }
+    d.unreferenced_vertices = static_cast<size_t>(std::count(used.begin(), used.end(), 0));
+    for (const auto& [edge, faces] : edge_faces) {
+        if (faces > 2) ++d.non_manifold_edges;
+        if (faces == 1) ++d.boundary_edges;
+    }
+    // Fans: around each vertex, its triangles joined through the edges they share there (vertex -> other end).
+    std::vector<uint32_t> first(mesh.vertexCount() + 1, 0);
+    for (const Triangle& t : good) {
+        for (const uint32_t v : t) ++first[v + 1];
+    }
+    std::partial_sum(first.begin(), first.end(), first.begin());
+    std::vector<uint32_t> fill(first.begin(), first.end() - 1);
+    std::vector<uint32_t> incident(good.size() * 3);
+    for (uint32_t f = 0; f < good.size(); ++f) {
+        for (const uint32_t v : good[f]) incident[fill[v]++] = f;
+    }
+    std::vector<uint32_t> parent;
+    std::unordered_map<uint32_t, uint32_t> by_other;
+    for (uint32_t v = 0; v < mesh.vertexCount(); ++v) {
+        const uint32_t k = first[v + 1] - first[v];
+        if (k < 2) continue;
+        parent.resize(k);
+        std::iota(parent.begin(), parent.end(), 0u);
+        by_other.clear();
+        uint32_t pieces = k;
+        for (uint32_t i = 0; i < k; ++i) {
+            for (const uint32_t o : good[incident[first[v] + i]]) {
+                if (o == v) continue;
+                auto [it, inserted] = by_other.try_emplace(o, i);
+                if (inserted) continue;
+                const int ra = findRoot(parent, it->second), rb = findRoot(parent, i);
+                if (ra != rb) parent[rb] = static_cast<uint32_t>(ra), --pieces;
+            }
+        }
+        if (pieces > 1) ++d.non_manifold_vertices;
+    }
+    return d;
+}
+
+void removeDefects(IndexedMesh& mesh) {
+    const std::vector<uint32_t> canonical = canonicalByPosition(mesh);
+    std::unordered_set<Triangle, TriKeyHash> seen;
+    seen.reserve(mesh.triangleCount());
+    size_t kept = 0;
+    for (const Triangle& t : mesh.triangles) {
+        const Triangle c = {canonical[t[0]], canonical[t[1]], canonical[t[2]]};
+        if (zeroArea(mesh, c) || !seen.insert(sorted(c)).second) continue;
+        mesh.triangles[kept++] = c;
+    }
+    mesh.triangles.resize(kept);
+    constexpr uint32_t kUnused = ~0u;
+    std::vector<uint32_t> new_index(mesh.vertexCount(), kUnused);
+    uint32_t next = 0;
+    for (Triangle& t : mesh.triangles) {
+        for (uint32_t& v : t) {
+            if (new_index[v] == kUnused) new_index[v] = next++;
+            v = new_index[v];
+        }
+    }
+    auto compact = [&](auto& values) {
+        if (values.size() != new_index.size()) return;
+        std::remove_reference_t<decltype(values)> out(next);
+        for (size_t i = 0; i < new_index.size(); ++i) {
+            if (new_index[i] != kUnused) out[new_index[i]] = values[i];
+        }
+        values.swap(out);
+    };
+    compact(mesh.positions_m);
+    compact(mesh.normals);
+    compact(mesh.colours_rgb);
+}
+
+Mesh toOpenMesh(const IndexedMesh& in) {
+    Mesh out;
+    out.reserve(in.vertexCount(), in.triangleCount() * 3 / 2 + 3, in.triangleCount());
+    const bool colours = in.hasColours();
+    auto addVertex = [&](uint32_t i) {
+        const Eigen::Vector3f& p = in.positions_m[i];
+        const Mesh::VertexHandle vh = out.add_vertex(Mesh::Point(p.x(), p.y(), p.z()));
+        if (colours) out.set_color(vh, Mesh::Color(in.colours_rgb[i][0], in.colours_rgb[i][1], in.colours_rgb[i][2]));
+        return vh;
+    };
+    std::vector<Mesh::VertexHandle> handle(in.vertexCount());
+    for (uint32_t i = 0; i < in.vertexCount(); ++i) handle[i] = addVertex(i);
+    std::vector<uint32_t> source(in.vertexCount());  // the input vertex of each output vertex (for the normals)
+    std::iota(source.begin(), source.end(), 0u);
+    for (const Triangle& t : in.triangles) {
+        if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;
+        if (out.add_face(handle[t[0]], handle[t[1]], handle[t[2]]).is_valid()) continue;
+        Mesh::VertexHandle copy[3];
+        for (int k = 0; k < 3; ++k) copy[k] = addVertex(t[k]), source.push_back(t[k]);
+        out.add_face(copy[0], copy[1], copy[2]);
+    }
+    out.update_face_normals();
+    if (in.hasNormals()) {
+        for (const auto vh : out.vertices()) {
+            const Eigen::Vector3f& n = in.normals[source[static_cast<size_t>(vh.idx())]];
+            out.set_normal(vh, Mesh::Normal(n.x(), n.y(), n.z()));
+        }
+    } else {
+        out.update_vertex_normals();
+    }
+    return out;
+}
+
+IndexedMesh fromOpenMesh(const Mesh& mesh) {
+    IndexedMesh out;
+    std::vector<uint32_t> index_of(mesh.n_vertices(), 0);
+    out.positions_m.reserve(mesh.n_vertices());
+    const bool normals = mesh.has_vertex_normals();
+    const bool colours = mesh.has_vertex_colors();
+    for (const auto vh : mesh.vertices()) {
+        index_of[static_cast<size_t>(vh.idx())] = static_cast<uint32_t>(out.positions_m.size());
+        const auto& p = mesh.point(vh);
+        out.positions_m.emplace_back(p[0], p[1], p[2]);
+        if (normals) {
+            const auto& n = mesh.normal(vh);
+            out.normals.emplace_back(n[0], n[1], n[2]);
+        }
+        if (colours) {
+            const auto& c = mesh.color(vh);
+            out.colours_rgb.push_back({c[0], c[1], c[2]});
+        }
+    }
+    out.triangles.reserve(mesh.n_faces());
+    std::vector<uint32_t> ring;
+    for (const auto fh : mesh.faces()) {
+        ring.clear();
+        for (const auto vh : mesh.fv_range(fh)) ring.push_back(index_of[static_cast<size_t>(vh.idx())]);
+        for (size_t i = 1; i + 1 < ring.size(); ++i) out.triangles.push_back({ring[0], ring[i], ring[i + 1]});
+    }
+    return out;
+}
+
+}  // namespace facescan::recon
