@@ -43,7 +43,7 @@ struct SnapshotFigures {
 struct FinalFigures {
     size_t bytes = 0, triangles = 0, vertices = 0;
     double encode_ms = 0, decode_ms = 0, write_ply_ms = 0, max_error_mm = 0;
-    size_t old_bytes = 0;
+    size_t old_bytes = 0, unaligned_bytes = 0;
     double old_encode_ms = 0, old_decode_ms = 0;
     recon::MeshDefects raw, delivered;
 };
@@ -64,8 +64,7 @@ std::string jsonDefects(const recon::MeshDefects& d) {
 }
 
 // Final mesh figures; `repeat` passes of encode and decode after a warm-up.
-bool measureFinal(const recon::IndexedMesh& mesh, int repeat, FinalFigures& f) {
-    const wire::MeshCodecParams params;
+bool measureFinal(const recon::IndexedMesh& mesh, const wire::MeshCodecParams& params, int repeat, FinalFigures& f) {
     std::vector<uint8_t> bytes;
     if (!wire::encodeMeshDraco(mesh, params, bytes).isOk()) return false;
     recon::IndexedMesh decoded;
@@ -99,6 +98,12 @@ bool measureFinal(const recon::IndexedMesh& mesh, int repeat, FinalFigures& f) {
         f.max_error_mm = std::max(f.max_error_mm, 1e3 * double((decoded.positions_m[v] - mesh.positions_m[i]).norm()));
     }
 
+    // The same without aligning Draco's grid with the voxels.
+    wire::MeshCodecParams unaligned = params;
+    unaligned.lattice_step_m = 0.0f;
+    if (!wire::encodeMeshDraco(mesh, unaligned, bytes).isOk()) return false;
+    f.unaligned_bytes = bytes.size();
+
     // Baseline: the wire before issue 16 (10-bit normals; decoded into OpenMesh's half-edge mesh).
     wire::MeshCodecParams old_params;
     old_params.normal_bits = 10;
@@ -116,11 +121,11 @@ bool measureFinal(const recon::IndexedMesh& mesh, int repeat, FinalFigures& f) {
 }
 
 // Size and time of the final mesh per Draco speed, with and without colours: the evidence for the shipped speed.
-void printSweep(const recon::IndexedMesh& mesh) {
+void printSweep(const recon::IndexedMesh& mesh, const wire::MeshCodecParams& shipped) {
     std::printf("\n  %-18s %6s %10s %10s %10s\n", "attributes", "speed", "KB", "encode_ms", "decode_ms");
     for (const bool colours : {false, true}) {
         for (int speed = 0; speed <= 10; ++speed) {
-            wire::MeshCodecParams p;
+            wire::MeshCodecParams p = shipped;
             p.speed = speed;
             p.colours = colours;
             std::vector<uint8_t> bytes;
@@ -202,6 +207,8 @@ int runMesh(const std::vector<std::string>& args) {
         rec.copyVolume(grid);
         const double copy_ms = threadMs() - t0;
         grid.copyTo(scratch);  // for the full re-mesh beside it (update() swaps `grid` away)
+        snap_codec.lattice_step_m = scratch.voxel_size_m;
+        snap_codec.lattice_origin_m = scratch.origin_world;
         t0 = threadMs();
         const recon::IndexedMesh m = mesher.update(grid);
         const double mesh_ms = threadMs() - t0;
@@ -238,7 +245,10 @@ int runMesh(const std::vector<std::string>& args) {
     const recon::IndexedMesh final_mesh = recon::extractTriangles(final_grid, params.mesh);
     const double extract_ms = threadMs() - t0;
     FinalFigures ff;
-    if (final_mesh.triangles.empty() || !measureFinal(final_mesh, repeat, ff)) {
+    wire::MeshCodecParams final_codec;  // what the server sends: the quantisation grid on the voxel lines
+    final_codec.lattice_step_m = final_grid.voxel_size_m;
+    final_codec.lattice_origin_m = final_grid.origin_world;
+    if (final_mesh.triangles.empty() || !measureFinal(final_mesh, final_codec, repeat, ff)) {
         std::fprintf(stderr, "mesh: the final mesh is empty or its round trip failed\n");
         return 1;
     }
@@ -247,6 +257,7 @@ int runMesh(const std::vector<std::string>& args) {
     std::printf("  %-34s %10s %10s %10s %14s\n", "wire", "KB", "encode_ms", "decode_ms", "max_error_mm");
     std::printf("  %-34s %10.1f %10.2f %10.2f %14.4f\n", "positions+colours, arrays (now)", ff.bytes / 1024.0,
                 ff.encode_ms, ff.decode_ms, ff.max_error_mm);
+    std::printf("  %-34s %10.1f\n", "same, grid not on the voxel lines", ff.unaligned_bytes / 1024.0);
     std::printf("  %-34s %10.1f %10.2f %10.2f\n", "+10-bit normals, OpenMesh (before)", ff.old_bytes / 1024.0,
                 ff.old_encode_ms, ff.old_decode_ms);
     std::printf("  decoded mesh to binary PLY bytes: %.2f ms\n", ff.write_ply_ms);
@@ -254,17 +265,18 @@ int runMesh(const std::vector<std::string>& args) {
                 "nm_verts");
     printDefects("marching cubes output (raw)", ff.raw);
     printDefects("decoded by a client (delivered)", ff.delivered);
-    if (sweep) printSweep(final_mesh);
+    if (sweep) printSweep(final_mesh, final_codec);
     const bool ok = ff.delivered.clean() && sf.equal_to_full;
     if (json) {
         std::printf(
             "{\"mesh\":{\"bytes\":%zu,\"encode_ms\":%.3f,\"decode_ms\":%.3f,\"max_error_mm\":%.5f,\"triangles\":%zu,"
-            "\"old_bytes\":%zu,\"old_encode_ms\":%.3f,\"old_decode_ms\":%.3f,\"raw_defects\":%s,\"defects\":%s},"
+            "\"unaligned_bytes\":%zu,\"old_bytes\":%zu,\"old_encode_ms\":%.3f,\"old_decode_ms\":%.3f,\"raw_defects\":%"
+            "s,\"defects\":%s},"
             "\"snapshot\":{\"count\":%d,\"copy_ms\":%.3f,\"mesh_ms\":%.3f,\"full_mesh_ms\":%.3f,\"encode_ms\":%.3f,"
             "\"cpu_share\":%.5f,\"blocks_changed_share\":%.3f}}\n",
-            ff.bytes, ff.encode_ms, ff.decode_ms, ff.max_error_mm, ff.triangles, ff.old_bytes, ff.old_encode_ms,
-            ff.old_decode_ms, jsonDefects(ff.raw).c_str(), jsonDefects(ff.delivered).c_str(), sf.count, sf.copy_ms / n,
-            sf.mesh_ms / n, sf.full_mesh_ms / n, sf.encode_ms / n, cpu_share,
+            ff.bytes, ff.encode_ms, ff.decode_ms, ff.max_error_mm, ff.triangles, ff.unaligned_bytes, ff.old_bytes,
+            ff.old_encode_ms, ff.old_decode_ms, jsonDefects(ff.raw).c_str(), jsonDefects(ff.delivered).c_str(),
+            sf.count, sf.copy_ms / n, sf.mesh_ms / n, sf.full_mesh_ms / n, sf.encode_ms / n, cpu_share,
             sf.blocks > 0 ? sf.changed / sf.blocks : 0.0);
     }
     return ok ? 0 : 1;

@@ -261,3 +261,27 @@ TEST(MeshDraco, EncoderRejectsBadInput) {
 
 }  // namespace
 }  // namespace facescan::wire
+
+namespace facescan::wire {
+namespace {
+
+TEST(MeshDraco, GridAlignedWithTheVoxelLinesKeepsTheBudgetAndSavesBytes) {
+    // Vertices on a 1.5 mm lattice in x and y (like marching cubes' on voxel lines), z anywhere.
+    const float voxel_m = 1.5e-3f;
+    const int n = 80;
+    const recon::Mesh mesh = bumpGrid(n, voxel_m * float(n - 1));
+    MeshCodecParams aligned;
+    aligned.lattice_step_m = voxel_m;
+    aligned.lattice_origin_m = Eigen::Vector3f(-0.5f * voxel_m * float(n - 1), -0.5f * voxel_m * float(n - 1), 0.0f);
+    const RoundTrip a = expectRoundTrip(mesh, aligned);
+    const RoundTrip u = expectRoundTrip(mesh, {});
+    EXPECT_LT(a.max_error_m, 0.05e-3);
+    EXPECT_LT(a.bytes, u.bytes);
+    MeshCodecParams bad;
+    bad.lattice_step_m = -1.0f;
+    std::vector<uint8_t> bytes;
+    EXPECT_EQ(encodeMeshDraco(mesh, bad, bytes).code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace facescan::wire

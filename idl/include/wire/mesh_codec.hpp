@@ -24,8 +24,12 @@ inline constexpr size_t kMaxMeshVertices = 4'000'000;
 struct MeshCodecParams {
     float max_position_error_m = 0.05e-3f;  // metres, Euclidean; quantisation keeps every vertex within this
     int position_bits = 0;  // [0, 30] bits per coordinate; 0 = the fewest that honour max_position_error_m
-    int normal_bits = 0;    // [0, 30] octahedral normal bits; 0 = leave normals out (the receiver recomputes them)
-    bool colours = true;    // send the 8-bit vertex colours (lossless)
+    // metres; > 0: the positions lie on the lines of a cubic lattice of this spacing through lattice_origin_m (the
+    // TSDF voxel grid, for marching-cubes meshes): the quantisation grid is aligned with it (see encodeMeshDraco)
+    float lattice_step_m = 0.0f;
+    Eigen::Vector3f lattice_origin_m = Eigen::Vector3f::Zero();  // metres
+    int normal_bits = 0;  // [0, 30] octahedral normal bits; 0 = leave normals out (the receiver recomputes them)
+    bool colours = true;  // send the 8-bit vertex colours (lossless)
     int speed = 8;  // Draco encode/decode speed [0, 10]: without normals 8 is smaller and faster than 7 (issue 16,
                     // facescan-bench mesh --sweep: 143 vs 151 KB, 21 vs 22 ms); 0-1 save 8 % more at 3x the time
 

@@ -424,7 +424,7 @@ StatusOr<MeshResult> Session::mesh() {
     rec->copyVolume(grid);  // under the volume's short lock; meshed without it
     const recon::IndexedMesh m = recon::extractTriangles(grid, params_.recon.mesh);
     if (m.triangles.empty()) return unavailable("session '" + id_ + "' has no surface yet");
-    return encodeMesh(m, wire::MeshCodecParams{});
+    return encodeMesh(m, meshCodecParams(grid, wire::MeshCodecParams{}.max_position_error_m));
 }
 
 StatusOr<std::vector<uint8_t>> Session::previewPng() {
@@ -462,6 +462,14 @@ void Session::copySnapshotIfAsked() {
         snapshot_copy_ = SnapshotCopy::kDone;
     }
     snapshot_copy_cv_.notify_all();
+}
+
+wire::MeshCodecParams meshCodecParams(const recon::VoxelBlockGrid& grid, float max_error_m) {
+    wire::MeshCodecParams params;
+    params.max_position_error_m = max_error_m;
+    params.lattice_step_m = grid.voxel_size_m;
+    params.lattice_origin_m = grid.origin_world;
+    return params;
 }
 
 StatusOr<MeshResult> encodeMesh(const recon::IndexedMesh& mesh, const wire::MeshCodecParams& params,
@@ -505,11 +513,10 @@ std::optional<SnapshotResult> Session::makeSnapshot() {
     }
     // Only the blocks whose voxels changed since the last snapshot are meshed again (issue 16).
     const int64_t t1 = steadyNowNs();
-    const recon::IndexedMesh m = snapshot_mesher_.update(snapshot_grid_);
+    const wire::MeshCodecParams cp = meshCodecParams(snapshot_grid_, params_.snapshot_max_error_m);
+    const recon::IndexedMesh m = snapshot_mesher_.update(snapshot_grid_);  // swaps the grid away
     const float mesh_ms = msSince(t1);
     if (m.triangles.empty()) return std::nullopt;
-    wire::MeshCodecParams cp;
-    cp.max_position_error_m = params_.snapshot_max_error_m;
     const int64_t t2 = steadyNowNs();
     auto encoded = encodeMesh(m, cp);
     if (!encoded.isOk()) return std::nullopt;

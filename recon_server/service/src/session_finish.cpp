@@ -43,7 +43,8 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         rec->copyVolume(grid);
         const recon::IndexedMesh extracted = recon::extractTriangles(grid, params_.recon.mesh);
         if (!extracted.triangles.empty()) {
-            auto encoded = encodeMesh(extracted, wire::MeshCodecParams{}, &mesh);
+            const auto params = meshCodecParams(grid, wire::MeshCodecParams{}.max_position_error_m);
+            auto encoded = encodeMesh(extracted, params, &mesh);
             if (encoded.isOk()) {
                 result = std::move(*encoded);
             } else {

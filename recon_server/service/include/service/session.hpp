@@ -75,6 +75,8 @@ struct MeshResult {
     uint32_t triangle_count = 0;
 };
 
+// Draco parameters for a mesh of `grid` (marching cubes): quantisation within max_error_m, aligned with the voxels.
+wire::MeshCodecParams meshCodecParams(const recon::VoxelBlockGrid& grid, float max_error_m);
 // Draco bytes of `mesh` and their counts; `encoded`, when given, receives the cleaned mesh the bytes hold.
 StatusOr<MeshResult> encodeMesh(const recon::IndexedMesh& mesh, const wire::MeshCodecParams& params,
                                 recon::IndexedMesh* encoded = nullptr);
