@@ -36,6 +36,7 @@ double threadMs() {
 struct SnapshotFigures {
     int count = 0;
     double copy_ms = 0, mesh_ms = 0, full_mesh_ms = 0, encode_ms = 0, max_total_ms = 0;
+    double old_mesh_ms = 0, old_encode_ms = 0;  // before issue 16: OpenMesh with gradient normals, normals sent
     double blocks = 0, changed = 0, remeshed = 0, triangles = 0, bytes = 0;
     bool equal_to_full = true;  // the incremental mesh had the full re-mesh's triangle and vertex counts
 };
@@ -216,6 +217,18 @@ int runMesh(const std::vector<std::string>& args) {
         const recon::IndexedMesh full = recon::extractTriangles(scratch, snap_params);
         sf.full_mesh_ms += threadMs() - t0;
         sf.equal_to_full &= full.triangleCount() == m.triangleCount() && full.vertexCount() == m.vertexCount();
+        {  // the snapshot path before issue 16, on the same volume
+            wire::MeshCodecParams old_codec;
+            old_codec.max_position_error_m = snapshot_error_m;
+            old_codec.normal_bits = 10;
+            old_codec.speed = 7;
+            t0 = threadMs();
+            const recon::Mesh old_mesh = recon::extractMesh(scratch, snap_params);
+            sf.old_mesh_ms += threadMs() - t0;
+            t0 = threadMs();
+            (void)wire::encodeMeshDraco(old_mesh, old_codec, bytes);
+            sf.old_encode_ms += threadMs() - t0;
+        }
         t0 = threadMs();
         if (m.triangles.empty() || !wire::encodeMeshDraco(m, snap_codec, bytes).isOk()) continue;
         const double encode_ms = threadMs() - t0;
@@ -236,6 +249,9 @@ int runMesh(const std::vector<std::string>& args) {
                 sf.copy_ms / n, sf.mesh_ms / n, sf.full_mesh_ms / n, sf.encode_ms / n);
     std::printf("  blocks %.0f, changed %.0f, re-meshed %.0f; %.0f triangles, %.1f KB\n", sf.blocks / n, sf.changed / n,
                 sf.remeshed / n, sf.triangles / n, sf.bytes / n / 1024.0);
+    std::printf(
+        "  before issue 16 (same volumes): mesh %.2f ms (OpenMesh, gradient normals), encode %.2f ms (normals)\n",
+        sf.old_mesh_ms / n, sf.old_encode_ms / n);
     std::printf("  copy+mesh+encode %.2f ms per snapshot (max %.2f) = %.2f %% of a core per session%s\n", total_ms,
                 sf.max_total_ms, 100.0 * cpu_share, sf.equal_to_full ? "" : "  (INCREMENTAL != FULL)");
 
@@ -273,11 +289,11 @@ int runMesh(const std::vector<std::string>& args) {
             "\"unaligned_bytes\":%zu,\"old_bytes\":%zu,\"old_encode_ms\":%.3f,\"old_decode_ms\":%.3f,\"raw_defects\":%"
             "s,\"defects\":%s},"
             "\"snapshot\":{\"count\":%d,\"copy_ms\":%.3f,\"mesh_ms\":%.3f,\"full_mesh_ms\":%.3f,\"encode_ms\":%.3f,"
-            "\"cpu_share\":%.5f,\"blocks_changed_share\":%.3f}}\n",
+            "\"old_mesh_ms\":%.3f,\"old_encode_ms\":%.3f,\"cpu_share\":%.5f,\"blocks_changed_share\":%.3f}}\n",
             ff.bytes, ff.encode_ms, ff.decode_ms, ff.max_error_mm, ff.triangles, ff.unaligned_bytes, ff.old_bytes,
             ff.old_encode_ms, ff.old_decode_ms, jsonDefects(ff.raw).c_str(), jsonDefects(ff.delivered).c_str(),
-            sf.count, sf.copy_ms / n, sf.mesh_ms / n, sf.full_mesh_ms / n, sf.encode_ms / n, cpu_share,
-            sf.blocks > 0 ? sf.changed / sf.blocks : 0.0);
+            sf.count, sf.copy_ms / n, sf.mesh_ms / n, sf.full_mesh_ms / n, sf.encode_ms / n, sf.old_mesh_ms / n,
+            sf.old_encode_ms / n, cpu_share, sf.blocks > 0 ? sf.changed / sf.blocks : 0.0);
     }
     return ok ? 0 : 1;
 }

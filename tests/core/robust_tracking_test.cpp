@@ -73,6 +73,20 @@ ScenarioRun runScenario(const synth::SequenceParams& sp, const ReconParams& para
     return run;
 }
 
+TEST(Robustness, TheGentleSequenceIsTrackedInEveryFrameFromTheModel) {
+    synth::SequenceParams sp = scenario("gentle");
+    sp.frames = 90;
+    sp.seed = 17;
+    const ScenarioRun run = runScenario(sp);
+    EXPECT_EQ(run.figures.tracked_in_view, sp.frames);
+    EXPECT_EQ(run.figures.losses, 0);
+    EXPECT_EQ(run.figures.wrong_poses, 0) << "max error " << run.figures.max_pose_err_mm << " mm";
+    EXPECT_EQ(run.figures.foreign_vertices, 0) << "torso fused";
+    int from_model = 0;
+    for (const ScanStep& s : run.steps) from_model += s.head.from_model;
+    EXPECT_GE(from_model, sp.frames - 10) << "once tracked, the head comes from the model, not from detection";
+}
+
 TEST(Robustness, WideFastTurnsAboveATorsoAreTracked) {
     synth::SequenceParams sp = scenario("wide");
     sp.frames = 150;  // a whole yaw cycle: 0 -> 60 -> 0 -> -60 -> 0 deg at up to 2.8 deg a frame
@@ -172,7 +186,7 @@ TEST(RobustIntegration, AnOccluderInsideTheMaskIsNotFused) {
     }
 }
 
-// A deliberately wrong re-acquisition hypothesis (the true pose turned 25 deg, or moved 4 cm) fails
+// A deliberately wrong re-acquisition hypothesis (the true pose turned 25 deg or 5 deg, or moved 4 cm or 1 cm) fails
 // verification; the true pose passes.
 TEST(Reacquisition, VerificationRejectsADeliberatelyWrongHypothesis) {
     synth::SequenceParams sp;
@@ -182,7 +196,6 @@ TEST(Reacquisition, VerificationRejectsADeliberatelyWrongHypothesis) {
     Reconstructor rec(sim.intrinsics(), ReconParams::faceDefaults());
     RgbdFrame frame;
     synth::FrameTruth truth;
-    const Pose T_c0_head = sim.poseAt(0);
     FrameResult r;
     for (int i = 0; i < sp.frames; ++i) {
         sim.render(i, frame, &truth);
@@ -194,20 +207,33 @@ TEST(Reacquisition, VerificationRejectsADeliberatelyWrongHypothesis) {
     std::printf("right pose: inliers %.2f conflicts %.3f rmse %.2f mm\n", good.agreeShare(), good.conflictShare(),
                 1000 * good.rmse_m);
     EXPECT_TRUE(rec.acceptsCheck(good));
+    // Wrong hypotheses: turned about the head's centre (25 deg as a hypothesis step; 5 deg about each axis, just
+    // past the 3 deg that counts as a wrong pose), or moved (4 cm; 1 cm along each axis).
     const Eigen::Vector3f centre = rec.headRegion().centre_world;
-    Pose turned = Pose::Identity();
-    turned.linear() = Eigen::AngleAxisf(25.0f / 57.29578f, Eigen::Vector3f::UnitY()).toRotationMatrix();
-    turned.translation() = centre - turned.linear() * centre;
-    Pose shifted = Pose::Identity();
-    shifted.translation() = Eigen::Vector3f(0.04f, 0.0f, 0.0f);
-    for (const Pose& wrong : {Pose(turned * right), Pose(shifted * right)}) {
+    auto turned = [&](float deg, const Eigen::Vector3f& axis) {
+        Pose t = Pose::Identity();
+        t.linear() = Eigen::AngleAxisf(deg / 57.29578f, axis).toRotationMatrix();
+        t.translation() = centre - t.linear() * centre;
+        return Pose(t * right);
+    };
+    auto moved = [&](const Eigen::Vector3f& by_m) {
+        Pose t = Pose::Identity();
+        t.translation() = by_m;
+        return Pose(t * right);
+    };
+    std::vector<Pose> wrong_poses = {turned(25.0f, Eigen::Vector3f::UnitY()), moved({0.04f, 0.0f, 0.0f})};
+    for (int axis = 0; axis < 3; ++axis) {
+        wrong_poses.push_back(turned(5.0f, Eigen::Vector3f::Unit(axis)));
+        wrong_poses.push_back(moved(0.01f * Eigen::Vector3f::Unit(axis)));
+    }
+    for (const Pose& wrong : wrong_poses) {
         const PoseCheck bad = rec.verifyPose(wrong);
-        std::printf("wrong pose (%.1f deg, %.1f mm off): inliers %.2f conflicts %.3f rmse %.2f mm\n",
-                    angleDeg(right.inverse() * wrong), 1000 * (right.inverse() * wrong).translation().norm(),
-                    bad.agreeShare(), bad.conflictShare(), 1000 * bad.rmse_m);
+        const Pose off = right.inverse() * wrong;
+        std::printf("wrong pose (%.1f deg, camera %.1f mm off): inliers %.2f conflicts %.3f rmse %.2f mm\n",
+                    angleDeg(off), 1000 * off.translation().norm(), bad.agreeShare(), bad.conflictShare(),
+                    1000 * bad.rmse_m);
         EXPECT_FALSE(rec.acceptsCheck(bad));
     }
-    (void)T_c0_head;
 }
 
 TEST(ScanStep, AFrameWithoutAHeadIsNoHeadAndTheAdviceSaysWhatToDo) {

@@ -40,13 +40,24 @@ using facescan::testing::readText;
 
 bool contains(const std::string& text, const std::string& needle) { return text.find(needle) != std::string::npos; }
 
+// One test's private DDS domain (and the CLI's flags for it), its session name and an empty scratch folder.
+struct Scratch {
+    std::string domain, session, dds;
+    fs::path dir;
+};
+Scratch makeScratch(uint32_t salt, const std::string& name) {
+    Scratch s;
+    s.domain = std::to_string(facescan::testing::privateDomain(salt));
+    s.session = name + "-" + std::to_string(::getpid());
+    s.dds = " --profile loopback --domain " + s.domain;
+    s.dir = fs::temp_directory_path() / ("facescan_" + s.session);
+    fs::remove_all(s.dir);
+    fs::create_directories(s.dir);
+    return s;
+}
+
 TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
-    const std::string domain = std::to_string(facescan::testing::privateDomain(5));
-    const std::string session = "e2e-" + std::to_string(::getpid());
-    const std::string dds = " --profile loopback --domain " + domain;
-    const fs::path dir = fs::temp_directory_path() / ("facescan_e2e_" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
+    const auto [domain, session, dds, dir] = makeScratch(5, "e2e");
     constexpr int kFrames = 40;
 
     ChildProcess server({FACESCAN_SERVER_BIN, "--profile", "loopback", "--domain", domain, "--data-dir",
@@ -178,12 +189,7 @@ TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
 // tells the person what to do while the face is lost, `facescan watch` shows it the moment the scan is lost, and
 // the scan comes back by itself after the gap (re-acquisition), in real time at 30 Hz.
 TEST(EndToEnd, WatchShowsTheAdviceWhileTheFaceIsLostAndTheScanComesBack) {
-    const std::string domain = std::to_string(facescan::testing::privateDomain(6));
-    const std::string session = "gap-" + std::to_string(::getpid());
-    const std::string dds = " --profile loopback --domain " + domain;
-    const fs::path dir = fs::temp_directory_path() / ("facescan_e2e_gap_" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
+    const auto [domain, session, dds, dir] = makeScratch(6, "e2e-gap");
     // 1.5 s of tracking, 5 frames walking out, 30 out of view, 5 walking back, then 2 s to come back.
     ChildProcess server({FACESCAN_SERVER_BIN, "--profile", "loopback", "--domain", domain, "--data-dir",
                          (dir / "data").string(), "--set", "status_hz=10"},

@@ -5,7 +5,6 @@
 #include <cstring>
 #include <numeric>
 #include <unordered_map>
-#include <unordered_set>
 
 namespace facescan::recon {
 namespace {
@@ -31,13 +30,40 @@ PosKey keyOf(const Eigen::Vector3f& p) {
     return k;
 }
 
+// A flat open-addressing table (linear probing) of indices: the meshes here have ~100k elements, and
+// std::unordered_map's node per element made cleaning cost half of the Draco encode (12.8 of 26 ms).
+class IndexTable {
+ public:
+    explicit IndexTable(size_t count) {
+        size_t n = 16;
+        while (n < 2 * count) n <<= 1;
+        slots_.assign(n, 0);
+    }
+    // The index already stored that `same` accepts, else `candidate` (stored now).
+    template <class Same>
+    uint32_t findOrInsert(uint32_t candidate, size_t hash, Same same) {
+        const size_t mask = slots_.size() - 1;
+        for (size_t i = hash & mask;; i = (i + 1) & mask) {
+            if (slots_[i] == 0) {
+                slots_[i] = candidate + 1;
+                return candidate;
+            }
+            if (same(slots_[i] - 1)) return slots_[i] - 1;
+        }
+    }
+
+ private:
+    std::vector<uint32_t> slots_;  // index + 1; 0 = empty
+};
+
 // canonical[i] = the first vertex with vertex i's position.
 std::vector<uint32_t> canonicalByPosition(const IndexedMesh& mesh) {
     std::vector<uint32_t> canonical(mesh.vertexCount());
-    std::unordered_map<PosKey, uint32_t, PosKeyHash> first;
-    first.reserve(mesh.vertexCount());
+    std::vector<PosKey> keys(mesh.vertexCount());
+    IndexTable table(mesh.vertexCount());
     for (uint32_t i = 0; i < mesh.vertexCount(); ++i) {
-        canonical[i] = first.try_emplace(keyOf(mesh.positions_m[i]), i).first->second;
+        keys[i] = keyOf(mesh.positions_m[i]);
+        canonical[i] = table.findOrInsert(i, PosKeyHash()(keys[i]), [&](uint32_t j) { return keys[j] == keys[i]; });
     }
     return canonical;
 }
@@ -61,10 +87,26 @@ struct TriKeyHash {
                                      (uint64_t(t[2]) * 0xff51afd7ed558ccdull));
     }
 };
-Triangle sorted(Triangle t) {
-    std::sort(t.begin(), t.end());
-    return t;
-}
+// Marks each triangle whose vertex set (any order) an earlier one has: keeps[t] = false for those.
+class TriangleSet {
+ public:
+    explicit TriangleSet(size_t count) : table_(count) { sorted_.reserve(count); }
+    // True when `t` is new (and remembers it).
+    bool insert(const Triangle& t) {
+        Triangle k = t;
+        std::sort(k.begin(), k.end());
+        const uint32_t candidate = static_cast<uint32_t>(sorted_.size());
+        sorted_.push_back(k);
+        const uint32_t found =
+            table_.findOrInsert(candidate, TriKeyHash()(k), [&](uint32_t j) { return sorted_[j] == k; });
+        if (found != candidate) sorted_.pop_back();
+        return found == candidate;
+    }
+
+ private:
+    IndexTable table_;
+    std::vector<Triangle> sorted_;
+};
 
 int findRoot(std::vector<uint32_t>& parent, uint32_t i) {
     while (parent[i] != i) i = parent[i] = parent[parent[i]];
@@ -98,8 +140,7 @@ MeshDefects countDefects(const IndexedMesh& mesh) {
     MeshDefects d;
     const std::vector<uint32_t> canonical = canonicalByPosition(mesh);
     std::vector<char> used(mesh.vertexCount(), 0);
-    std::unordered_set<Triangle, TriKeyHash> seen;
-    seen.reserve(mesh.triangleCount());
+    TriangleSet seen(mesh.triangleCount());
     std::unordered_map<uint64_t, uint32_t> edge_faces;
     edge_faces.reserve(mesh.triangleCount() * 2);
     std::vector<Triangle> good;  // canonical, non-degenerate, first copies
@@ -111,7 +152,7 @@ MeshDefects countDefects(const IndexedMesh& mesh) {
             ++d.zero_area_triangles;
             continue;
         }
-        if (!seen.insert(sorted(c)).second) {
+        if (!seen.insert(c)) {
             ++d.duplicate_triangles;
             continue;
         }
@@ -159,12 +200,11 @@ MeshDefects countDefects(const IndexedMesh& mesh) {
 
 void removeDefects(IndexedMesh& mesh) {
     const std::vector<uint32_t> canonical = canonicalByPosition(mesh);
-    std::unordered_set<Triangle, TriKeyHash> seen;
-    seen.reserve(mesh.triangleCount());
+    TriangleSet seen(mesh.triangleCount());
     size_t kept = 0;
     for (const Triangle& t : mesh.triangles) {
         const Triangle c = {canonical[t[0]], canonical[t[1]], canonical[t[2]]};
-        if (zeroArea(mesh, c) || !seen.insert(sorted(c)).second) continue;
+        if (zeroArea(mesh, c) || !seen.insert(c)) continue;
         mesh.triangles[kept++] = c;
     }
     mesh.triangles.resize(kept);
