@@ -109,42 +109,65 @@ Status encodeMeshDraco(const recon::IndexedMesh& mesh, const MeshCodecParams& pa
         params.position_bits > 0 ? params.position_bits : positionBitsFor(range, params.max_position_error_m);
     DracoGrid grid;
     for (int a = 0; a < 3; ++a) grid.min[a] = lo[a];
+    auto setGrid = [&](int bits, float grid_range) {
+        position_bits = bits;
+        range = grid_range;
+        const float max_quantized = static_cast<float>((1u << bits) - 1u);
+        grid.inverse_delta = max_quantized / range;
+        grid.delta = range / max_quantized;
+    };
+    setGrid(position_bits, range);
+    // The mesh as the receiver will see it: positions on Draco's grid (then welded and cleaned there, below).
+    recon::IndexedMesh work;
+    work.positions_m.resize(nv_in);
+    auto snapAll = [&] {
+        double worst_m = 0.0;
+        for (size_t i = 0; i < nv_in; ++i) {
+            for (int a = 0; a < 3; ++a) work.positions_m[i][a] = grid.snap(mesh.positions_m[i][a], a);
+            worst_m = std::max(worst_m, double((work.positions_m[i] - mesh.positions_m[i]).norm()));
+        }
+        return worst_m;
+    };
+    bool snapped = false;
     if (params.lattice_step_m > 0.0f && params.position_bits == 0) {
         // Marching-cubes vertices lie on voxel lines: two of their three coordinates are multiples of the voxel.
-        // A quantisation step that divides the voxel, from an origin on a voxel line, keeps those two exact, and
-        // Draco's parallelogram residuals on them become multiples of k, which its entropy coder stores in a few
-        // bits (facescan-bench mesh: the final mesh's bytes against the unaligned grid).
+        // A quantisation step that divides the voxel, from an origin on a voxel line, keeps those two exact, so
+        // only the third carries error: the step may be twice the error bound instead of 2/sqrt(3) of it. And
+        // Draco's parallelogram residuals on the exact axes are multiples of k, which its entropy coder stores in
+        // a few bits (facescan-bench mesh: the final mesh's bytes against the unaligned grid). Every vertex is
+        // checked; a mesh whose vertices are not on the lines gets the corner-safe step.
         const double lattice = params.lattice_step_m;
         const double budget_m = 0.95 * double(params.max_position_error_m);
-        const int k = static_cast<int>(std::ceil(lattice / (2.0 * budget_m / std::sqrt(3.0))));
-        const double step = lattice / k;
-        double extent = 0.0;
         double origin[3];
+        double extent = 0.0;
         for (int a = 0; a < 3; ++a) {
             const double o = params.lattice_origin_m[a];
             origin[a] = o + std::floor((double(lo[a]) - o) / lattice) * lattice;
             extent = std::max(extent, double(hi[a]) - origin[a]);
         }
-        int bits = 1;
-        while (bits < 30 && double((1u << bits) - 1u) * step < extent + step) ++bits;
-        if (bits < 30) {
-            position_bits = bits;
-            range = static_cast<float>(step * double((1u << bits) - 1u));
+        const float saved_min[3] = {grid.min[0], grid.min[1], grid.min[2]};
+        const int saved_bits = position_bits;
+        const float saved_range = range;
+        for (const double max_step : {2.0 * budget_m, 2.0 * budget_m / std::sqrt(3.0)}) {
+            const double step = lattice / std::ceil(lattice / max_step);
+            int bits = 1;
+            while (bits < 30 && double((1u << bits) - 1u) * step < extent + step) ++bits;
+            if (bits >= 30) break;
             for (int a = 0; a < 3; ++a) grid.min[a] = static_cast<float>(origin[a]);
+            setGrid(bits, static_cast<float>(step * double((1u << bits) - 1u)));
+            if (snapAll() <= double(params.max_position_error_m)) {
+                snapped = true;
+                break;
+            }
+        }
+        if (!snapped) {
+            for (int a = 0; a < 3; ++a) grid.min[a] = saved_min[a];
+            setGrid(saved_bits, saved_range);
         }
     }
-    const float max_quantized = static_cast<float>((1u << position_bits) - 1u);
-    grid.inverse_delta = max_quantized / range;
-    grid.delta = range / max_quantized;
-
-    // The mesh as the receiver will see it: positions on Draco's grid, then welded and cleaned there (no
-    // zero-area or duplicate triangle, no unreferenced vertex). Draco quantises these snapped positions to the
-    // same grid again (set explicitly below), so what the receiver decodes is this mesh, vertex order aside.
-    recon::IndexedMesh work;
-    work.positions_m.resize(nv_in);
-    for (size_t i = 0; i < nv_in; ++i) {
-        for (int a = 0; a < 3; ++a) work.positions_m[i][a] = grid.snap(mesh.positions_m[i][a], a);
-    }
+    if (!snapped) (void)snapAll();
+    // Draco quantises the snapped positions to the same grid again (set explicitly below), so what the receiver
+    // decodes is the cleaned mesh below, vertex order aside.
     if (params.colours && mesh.hasColours()) work.colours_rgb = mesh.colours_rgb;
     const bool send_normals = params.normal_bits > 0 && mesh.hasNormals();
     if (send_normals) work.normals = mesh.normals;
