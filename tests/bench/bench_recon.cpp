@@ -228,6 +228,30 @@ StatusOr<double> twinMean(const Options& o, const recon::ReconParams& params, co
     return acc.mean_mm;
 }
 
+// Without masks the whole frame is fused (recon::Reconstructor's contract). The volume is centred on the first
+// frame's centroid, so a scene much deeper than the volume (a head 1 m in front of a wall) leaves the head outside
+// it: the model is a sliver of background and registration fails frame after frame (299 of 300 on a synthetic TUM
+// head recording). Returns the first frame's depth spread when that is the case.
+std::optional<float> wholeFrameDepthSpreadM(const Sequence& seq, const recon::ReconParams& p, bool pipeline_mask) {
+    if (pipeline_mask || seq.frames.empty() || (!seq.masks.empty() && !seq.masks.front().empty())) return std::nullopt;
+    std::vector<float> z;
+    const cv::Mat& d = seq.frames.front().depth_m;
+    for (int v = 0; v < d.rows; v += 2)
+        for (int u = 0; u < d.cols; u += 2) {
+            const float m = d.at<float>(v, u);
+            if (m >= p.filter.min_depth_m && m <= p.filter.max_depth_m) z.push_back(m);
+        }
+    if (z.size() < 100) return std::nullopt;
+    const auto at = [&](double q) {
+        auto it = z.begin() + static_cast<std::ptrdiff_t>(q * static_cast<double>(z.size() - 1));
+        std::nth_element(z.begin(), it, z.end());
+        return *it;
+    };
+    const float spread = at(0.98) - at(0.02);
+    if (spread <= p.tsdf.volume_size_m) return std::nullopt;
+    return spread;
+}
+
 int runRecon(const std::vector<std::string>& args) {
     Options o;
     for (size_t i = 0; i < args.size(); ++i) {
@@ -300,6 +324,16 @@ int runRecon(const std::vector<std::string>& args) {
         params.icp.max_rmse_m = 0.03f;
         params.raycast.start_before_hint_m = 3.0f * params.tsdf.trunc_dist_m;  // rays must span a few voxels
         params.raycast.search_after_hint_m = 4.0f * params.tsdf.trunc_dist_m;
+    }
+    if (const std::optional<float> spread = wholeFrameDepthSpreadM(seq, params, o.pipeline_mask)) {
+        std::fprintf(stderr,
+                     "recon: %s has no head masks, so every pixel is fused (the core's empty mask = whole frame), but "
+                     "its first frame spans %.2f m in depth (2nd-98th percentile) and the volume is %.2f m: placed on "
+                     "the centroid of head and background, it holds neither and nearly every frame is rejected.\n"
+                     "  For a head recording use --mask pipeline (the server's own detection and segmentation); for "
+                     "a room, a volume that holds it (--volume-m 3).\n",
+                     o.input.c_str(), static_cast<double>(*spread), static_cast<double>(params.tsdf.volume_size_m));
+        return 2;
     }
     const double rss_frames_mb = currentRssMb();
     recon::Reconstructor rec(seq.k, params);
