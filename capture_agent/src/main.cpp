@@ -36,6 +36,9 @@ options:
                         frame lost (recordings); HZ: a fixed rate
   --jpeg-quality Q      colour JPEG quality 1-100 (default 90)
   --no-colour           send depth only
+  --preload             read the whole recording into memory first (tum:, oni:, synthetic), then stream it at
+                        its rate: the agent then costs only its encoding, as on a capture PC of its own
+                        (memory: about 1.5 MB per VGA frame with colour)
   --depth-codec NAME    lossless depth codec: packed-delta-zstd (default), delta-zstd, rvl-zstd, rvl, zstd,
                         raw16, png (`facescan-bench codecs` compares them on your frames)
   --tum-depth-scale S   raw depth units per metre of tum: sources (default 5000; Kinect millimetres: 1000)
@@ -70,6 +73,9 @@ int main(int argc, char** argv) {
             return 0;
         } else if (arg == "--no-colour" || arg == "--no-color") {
             options.source_options.colour = false;
+            continue;
+        } else if (arg == "--preload") {
+            options.preload = true;
             continue;
         }
         const char* v = value();
@@ -113,6 +119,18 @@ int main(int argc, char** argv) {
     }
     if (const Status s = options.validate(); !s.isOk()) return usageError(s.message());
 
+    if (options.preload) {
+        // A line per tenth of the recording (or per 100 frames when its length is unknown).
+        options.preload_progress = [last_tenth = -1](int done, int expected) mutable {
+            if (expected <= 0) {
+                if (done % 100 == 0) std::printf("facescan-agent: preloading, %d frames so far\n", done);
+            } else if (const int tenth = 10 * done / expected; tenth != last_tenth) {
+                last_tenth = tenth;
+                std::printf("facescan-agent: preloading %d of %d frames\n", done, expected);
+            }
+            std::fflush(stdout);
+        };
+    }
     auto agent = capture::Agent::create(options);
     if (!agent.isOk()) {
         std::fprintf(stderr, "facescan-agent: %s\n", agent.status().toString().c_str());

@@ -22,6 +22,10 @@
 #include <string>
 #include <vector>
 
+#if __has_include(<valgrind/callgrind.h>)
+#include <valgrind/callgrind.h>  // instruction counts of the loop alone: see loopInstrumentation()
+#endif
+
 #include "allocation_counter.hpp"  // counts heap allocations: the frame loop must make none after warm-up
 #include "bench_command.hpp"
 #include "eval/accuracy.hpp"
@@ -70,6 +74,21 @@ double currentRssMb() {
     long pages = 0, resident = 0;
     f >> pages >> resident;
     return static_cast<double>(resident) * 4096.0 / (1024.0 * 1024.0);
+}
+
+// Under `valgrind --tool=callgrind --instr-atstart=no`, only the timed loop is instrumented, so callgrind's
+// instruction count is the frame loop's alone (all threads): a figure that does not move with the machine's load,
+// for comparing variants on a busy machine. Without valgrind (or its header) these do nothing.
+void loopInstrumentation(bool on) {
+#ifdef CALLGRIND_START_INSTRUMENTATION
+    if (on) {
+        CALLGRIND_START_INSTRUMENTATION;
+    } else {
+        CALLGRIND_STOP_INSTRUMENTATION;
+    }
+#else
+    (void)on;
+#endif
 }
 
 // Via the quaternion: acos of the trace loses everything below ~0.03 deg in float.
@@ -167,7 +186,10 @@ LoopResult runLoop(const Sequence& seq, recon::Reconstructor& rec, recon::FacePi
     long allocations_at_warmup = 0;
     const auto t0 = std::chrono::steady_clock::now();
     for (int i = 0; i < n; ++i) {
-        if (i == out.warmup) allocations_at_warmup = testing::heapAllocations();
+        if (i == out.warmup) {
+            allocations_at_warmup = testing::heapAllocations();
+            loopInstrumentation(true);
+        }
         recon::FrameResult r;
         const char* advice = "";
         if (pipeline) {
@@ -194,6 +216,7 @@ LoopResult runLoop(const Sequence& seq, recon::Reconstructor& rec, recon::FacePi
         }
     }
     out.loop_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    loopInstrumentation(false);
     out.allocations_after_warmup = n > out.warmup ? testing::heapAllocations() - allocations_at_warmup : 0;
     return out;
 }

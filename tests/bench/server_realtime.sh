@@ -2,14 +2,23 @@
 # The server's real-time figures (issue 8): facescan-server and N synthetic agents at 30 Hz over loopback DDS in a
 # private domain, every process on this machine. Prints each session's summary (fps, integrated / skipped frames,
 # capture-to-pose latency p50/p95, per-stage ms, snapshot timings) from the server's --data-dir.
-#   usage: tests/bench/server_realtime.sh [SESSIONS (default 1)] [FRAMES (default 300)] [SUBJECT (default scan)]
+#   usage: tests/bench/server_realtime.sh [--preload] [SESSIONS (default 1)] [FRAMES (default 300)] [SUBJECT (scan)]
+#   --preload: each agent reads its whole sequence into memory first (facescan-agent --preload), then streams it at
+#          30 Hz: an agent then costs only its encoding (~5 % of a core), as on a capture PC of its own. Without it
+#          every agent renders (synthetic) or decodes PNGs (TUM_DIR) on the cores the server needs.
 #   env:   BUILD_DIR (default ./build), FACESCAN_DATA_DIR (../shared/data: the real head scan), SNAPSHOT_HZ (1),
-#          TUM_DIR: stream this TUM folder instead of rendering live (`facescan-bench synth --head scan --tum DIR`
-#          writes the same sequence): the synthetic agent renders on the CPU the server needs (~75 % of a core
-#          per agent at 30 Hz), a TUM agent only decodes PNGs, like a real camera's capture PC.
+#          TUM_DIR: stream this TUM folder instead of the synthetic Kinect (`facescan-bench synth --head scan --tum
+#          DIR` writes the same sequence); PRELOAD=1 is the same as --preload.
+#   Ends with a table: per session, frames integrated of those sent, skipped (live mode keeps the newest frame),
+#   capture-to-pose latency p50/p95, and the snapshot thread's cost in % of a core.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
+preload=${PRELOAD:-0}
+if [ "${1:-}" = "--preload" ]; then
+    preload=1
+    shift
+fi
 sessions=${1:-1}
 frames=${2:-300}
 subject=${3:-scan}
@@ -34,11 +43,13 @@ server_pid=$!
 pids+=("$server_pid")
 sleep 1
 agent_pids=()
+preload_flag=()
+[ "$preload" = 1 ] && preload_flag=(--preload)
 for s in $(seq 1 "$sessions"); do
     source="synthetic:frames=$frames,subject=$subject,seed=$s"
     [ -n "${TUM_DIR:-}" ] && source="tum:$TUM_DIR"
     "$agent_bin" --source "$source" --frames "$frames" --profile loopback --domain "$domain" \
-        --session "rt$s" --rate real >"$work/agent$s.log" 2>&1 &
+        --session "rt$s" --rate real "${preload_flag[@]}" >"$work/agent$s.log" 2>&1 &
     agent_pids+=("$!")
     pids+=("$!")
 done
@@ -49,7 +60,10 @@ done
 kill -INT "$server_pid" 2>/dev/null || true
 wait "$server_pid" 2>/dev/null || true
 
-echo "server_realtime: $sessions session(s) x $frames frames at 30 Hz from ${TUM_DIR:-live synthetic rendering}, domain $domain, load $(cut -d' ' -f1-3 /proc/loadavg)"
+what=${TUM_DIR:+tum:$TUM_DIR}
+what=${what:-synthetic Kinect}
+[ "$preload" = 1 ] && what="$what, preloaded by the agents"
+echo "server_realtime: $sessions session(s) x $frames frames at 30 Hz from $what, domain $domain, load $(cut -d' ' -f1-3 /proc/loadavg)"
 for s in $(seq 1 "$sessions"); do
     f="$work/data/rt$s/summary.json"
     if [ -f "$f" ]; then
@@ -58,4 +72,20 @@ for s in $(seq 1 "$sessions"); do
     else
         echo "--- rt$s: no summary (logs in $work)"
     fi
+done
+# One number out of a summary line: field KEY of the line that starts with "SECTION".
+field() { grep -E "^  \"$2\"" "$1" | sed -E "s/.*\"$3\": ([0-9.e+-]+).*/\1/"; }
+printf '%-8s %12s %9s %9s %9s %12s\n' session integrated skipped p50_ms p95_ms snapshot_cpu
+for s in $(seq 1 "$sessions"); do
+    f="$work/data/rt$s/summary.json"
+    [ -f "$f" ] || continue
+    received=$(field "$f" frames received)
+    skipped=$(field "$f" frames skipped)
+    # The snapshot thread's cost in % of a core, from the LAST snapshot's copy + mesh + encode ms (the summary keeps
+    # no mean) times snapshots a second: one snapshot's wall-clock cost, not an average over the session.
+    snapshot_cpu=$(awk -v c="$(field "$f" snapshot copy_ms)" -v m="$(field "$f" snapshot mesh_ms)" \
+        -v e="$(field "$f" snapshot encode_ms)" -v hz="${SNAPSHOT_HZ:-1}" 'BEGIN { printf "%.1f", (c + m + e) * hz / 10 }')
+    printf '%-8s %5s of %-4s %5s %2s %9.1f %9.1f %10s %%\n' "rt$s" "$(field "$f" frames integrated)" "$frames" \
+        "$skipped" "($(( received > 0 ? 100 * skipped / received : 0 ))%)" "$(field "$f" latency_ms p50)" \
+        "$(field "$f" latency_ms p95)" "$snapshot_cpu"
 done

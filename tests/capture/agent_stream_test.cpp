@@ -56,12 +56,16 @@ std::vector<cv::Mat> expectedDepth(const std::string& spec) {
 }
 
 // Streams `spec` through the agent and checks every received depth frame against `expected`.
-void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expected, uint32_t salt) {
+void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expected, uint32_t salt,
+                      const std::vector<std::string>& extra_args = {}) {
     ASSERT_FALSE(expected.empty());
     const uint32_t domain = privateDomain(salt);
     const std::string session = "agent-test-" + std::to_string(salt);
-    const pid_t agent = spawnAgent({"--source", spec, "--profile", "loopback", "--domain", std::to_string(domain),
-                                    "--session", session, "--rate", "max", "--wait-for-server", "30"});
+    std::vector<std::string> args = {
+        "--source",  spec,    "--profile", "loopback", "--domain",          std::to_string(domain),
+        "--session", session, "--rate",    "max",      "--wait-for-server", "30"};
+    args.insert(args.end(), extra_args.begin(), extra_args.end());
+    const pid_t agent = spawnAgent(args);
     ASSERT_GT(agent, 0);
 
     auto participant = wire::Participant::create({domain, "loopback"});
@@ -147,7 +151,51 @@ TEST(AgentStream, TumFolderArrivesBitExactAndInOrder) {
                    cv::IMREAD_ANYDEPTH);
     EXPECT_EQ(first.type(), CV_16UC1);
     streamAndCompare(spec, expected, 2);
+    // --preload: the whole folder is read first, then the same frames go out in the same order.
+    streamAndCompare(spec, expected, 3, {"--preload"});
     fs::remove_all(dir);
+}
+
+// A live camera: nothing to read ahead.
+class LiveSource final : public FrameSource {
+ public:
+    const SourceInfo& info() const override { return info_; }
+    StatusOr<bool> next(CapturedFrame&) override { return true; }
+
+ private:
+    SourceInfo info_;  // is_recording = false
+};
+
+TEST(Sources, PreloadHoldsEveryFrameOfARecordingAndRefusesALiveCamera) {
+    auto live = preloadSource(std::make_unique<LiveSource>());
+    ASSERT_FALSE(live.isOk());
+    EXPECT_EQ(live.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(live.status().message().find("recording"), std::string::npos) << live.status().message();
+
+    const std::string spec = "synthetic:frames=6,seed=2,subject=builtin";
+    const auto expected = expectedDepth(spec);
+    auto source = openSource(spec, SourceOptions{});
+    ASSERT_TRUE(source.isOk());
+    std::vector<int> progress;
+    auto preloaded = preloadSource(std::move(*source), [&](int done, int total) {
+        progress.push_back(done);
+        EXPECT_EQ(total, 6);
+    });
+    ASSERT_TRUE(preloaded.isOk()) << preloaded.status().toString();
+    EXPECT_EQ(progress, (std::vector<int>{1, 2, 3, 4, 5, 6}));
+    EXPECT_TRUE((*preloaded)->info().is_recording);
+    EXPECT_EQ((*preloaded)->info().expected_frames, 6);
+    CapturedFrame frame;
+    for (size_t i = 0; i < expected.size(); ++i) {
+        auto got = (*preloaded)->next(frame);
+        ASSERT_TRUE(got.isOk() && *got) << "frame " << i;
+        EXPECT_EQ(frame.index, i);
+        EXPECT_EQ(cv::norm(frame.depth_raw, expected[i], cv::NORM_INF), 0) << "frame " << i;
+        EXPECT_FALSE(frame.colour_bgr.empty());
+    }
+    auto end = (*preloaded)->next(frame);
+    ASSERT_TRUE(end.isOk());
+    EXPECT_FALSE(*end) << "a preloaded recording ends where the recording ended";
 }
 
 TEST(Sources, BadSpecsAndMissingInputsGiveClearErrors) {

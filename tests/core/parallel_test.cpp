@@ -19,7 +19,9 @@
 #include <vector>
 
 #include "allocation_counter.hpp"
+#include "recon/face_pipeline.hpp"
 #include "recon/reconstructor.hpp"
+#include "recon/scan_step.hpp"
 
 namespace facescan::recon {
 namespace {
@@ -306,6 +308,41 @@ TEST(FrameLoop, ReconstructorDoesNotAllocateAfterWarmUp) {
     const long allocations = testing::heapAllocations() - before;
     EXPECT_EQ(integrated, 12) << "every frame must be tracked and fused, or the loop checked is not the full one";
     EXPECT_EQ(allocations, 0) << "heap allocations in 8 frames after 4 warm-up frames";
+}
+
+TEST(FrameLoop, FacePipelineAndReconstructorDoNotAllocateAfterWarmUp) {
+    // Issue 16: the server's whole per-frame path (recon::scanFrame, as the session worker runs it), detection and
+    // segmentation included. Frames without colour, so the detector is the depth-only head finder; it re-detects
+    // every 3rd frame (redetect_every_frames) and the tracked model's prediction seeds the segmentation in between
+    // (ModelSegmenter, issue 18), so both paths run after the warm-up.
+    std::vector<RgbdFrame> frames(12);
+    std::vector<cv::Mat> unused(frames.size());
+    for (size_t i = 0; i < frames.size(); ++i) frames[i] = sphereBeforeWall(static_cast<int>(i), unused[i]);
+    const Intrinsics k = Intrinsics::kinectV1();
+    FacePipelineParams fp;
+    fp.redetect_every_frames = 3;
+    StatusOr<FacePipeline> created = FacePipeline::create(fp, k, ColourCamera::registeredTo(k));
+    ASSERT_TRUE(created.isOk()) << created.status().toString();
+    FacePipeline pipeline = std::move(created).value();
+    Reconstructor rec(k, ReconParams::faceDefaults());
+    ASSERT_TRUE(rec.initStatus().isOk()) << rec.initStatus().toString();
+    ScanStep step;
+    long before = 0;
+    int integrated = 0, detections = 0, from_model = 0;
+    for (int i = 0; i < static_cast<int>(frames.size()); ++i) {
+        if (i == 4) before = testing::heapAllocations();
+        scanFrame(pipeline, rec, frames[static_cast<size_t>(i)], step);
+        ASSERT_TRUE(step.head.found) << "frame " << i << ": " << step.head.reason;
+        if (i >= 4) detections += step.head.detection_ran ? 1 : 0;
+        if (i >= 4) from_model += step.head.from_model ? 1 : 0;
+        integrated += step.frame.integrated ? 1 : 0;
+        if (!step.frame.integrated) std::printf("frame %d: %s\n", i, step.frame.reason);
+    }
+    const long allocations = testing::heapAllocations() - before;
+    EXPECT_EQ(integrated, 12) << "every frame must be tracked and fused, or the loop checked is not the full one";
+    EXPECT_GE(detections, 2) << "re-detection must run after the warm-up, or its allocations go unchecked";
+    EXPECT_GE(from_model, 2) << "model-based segmentation must run after the warm-up, or its allocations go unchecked";
+    EXPECT_EQ(allocations, 0) << "heap allocations in 8 frames (detection, segmentation, recon) after 4 warm-up frames";
 }
 
 }  // namespace

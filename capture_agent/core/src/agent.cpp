@@ -115,6 +115,9 @@ StatusOr<std::unique_ptr<Agent>> Agent::create(AgentOptions options) {
     std::unique_ptr<Agent> agent(new Agent(std::move(options)));
     agent->session_id_ = agent->options_.session_id.empty() ? newSessionId() : agent->options_.session_id;
     ASSIGN_OR_RETURN(agent->source_, openSource(agent->options_.source, agent->options_.source_options));
+    if (agent->options_.preload) {
+        ASSIGN_OR_RETURN(agent->source_, preloadSource(std::move(agent->source_), agent->options_.preload_progress));
+    }
 
     auto impl = std::make_unique<Impl>();
     ASSIGN_OR_RETURN(impl->participant, wire::Participant::create(agent->options_.dds));

@@ -52,11 +52,18 @@ DepthFilter::DepthFilter(const Intrinsics& k, const FilterParams& p) : k_(k), pa
     masked_.setTo(0.0f);
     // Eq. 4.5 depends only on the squared pixel distance; eq. 4.6 on |dz|, tabulated up to 3 sigma (beyond it the
     // weight is below 1.1 %, and cutting it there keeps foreground and background apart).
-    for (size_t r2 = 0; r2 < space_lut_.size(); ++r2) {
-        space_lut_[r2] = std::exp(-static_cast<float>(r2) / (2.0f * p.sigma_space_px * p.sigma_space_px));
+    const int side = 2 * p.radius_px + 1;
+    space_weight_.assign(static_cast<size_t>(side * side), 0.0f);
+    for (int dv = -p.radius_px; dv <= p.radius_px; ++dv) {
+        for (int du = -p.radius_px; du <= p.radius_px; ++du) {
+            space_weight_[static_cast<size_t>((dv + p.radius_px) * side + du + p.radius_px)] =
+                std::exp(-static_cast<float>(du * du + dv * dv) / (2.0f * p.sigma_space_px * p.sigma_space_px));
+        }
     }
-    range_step_m_ = 3.0f * p.sigma_depth_m / static_cast<float>(range_lut_.size() - 1);
-    for (size_t i = 0; i < range_lut_.size(); ++i) {
+    // kRangeSteps entries up to 3 sigma, then one 0: the filter clamps its index to it (no branch per tap).
+    range_step_m_ = 3.0f * p.sigma_depth_m / static_cast<float>(kRangeSteps - 1);
+    range_lut_[kRangeSteps] = 0.0f;
+    for (size_t i = 0; i < kRangeSteps; ++i) {
         const float dz = static_cast<float>(i) * range_step_m_;
         range_lut_[i] = std::exp(-dz * dz / (2.0f * p.sigma_depth_m * p.sigma_depth_m));
     }
@@ -88,35 +95,35 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
     if (x_max < 0) return 0;
     const cv::Rect roi(x_min, y_min, x_max - x_min + 1, y_max - y_min + 1);
 
-    // Bilateral filter, eq. 4.4: invalid pixels stay invalid and never contribute.
+    // Bilateral filter, eq. 4.4: invalid pixels stay invalid and never contribute. The window is clipped to the ROI
+    // once per pixel, and a tap's weight is space(du, dv) * range(|dz|) with range 0 past the table's end (3 sigma)
+    // and for invalid neighbours (depth 0): no branch per tap.
     SurfaceLevel& l0 = out.levels[0];
     l0.roi = roi;
     const int radius = p.radius_px;
+    const int side = 2 * radius + 1;
     const float inv_step = 1.0f / range_step_m_;
-    const int lut_last = static_cast<int>(range_lut_.size()) - 1;
+    constexpr int kBeyond = static_cast<int>(kRangeSteps);  // index of the table's trailing 0
     parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
         for (int v = v_lo; v < v_hi; ++v) {
             float* dst = l0.depth_m.ptr<float>(v);
             const float* centre_row = masked_.ptr<float>(v);
+            const int dv_lo = std::max(-radius, roi.y - v), dv_hi = std::min(radius, roi.y + roi.height - 1 - v);
             for (int u = roi.x; u < roi.x + roi.width; ++u) {
                 const float zc = centre_row[u];
                 if (zc <= 0.0f) {
                     dst[u] = 0.0f;
                     continue;
                 }
+                const int du_lo = std::max(-radius, roi.x - u), du_hi = std::min(radius, roi.x + roi.width - 1 - u);
                 float sum_w = 0.0f, sum_wz = 0.0f;
-                for (int dv = -radius; dv <= radius; ++dv) {
-                    const int vv = v + dv;
-                    if (vv < roi.y || vv >= roi.y + roi.height) continue;
-                    const float* row = masked_.ptr<float>(vv);
-                    for (int du = -radius; du <= radius; ++du) {
-                        const int uu = u + du;
-                        if (uu < roi.x || uu >= roi.x + roi.width) continue;
-                        const float z = row[uu];
-                        if (z <= 0.0f) continue;
-                        const int idx = static_cast<int>(std::fabs(z - zc) * inv_step + 0.5f);
-                        if (idx > lut_last) continue;
-                        const float wgt = space_lut_[du * du + dv * dv] * range_lut_[idx];
+                for (int dv = dv_lo; dv <= dv_hi; ++dv) {
+                    const float* row = masked_.ptr<float>(v + dv) + u;
+                    const float* space = &space_weight_[static_cast<size_t>((dv + radius) * side + radius)];
+                    for (int du = du_lo; du <= du_hi; ++du) {
+                        const float z = row[du];
+                        const int idx = std::min(static_cast<int>(std::fabs(z - zc) * inv_step + 0.5f), kBeyond);
+                        const float wgt = z > 0.0f ? space[du] * range_lut_[static_cast<size_t>(idx)] : 0.0f;
                         sum_w += wgt;
                         sum_wz += wgt * z;
                     }

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <numeric>
-#include <opencv2/imgproc.hpp>
 
 namespace facescan::recon {
 
@@ -22,10 +21,20 @@ void HeadFinder::find(const cv::Mat& depth_m, const Intrinsics& k, HeadSegmentat
 
     const HeadSegmenterParams& sp = segmenter_.params();
     const Intrinsics ks = k.scaled(params_.level);
-    cv::resize(depth_m, small_, cv::Size(ks.width_px, ks.height_px), 0, 0, cv::INTER_NEAREST);
-    const int w = small_.cols, h = small_.rows;
+    // Every 2^level-th pixel (cv::resize's INTER_NEAREST, by hand: no allocation in the frame loop).
+    const int w = ks.width_px, h = ks.height_px, step = 1 << params_.level;
+    small_.create(h, w, CV_32FC1);
     labels_.create(h, w, CV_32SC1);
-    labels_.setTo(0);
+    for (int v = 0; v < h; ++v) {
+        const float* src = depth_m.ptr<float>(v * step);
+        float* dst = small_.ptr<float>(v);
+        for (int u = 0; u < w; ++u) dst[u] = src[u * step];
+        std::fill_n(labels_.ptr<int>(v), w, 0);
+    }
+    // At most one blob per pixel: reserved once, so a noisy frame with many blobs does not reallocate.
+    blobs_.reserve(static_cast<size_t>(w) * static_cast<size_t>(h) + 1);
+    queue_.reserve(static_cast<size_t>(w) * static_cast<size_t>(h));
+    order_.reserve(static_cast<size_t>(w) * static_cast<size_t>(h));
     blobs_.clear();
     blobs_.push_back({});  // label 0: none
     queue_.clear();
@@ -64,19 +73,19 @@ void HeadFinder::find(const cv::Mat& depth_m, const Intrinsics& k, HeadSegmentat
     }
     if (valid == 0) return fail("no valid depth in the frame");
 
-    std::vector<int> order;
+    order_.clear();
     for (int id = 1; id < static_cast<int>(blobs_.size()); ++id) {
-        if (blobs_[static_cast<size_t>(id)].pixels >= params_.min_blob_px) order.push_back(id);
+        if (blobs_[static_cast<size_t>(id)].pixels >= params_.min_blob_px) order_.push_back(id);
     }
-    std::sort(order.begin(), order.end(), [&](int a, int b) {
+    std::sort(order_.begin(), order_.end(), [&](int a, int b) {
         return blobs_[static_cast<size_t>(a)].mean_depth_m() < blobs_[static_cast<size_t>(b)].mean_depth_m();
     });
-    if (order.size() > static_cast<size_t>(params_.max_blobs_tried))
-        order.resize(static_cast<size_t>(params_.max_blobs_tried));
+    if (order_.size() > static_cast<size_t>(params_.max_blobs_tried))
+        order_.resize(static_cast<size_t>(params_.max_blobs_tried));
 
-    const int scale = 1 << params_.level;
-    std::string last_reason = "no depth blob large enough to hold a head";
-    for (int id : order) {
+    const int scale = step;
+    std::string last_reason;  // empty until a blob fails: the found path builds no string
+    for (int id : order_) {
         const Blob& blob = blobs_[static_cast<size_t>(id)];
         const float px_per_m = ks.fy_px / blob.mean_depth_m();
         // The seed: the blob's pixels in a band just below its top (the crown of a head, if it is one).
@@ -99,7 +108,8 @@ void HeadFinder::find(const cv::Mat& depth_m, const Intrinsics& k, HeadSegmentat
         return fail("too close: most of the scene is nearer than the sensor's " +
                     std::to_string(static_cast<int>(sp.min_depth_m * 100)) + " cm minimum");
     }
-    fail("no head-sized blob found by depth (" + last_reason + ")");
+    fail("no head-sized blob found by depth (" +
+         (last_reason.empty() ? std::string("no depth blob large enough to hold a head") : last_reason) + ")");
 }
 
 }  // namespace facescan::recon

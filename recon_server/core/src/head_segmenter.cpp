@@ -67,10 +67,22 @@ void HeadSegmentation::markNotFound(const cv::Mat& depth, std::string why) {
     found = false;
     reason = std::move(why);
     if (depth.empty()) return;
-    mask.create(depth.size(), CV_8UC1);
-    mask.setTo(0);
-    depth_m.create(depth.size(), CV_32FC1);
-    depth_m.setTo(0);
+    clearImages(depth.size());
+}
+
+void HeadSegmentation::clearImages(const cv::Size& size) {
+    // cv::Mat::setTo allocates on every call (OpenCV 4.6): rows are cleared by hand.
+    cv::Rect dirty = written_px & cv::Rect(0, 0, size.width, size.height);
+    if (mask.size() != size || mask.type() != CV_8UC1 || depth_m.size() != size || depth_m.type() != CV_32FC1) {
+        mask.create(size, CV_8UC1);
+        depth_m.create(size, CV_32FC1);
+        dirty = cv::Rect(0, 0, size.width, size.height);
+    }
+    for (int v = dirty.y; v < dirty.br().y; ++v) {
+        std::fill_n(mask.ptr<uint8_t>(v) + dirty.x, dirty.width, uint8_t{0});
+        std::fill_n(depth_m.ptr<float>(v) + dirty.x, dirty.width, 0.0f);
+    }
+    written_px = cv::Rect();
 }
 
 const char* depthInputProblem(const cv::Mat& depth_m, const Intrinsics& k) {
@@ -98,6 +110,13 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
     const cv::Rect core = cv::Rect(seed.x + seed.width / 4, seed.y + seed.height / 4, std::max(1, seed.width / 2),
                                    std::max(1, seed.height / 2)) &
                           bounds;
+    // Scratch sized for the whole frame on the first call: a later, larger head never reallocates it.
+    scratch_.reserve(depth_m.total());
+    queue_.reserve(depth_m.total());
+    visited_.reserve(depth_m.total());
+    row_count_.reserve(static_cast<size_t>(depth_m.rows));
+    row_hist_.reserve(static_cast<size_t>(depth_m.rows));
+    col_hist_.reserve(static_cast<size_t>(depth_m.cols));
     scratch_.clear();
     int too_close = 0;
     for (int v = core.y; v < core.br().y; ++v) {
@@ -130,16 +149,14 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
     const int w = roi.width, h = roi.height;
 
     // Algorithm 1: grow R from the seed pixels through 4-neighbours whose depth differs by < delta_max.
-    visited_.create(h, w, CV_8UC1);
-    visited_.setTo(0);
+    visited_.assign(static_cast<size_t>(w) * static_cast<size_t>(h), uint8_t{0});
     queue_.clear();
-    queue_.reserve(static_cast<size_t>(w) * static_cast<size_t>(h));
     for (int v = core.y; v < core.br().y; ++v) {
         const float* z = depth_m.ptr<float>(v);
         for (int u = core.x; u < core.br().x; ++u) {
             if (!roi.contains({u, v}) || std::fabs(z[u] - z_seed) > params_.seed_band_m) continue;
             const int idx = (v - roi.y) * w + (u - roi.x);
-            visited_.data[idx] = 1;
+            visited_[idx] = 1;
             queue_.push_back(idx);
         }
     }
@@ -158,11 +175,10 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
                 const float nz = depth_m.at<float>(ny + roi.y, nx + roi.x);
                 if (nz <= 0.0f) continue;  // no data: try one further
                 const int nidx = ny * w + nx;
-                if (visited_.data[nidx] || nz < zmin || nz > zmax ||
-                    std::fabs(nz - z) >= jump * static_cast<float>(step)) {
+                if (visited_[nidx] || nz < zmin || nz > zmax || std::fabs(nz - z) >= jump * static_cast<float>(step)) {
                     return;
                 }
-                visited_.data[nidx] = 1;
+                visited_[nidx] = 1;
                 queue_.push_back(nidx);
                 return;
             }
@@ -224,8 +240,8 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
     }
 
     // Head = R above the cut. Mask, masked depth, extents.
-    out.mask.create(depth_m.size(), CV_8UC1);
-    out.mask.setTo(0);
+    out.clearImages(depth_m.size());
+    out.written_px = roi;
     int umin = w, umax = -1, vmin = h, vmax = -1;
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     float z_lo = 1e9f, z_hi = 0;
@@ -235,14 +251,12 @@ void HeadSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const c
         const int u = x + roi.x, v = y + roi.y;
         out.mask.at<uchar>(v, u) = 255;
         const float z = depth_m.at<float>(v, u);
+        out.depth_m.at<float>(v, u) = z;
         sum += k.backProject(static_cast<float>(u), static_cast<float>(v), z).cast<double>();
         z_lo = std::min(z_lo, z), z_hi = std::max(z_hi, z);
         umin = std::min(umin, u), umax = std::max(umax, u), vmin = std::min(vmin, v), vmax = std::max(vmax, v);
         ++out.pixels;
     }
-    out.depth_m.create(depth_m.size(), CV_32FC1);
-    out.depth_m.setTo(0);
-    depth_m.copyTo(out.depth_m, out.mask);
     if (out.pixels == 0) return fail("the head region is empty after the head/torso split");
     out.head_box_px = cv::Rect(cv::Point(umin, vmin), cv::Point(umax + 1, vmax + 1));
     out.centroid_m = (sum / out.pixels).cast<float>();

@@ -11,6 +11,7 @@ namespace {
 
 constexpr int kStripes = 16;  // fixed stripe count: the reduction sums in the same order on any core count
 constexpr double kDegToRad = M_PI / 180.0;
+constexpr float kMaxPixel = 1 << 20;  // pixels; beyond any image
 
 // Rigid transform of the ICP unknowns x = [alpha beta gamma tx ty tz] (eq. 4.16). The rotation is built exactly
 // from the angles (eq. 4.2) rather than from the small-angle matrix of eq. 4.14, which is only used to linearise:
@@ -121,8 +122,11 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
                             const Eigen::Vector3f p_model = T_model_camera * p_cam;
                             if (p_model.z() <= 0.0f) continue;
                             const Eigen::Vector2f px = dst.k.project(p_model);
-                            const int ku = static_cast<int>(std::lround(px.x()));
-                            const int kv = static_cast<int>(std::lround(px.y()));
+                            // Nearest pixel; std::lround is a libm call per pair. Off the image (NaN included) is
+                            // outside any ROI, and checked before the conversion to int.
+                            const float fu = px.x() + 0.5f, fv = px.y() + 0.5f;
+                            if (!(fu >= 0.0f && fv >= 0.0f && fu < kMaxPixel && fv < kMaxPixel)) continue;
+                            const int ku = static_cast<int>(fu), kv = static_cast<int>(fv);
                             if (!dst.roi.contains({ku, kv})) continue;
                             const cv::Vec3f& dv = dst.vertex.at<cv::Vec3f>(kv, ku);
                             const cv::Vec3f& dn = dst.normal.at<cv::Vec3f>(kv, ku);
@@ -139,9 +143,12 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
                             const double a[6] = {sxn.x(), sxn.y(), sxn.z(), n_d.x(), n_d.y(), n_d.z()};
                             const float abs_b = std::fabs(b);
                             const double w = (huber > 0.0f && abs_b > huber) ? huber / abs_b : 1.0;
+                            // Fully unrolled (straight-line multiply-adds): this is the loop's hottest part.
                             int k = 0;
+#pragma GCC unroll 6
                             for (int i = 0; i < 6; ++i) {
                                 const double wai = w * a[i];
+#pragma GCC unroll 6
                                 for (int j = i; j < 6; ++j) acc[k++] += wai * a[j];  // A^T A, upper (eq. 4.20)
                                 acc[21 + i] += wai * b;                              // A^T b
                             }

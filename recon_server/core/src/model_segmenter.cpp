@@ -63,20 +63,9 @@ void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const 
     }
     const int w = depth_m.cols, h = depth_m.rows;
     const cv::Rect bounds(0, 0, w, h);
-    // Outputs of our own, reused every frame: only the area written last time is cleared.
-    if (out.mask.data == nullptr || out.mask.size() != depth_m.size() || out.mask.type() != CV_8UC1 ||
-        out.depth_m.size() != depth_m.size() || out.depth_m.type() != CV_32FC1) {
-        out.mask.create(depth_m.size(), CV_8UC1);
-        out.depth_m.create(depth_m.size(), CV_32FC1);
-        out.mask.setTo(0);
-        out.depth_m.setTo(0);
-        cleared_roi_ = {};
-    }
-    if (!cleared_roi_.empty()) {
-        out.mask(cleared_roi_).setTo(0);
-        out.depth_m(cleared_roi_).setTo(0);
-    }
-    cleared_roi_ = {};
+    // Outputs of our own, reused every frame: only the area written last time (out.written_px) is cleared, by hand
+    // (cv::Mat::setTo allocates on every call in OpenCV 4.6; see HeadSegmentation::clearImages).
+    out.clearImages(depth_m.size());
     state_.create(depth_m.size(), CV_8UC1);
 
     const SurfaceLevel& model = *prediction.model;
@@ -93,7 +82,7 @@ void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const 
         double z_sum = 0;
     };
     std::array<Partial, kStripes> partial{};
-    state_(roi_m).setTo(0);
+    for (int v = roi_m.y; v < roi_m.br().y; ++v) std::fill_n(state_.ptr<uint8_t>(v) + roi_m.x, roi_m.width, uint8_t{0});
     parallelFor(0, kStripes, [&](int s_lo, int s_hi) {
         for (int s = s_lo; s < s_hi; ++s) {
             Partial acc;
@@ -198,7 +187,7 @@ void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const 
     }
     out.pixels = static_cast<int>(queue_.size());
     out.head_box_px = cv::Rect(cv::Point(umin, vmin), cv::Point(umax + 1, vmax + 1));
-    cleared_roi_ = out.head_box_px;
+    out.written_px = out.head_box_px;
     out.centroid_m = (sum / out.pixels).cast<float>();
     out.depth_median_m = out.centroid_m.z();
     const float z_c = out.centroid_m.z();

@@ -28,41 +28,30 @@ bool clipToCube(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float n_max,
     return s0 < s1;
 }
 
-bool blockAllocated(const VoxelBlockGrid& g, const Eigen::Vector3f& p_vox) {
-    const int x = static_cast<int>(p_vox.x() + 0.5f), y = static_cast<int>(p_vox.y() + 0.5f),
-              z = static_cast<int>(p_vox.z() + 0.5f);
-    if (x < 0 || y < 0 || z < 0 || x >= g.resolution_vox || y >= g.resolution_vox || z >= g.resolution_vox)
-        return false;
-    return g.block_index[(static_cast<size_t>(z >> 3) * g.blocks_per_side + (y >> 3)) * g.blocks_per_side + (x >> 3)] >=
-           0;
-}
-
 // Marches one ray (eq. 4.27) in voxel coordinates between s_begin and s_end (units: voxels along the unit ray
 // direction dir_vox); returns the interpolated zero crossing (eq. 4.28) or a negative value when there is none.
 float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox, float s_begin,
                float s_end, float step_vox) {
+    using Cell = VoxelBlockGrid::Cell;
     float s = s_begin;
     float prev_d = 0.0f, prev_s = 0.0f;
     bool have_prev = false;
     const float block_skip = static_cast<float>(kBlockSide) * 0.5f;
+    const float free_step_per_d = g.trunc_dist_m / g.voxel_size_m;  // voxels of free space per unit of D
     while (s <= s_end) {
-        const Eigen::Vector3f p = o_vox + dir_vox * s;
-        if (!blockAllocated(g, p)) {
-            have_prev = false;
-            s += block_skip;  // empty space: half a block at a time so thin allocated shells are not jumped
-            continue;
-        }
         float d;
-        if (!g.interpolate(p, d)) {
+        const Cell cell = g.sample(o_vox + dir_vox * s, d);
+        if (cell != Cell::kOk) {
             have_prev = false;
-            s += step_vox;
+            // Empty space: half a block at a time so thin allocated shells are not jumped.
+            s += cell == Cell::kUnallocated ? block_skip : step_vox;
             continue;
         }
         if (have_prev && prev_d > 0.0f && d <= 0.0f) {
             float s_hit = prev_s + (s - prev_s) * prev_d / (prev_d - d);  // eq. 4.28
             // One regula falsi step: with steps of up to mu, D is not linear over the whole bracket.
             float d_hit;
-            if (g.interpolate(o_vox + dir_vox * s_hit, d_hit)) {
+            if (g.sample(o_vox + dir_vox * s_hit, d_hit) == Cell::kOk) {
                 if (d_hit > 0.0f) {
                     s_hit += (s - s_hit) * d_hit / (d_hit - d);
                 } else if (d_hit < 0.0f) {
@@ -77,9 +66,18 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
         have_prev = true;
         // In front of the surface the step is the distance D says is free (D is in units of mu), at least one
         // voxel and at most step_vox; the sign change is then bracketed within one step and refined above.
-        s += d > 0.0f ? std::max(1.0f, std::min(step_vox, d * g.trunc_dist_m / g.voxel_size_m)) : step_vox;
+        s += d > 0.0f ? std::max(1.0f, std::min(step_vox, d * free_step_per_d)) : step_vox;
     }
     return -1.0f;
+}
+
+// The unit surface normal at p_vox (eq. 4.30); false where the gradient is unavailable or zero.
+bool surfaceNormal(const VoxelBlockGrid& g, const Eigen::Vector3f& p_vox, Eigen::Vector3f& n) {
+    if (!g.gradient(p_vox, n)) return false;
+    const float len = n.norm();
+    if (!(len > 0.0f)) return false;
+    n /= len;
+    return true;
 }
 
 // Depth of the nearest pixel of a hint row with a measurement, within `radius` pixels of u; 0 when none.
@@ -147,12 +145,9 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
                 const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
                 if (s_hit < 0.0f) continue;
                 const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
-                Eigen::Vector3f grad;
-                if (!grid.gradient(p_vox, grad)) continue;
-                const float len = grad.norm();
-                if (!(len > 0.0f)) continue;
+                Eigen::Vector3f n_world;
+                if (!surfaceNormal(grid, p_vox, n_world)) continue;   // eq. 4.30
                 const Eigen::Vector3f p_world = grid.toWorld(p_vox);  // eq. 4.29
-                const Eigen::Vector3f n_world = grad / len;           // eq. 4.30
                 vert[u] = cv::Vec3f(p_world.x(), p_world.y(), p_world.z());
                 norm[u] = cv::Vec3f(n_world.x(), n_world.y(), n_world.z());
             }
@@ -181,10 +176,10 @@ void Raycaster::renderShaded(const VoxelBlockGrid& grid, const Intrinsics& k, co
                 const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
                 if (s_hit < 0.0f) continue;
                 const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
-                Eigen::Vector3f grad;
-                if (!grid.gradient(p_vox, grad) || !(grad.norm() > 0.0f)) continue;
+                Eigen::Vector3f n;
+                if (!surfaceNormal(grid, p_vox, n)) continue;
                 // Lambert with the light at the camera: brightness = cos(normal, ray back to the camera).
-                const float lambert = std::max(0.0f, -grad.normalized().dot(dir_vox));
+                const float lambert = std::max(0.0f, -n.dot(dir_vox));
                 const float shade = 0.15f + 0.85f * lambert;
                 Eigen::Vector3f bgr(200.0f, 200.0f, 200.0f);
                 Eigen::Vector3f c;

@@ -22,36 +22,7 @@ Status TsdfParams::validate() const {
 }
 
 bool VoxelBlockGrid::interpolate(const Eigen::Vector3f& p_vox, float& tsdf) const {
-    const int x0 = static_cast<int>(std::floor(p_vox.x()));
-    const int y0 = static_cast<int>(std::floor(p_vox.y()));
-    const int z0 = static_cast<int>(std::floor(p_vox.z()));
-    const float fx = p_vox.x() - static_cast<float>(x0);
-    const float fy = p_vox.y() - static_cast<float>(y0);
-    const float fz = p_vox.z() - static_cast<float>(z0);
-    float c[8];
-    const int lx = x0 & 7, ly = y0 & 7, lz = z0 & 7;
-    if (lx < 7 && ly < 7 && lz < 7) {
-        // All 8 neighbours lie in one block (343 of 512 cells): one index lookup instead of eight.
-        const Voxel* base = voxel(x0, y0, z0);
-        if (base == nullptr || x0 + 1 >= resolution_vox || y0 + 1 >= resolution_vox || z0 + 1 >= resolution_vox)
-            return false;
-        for (int i = 0; i < 8; ++i) {
-            const Voxel& vx = base[(i >> 2) * 64 + ((i >> 1) & 1) * 8 + (i & 1)];
-            if (vx.weight <= 0.0f) return false;
-            c[i] = vx.tsdf;
-        }
-    } else {
-        for (int i = 0; i < 8; ++i) {
-            const Voxel* vx = voxel(x0 + (i & 1), y0 + ((i >> 1) & 1), z0 + (i >> 2));
-            if (vx == nullptr || vx->weight <= 0.0f) return false;
-            c[i] = vx->tsdf;
-        }
-    }
-    const float c00 = c[0] + fx * (c[1] - c[0]), c10 = c[2] + fx * (c[3] - c[2]);
-    const float c01 = c[4] + fx * (c[5] - c[4]), c11 = c[6] + fx * (c[7] - c[6]);
-    const float c0 = c00 + fy * (c10 - c00), c1 = c01 + fy * (c11 - c01);
-    tsdf = c0 + fz * (c1 - c0);
-    return true;
+    return sample(p_vox, tsdf) == Cell::kOk;
 }
 
 bool VoxelBlockGrid::interpolateColour(const Eigen::Vector3f& p_vox, Eigen::Vector3f& bgr) const {
@@ -72,18 +43,6 @@ bool VoxelBlockGrid::interpolateColour(const Eigen::Vector3f& p_vox, Eigen::Vect
     }
     if (!(sum_w > 0.0f)) return false;
     bgr = sum / sum_w;
-    return true;
-}
-
-bool VoxelBlockGrid::gradient(const Eigen::Vector3f& p_vox, Eigen::Vector3f& grad) const {
-    for (int a = 0; a < 3; ++a) {
-        Eigen::Vector3f lo = p_vox, hi = p_vox;
-        lo[a] -= 1.0f;
-        hi[a] += 1.0f;
-        float f_lo, f_hi;
-        if (!interpolate(lo, f_lo) || !interpolate(hi, f_hi)) return false;
-        grad[a] = f_hi - f_lo;
-    }
     return true;
 }
 

@@ -32,6 +32,10 @@ struct AgentOptions {
     wire::DepthCodecParams depth;
     float wait_for_server_s = 0;  // seconds to wait for a server before giving up; 0 = wait forever
     int queue_frames = 4;         // frames between the camera thread and the publisher
+    // Read the whole recording into memory before streaming (preloadSource): the agent then costs only its
+    // encoding, like a capture PC that does not share the server's cores. Recordings only.
+    bool preload = false;
+    std::function<void(int, int)> preload_progress;  // (frames read, frames expected or 0), while preloading
 
     Status validate() const;
 };

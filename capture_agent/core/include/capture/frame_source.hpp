@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <opencv2/core.hpp>
 #include <string>
@@ -63,5 +64,12 @@ StatusOr<std::unique_ptr<FrameSource>> openSyntheticSource(const std::string& op
 StatusOr<std::unique_ptr<FrameSource>> openOpenNi2Device(const std::string& uri, const SourceOptions& options);
 // Playback of an .oni recording at manual speed: every frame in order, then a clean end.
 StatusOr<std::unique_ptr<FrameSource>> openOniFile(const std::string& path, const SourceOptions& options);
+
+// Reads every frame of a recording (tum:, oni:, synthetic) into memory now and returns a source that replays them
+// (same info; pacing stays with the caller). Memory: width x height x 5 bytes per frame (1.5 MB at VGA with
+// colour). `progress(frames_read, frames_expected)` is called after each frame (expected is 0 when unknown).
+// InvalidArgument for a live camera, whose frames do not exist yet.
+StatusOr<std::unique_ptr<FrameSource>> preloadSource(std::unique_ptr<FrameSource> source,
+                                                     const std::function<void(int, int)>& progress = {});
 
 }  // namespace facescan::capture

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "recon/camera.hpp"
 #include "recon/status.hpp"
@@ -57,9 +58,11 @@ class DepthFilter {
  private:
     Intrinsics k_;
     FilterParams params_;
-    cv::Mat masked_;                      // CV_32F, the input after masking and range checks
-    std::array<float, 32> space_lut_{};   // exp(-r^2 / 2 sigma_c^2) indexed by r^2 (eq. 4.5)
-    std::array<float, 512> range_lut_{};  // exp(-dz^2 / 2 sigma_s^2) indexed by |dz| / range_step_m_ (eq. 4.6)
+    cv::Mat masked_;                   // CV_32F, the input after masking and range checks
+    std::vector<float> space_weight_;  // exp(-(du^2 + dv^2) / 2 sigma_c^2) over the window, row-major (eq. 4.5)
+    static constexpr size_t kRangeSteps = 512;
+    // exp(-dz^2 / 2 sigma_s^2) indexed by |dz| / range_step_m_ up to 3 sigma, then 0 (eq. 4.6)
+    std::array<float, kRangeSteps + 1> range_lut_{};
     float range_step_m_ = 0.0f;
 };
 

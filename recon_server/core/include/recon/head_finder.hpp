@@ -46,6 +46,7 @@ class HeadFinder {
     cv::Mat small_, labels_;
     std::vector<int> queue_;
     std::vector<Blob> blobs_;
+    std::vector<int> order_;  // blob ids nearest first
 };
 
 }  // namespace facescan::recon

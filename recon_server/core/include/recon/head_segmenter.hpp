@@ -57,6 +57,10 @@ struct HeadSegmentation {
     // Not found, because `why`: mask and depth become all-zero images of depth_m's size (when it has one), so
     // callers can use them without checking.
     void markNotFound(const cv::Mat& depth_m, std::string why);
+    // Makes mask and depth_m all-zero images of `size`, allocating only when the size changes and otherwise clearing
+    // only what the last call wrote (written_px): the frame loop neither allocates nor sweeps two whole frames.
+    void clearImages(const cv::Size& size);
+    cv::Rect written_px;  // where mask/depth_m may be nonzero (what the last segmentation wrote)
 };
 
 // Why depth_m cannot be segmented (empty, not CV_32FC1 metres, not the camera's size), or nullptr when it can.
@@ -75,7 +79,7 @@ class HeadSegmenter {
  private:
     HeadSegmenterParams params_;
     // Scratch reused between frames.
-    cv::Mat visited_;
+    std::vector<uint8_t> visited_;  // ROI-sized, row-major
     std::vector<int> queue_;
     std::vector<int> row_count_, col_hist_, row_hist_;
     std::vector<float> scratch_;

@@ -83,8 +83,7 @@ class ModelSegmenter {
 
  private:
     ModelSegmenterParams params_;
-    cv::Mat state_;         // CV_8U per pixel: 0 untouched, 1 queued/head
-    cv::Rect cleared_roi_;  // where state_ and the outputs were written last time (cleared next time)
+    cv::Mat state_;  // CV_8U per pixel: 0 untouched, 1 queued/head
     std::vector<int> queue_;
     std::vector<int> col_hist_, row_hist_;
     int seeds_ = 0;

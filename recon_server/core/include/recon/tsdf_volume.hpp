@@ -5,6 +5,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cstdint>
 #include <opencv2/core.hpp>
 #include <vector>
@@ -73,14 +74,105 @@ struct VoxelBlockGrid {
     // Trilinear interpolation of D(x) (thesis section 4.2.2) in voxel coordinates; false where any of the 8
     // neighbours is unallocated or has zero weight.
     bool interpolate(const Eigen::Vector3f& p_vox, float& tsdf) const;
+    // The 8 corners of one trilinear cell, corner i at (x0 + (i & 1), y0 + ((i >> 1) & 1), z0 + (i >> 2)):
+    // kUnallocated when the block holding (x0, y0, z0) is not allocated (empty space: ray casting skips ahead),
+    // kUnobserved when another corner lies outside the cube, in an unallocated block or has zero weight.
+    // Inline (below): the ray caster's inner loop calls them ~200k times a frame.
+    enum class Cell { kOk, kUnobserved, kUnallocated };
+    Cell fetchCell(int x0, int y0, int z0, float corners[8]) const;
+    // D at p_vox from its trilinear cell; returns what fetchCell returned for that cell.
+    Cell sample(const Eigen::Vector3f& p_vox, float& tsdf) const;
     // Same, with the running-average colour (BGR, 0..255) interpolated as well.
     bool interpolateColour(const Eigen::Vector3f& p_vox, Eigen::Vector3f& bgr) const;
-    // Gradient of D by central differences of trilinear samples (thesis eq. 4.30); false where unavailable.
+    // Gradient of D by central differences of trilinear samples one voxel apart (thesis eq. 4.30); false where
+    // unavailable. Inline (below) like sample(): the ray caster takes one per pixel.
     bool gradient(const Eigen::Vector3f& p_vox, Eigen::Vector3f& grad) const;
     // Copies only the allocated blocks (and the index) into `dst`, reusing its capacity.
     void copyTo(VoxelBlockGrid& dst) const;
 };
 using TsdfSnapshot = VoxelBlockGrid;
+
+[[gnu::always_inline]] inline VoxelBlockGrid::Cell VoxelBlockGrid::fetchCell(int x0, int y0, int z0, float c[8]) const {
+    const unsigned n = static_cast<unsigned>(resolution_vox);
+    if (static_cast<unsigned>(x0) >= n || static_cast<unsigned>(y0) >= n || static_cast<unsigned>(z0) >= n)
+        return Cell::kUnallocated;
+    const size_t bps = static_cast<size_t>(blocks_per_side);
+    const int bx = x0 >> 3, by = y0 >> 3, bz = z0 >> 3;
+    const int b = block_index[(bz * bps + by) * bps + bx];
+    if (b < 0) return Cell::kUnallocated;
+    const int lx = x0 & 7, ly = y0 & 7, lz = z0 & 7;
+    if (lx < 7 && ly < 7 && lz < 7) {
+        // All 8 corners lie in one block (343 of 512 cells): one index lookup instead of eight.
+        const Voxel* p = &voxels[static_cast<size_t>(b) * kBlockVoxels + (lz * 64 + ly * 8 + lx)];
+        const float w = std::min(std::min(std::min(p[0].weight, p[1].weight), std::min(p[8].weight, p[9].weight)),
+                                 std::min(std::min(p[64].weight, p[65].weight), std::min(p[72].weight, p[73].weight)));
+        if (!(w > 0.0f)) return Cell::kUnobserved;
+        c[0] = p[0].tsdf, c[1] = p[1].tsdf, c[2] = p[8].tsdf, c[3] = p[9].tsdf;
+        c[4] = p[64].tsdf, c[5] = p[65].tsdf, c[6] = p[72].tsdf, c[7] = p[73].tsdf;
+        return Cell::kOk;
+    }
+    // The cell straddles 2, 4 or 8 blocks: the upper corner's side of each axis that crosses into the next block
+    // (a 3-bit "crossing" code) names the block; each distinct block is looked up once. Within a block, a step to
+    // the upper corner along an axis that crosses wraps to local coordinate 0.
+    if (static_cast<unsigned>(x0 + 1) >= n || static_cast<unsigned>(y0 + 1) >= n || static_cast<unsigned>(z0 + 1) >= n)
+        return Cell::kUnobserved;
+    const int cross = (lx == 7 ? 1 : 0) | (ly == 7 ? 2 : 0) | (lz == 7 ? 4 : 0);
+    const Voxel* block_of[8];
+    block_of[0] = &voxels[static_cast<size_t>(b) * kBlockVoxels];
+#pragma GCC unroll 8
+    for (int k = 1; k < 8; ++k) {
+        if ((k & cross) != k) continue;
+        const int bk = block_index[((bz + (k >> 2)) * bps + by + ((k >> 1) & 1)) * bps + bx + (k & 1)];
+        if (bk < 0) return Cell::kUnobserved;
+        block_of[k] = &voxels[static_cast<size_t>(bk) * kBlockVoxels];
+    }
+    const int base = lz * 64 + ly * 8 + lx;
+    const int step_x = lx == 7 ? -7 : 1, step_y = ly == 7 ? -56 : 8, step_z = lz == 7 ? -448 : 64;
+    float w = 1.0f;
+#pragma GCC unroll 8
+    for (int i = 0; i < 8; ++i) {
+        const Voxel& v = block_of[i & cross][base + (i & 1) * step_x + ((i >> 1) & 1) * step_y + (i >> 2) * step_z];
+        w = std::min(w, v.weight);
+        c[i] = v.tsdf;
+    }
+    return w > 0.0f ? Cell::kOk : Cell::kUnobserved;
+}
+
+[[gnu::always_inline]] inline VoxelBlockGrid::Cell VoxelBlockGrid::sample(const Eigen::Vector3f& p_vox,
+                                                                          float& tsdf) const {
+    // Truncation, not floor: a negative coordinate is outside the cube either way (rejected here), and this keeps
+    // the hot loop free of a libm call on targets without SSE4.1.
+    if (!(p_vox.x() >= 0.0f && p_vox.y() >= 0.0f && p_vox.z() >= 0.0f)) return Cell::kUnallocated;
+    const int x0 = static_cast<int>(p_vox.x());
+    const int y0 = static_cast<int>(p_vox.y());
+    const int z0 = static_cast<int>(p_vox.z());
+    float c[8];
+    const Cell cell = fetchCell(x0, y0, z0, c);
+    if (cell != Cell::kOk) return cell;
+    const float fx = p_vox.x() - static_cast<float>(x0);
+    const float fy = p_vox.y() - static_cast<float>(y0);
+    const float fz = p_vox.z() - static_cast<float>(z0);
+    const float c00 = c[0] + fx * (c[1] - c[0]), c10 = c[2] + fx * (c[3] - c[2]);
+    const float c01 = c[4] + fx * (c[5] - c[4]), c11 = c[6] + fx * (c[7] - c[6]);
+    const float c0 = c00 + fy * (c10 - c00), c1 = c01 + fy * (c11 - c01);
+    tsdf = c0 + fz * (c1 - c0);
+    return Cell::kOk;
+}
+
+inline bool VoxelBlockGrid::gradient(const Eigen::Vector3f& p_vox, Eigen::Vector3f& grad) const {
+    // Central differences over two voxels. The derivative of the trilinear cell alone would cost one sample instead
+    // of six, but measured twice the angular error on a sphere (4.3 against 2.1 degrees mean, p99 12.8 against
+    // 6.0) and, through ICP's point-to-plane terms, +0.002 mm mean error and +10 % ATE on the synthetic head.
+    for (int a = 0; a < 3; ++a) {
+        Eigen::Vector3f lo = p_vox, hi = p_vox;
+        lo[a] -= 1.0f;
+        hi[a] += 1.0f;
+        float f_lo, f_hi;
+        if (sample(lo, f_lo) != Cell::kOk || sample(hi, f_hi) != Cell::kOk) return false;
+        grad[a] = f_hi - f_lo;
+    }
+    return true;
+}
 
 struct IntegrateStats {
     int blocks_touched = 0;       // count; blocks integrated this frame
