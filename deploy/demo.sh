@@ -37,7 +37,8 @@ ACCURACY=${FACESCAN_ACCURACY:-$BUILD_DIR/tests/integration/facescan-demo-accurac
 if [ "${DEMO_NO_BUILD:-0}" != 1 ]; then
     build_s=$(date +%s.%N)
     say "building facescan into $BUILD_DIR (first time: a few minutes) ..."
-    cmake -S "$root" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+    # Release, as deploy/test.sh builds the same folder: running one after the other recompiles nothing.
+    cmake -S "$root" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
     cmake --build "$BUILD_DIR" -j "$JOBS" --target facescan-server facescan-agent facescan facescan-demo-accuracy \
         >"$BUILD_DIR/demo-build.log" 2>&1 || {
         tail -n 30 "$BUILD_DIR/demo-build.log"

@@ -22,7 +22,7 @@ command -v clang++ >/dev/null || { echo "fuzz.sh: clang++ not found (apt-get ins
 
 # BENCH=ON only so that tests/ (and with it tests/fuzz) is configured; nothing but the fuzzers is built.
 CC=clang CXX=clang++ cmake -S "$repo" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-    -DFACESCAN_BUILD_FUZZERS=ON -DFACESCAN_BUILD_TESTS=OFF -DFACESCAN_BUILD_BENCH=ON >/dev/null
+    -DFACESCAN_BUILD_FUZZERS=ON -DFACESCAN_BUILD_TESTS=OFF -DFACESCAN_BUILD_BENCH=ON -DFACESCAN_WERROR=ON >/dev/null
 cmake --build "$build" --target facescan_fuzzers -j "$jobs"
 
 fuzzers=(fuzz_depth_raw16 fuzz_depth_rvl fuzz_depth_zstd fuzz_depth_rvl_zstd fuzz_depth_delta_zstd fuzz_depth_png

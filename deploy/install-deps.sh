@@ -30,6 +30,8 @@ PACKAGES=(
     libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format
     # the cross-machine cluster test: network namespaces, a bridge and veths (ip), packet loss (nft numgen)
     iproute2 nftables
+    # the .deb and its test: dpkg-shlibdeps (dependencies), systemd-analyze and systemd-sysusers (units, user)
+    dpkg-dev systemd
 )
 
 # The viewer's three.js comes from npm (client_cli/web/package-lock.json): node and npm, from Debian unless the

@@ -9,6 +9,8 @@
 #include <functional>
 #include <sstream>
 
+#include "wire/data_files.hpp"
+
 namespace facescan::client {
 namespace fs = std::filesystem;
 
@@ -73,10 +75,11 @@ StatusOr<fs::path> findWebRoot() {
         RETURN_IF_ERROR(checkWebRoot(env));
         return fs::path(env);
     }
+    // share/facescan/web of the installed tree (beside bin/) or a configured prefix (wire/data_files.hpp), then the
+    // source tree's folder (where npm ci put three.js).
     std::vector<fs::path> candidates;
     std::error_code ec;
-    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-    if (!ec) candidates.push_back(exe.parent_path() / ".." / "share" / "facescan" / "web");
+    for (const fs::path& share : wire::shareDirs()) candidates.push_back(share / "web");
 #ifdef FACESCAN_WEB_SOURCE_DIR
     candidates.emplace_back(FACESCAN_WEB_SOURCE_DIR);
 #endif

@@ -13,6 +13,7 @@
 #include <thread>
 #include <vector>
 
+#include "wire/data_files.hpp"
 #include "wire/security.hpp"
 
 namespace facescan::wire {
@@ -56,18 +57,6 @@ std::optional<std::string> readFile(const fs::path& path) {
     return text.str();
 }
 
-std::vector<fs::path> profileDirs() {
-    std::vector<fs::path> dirs;
-    if (const char* env = std::getenv("FACESCAN_PROFILE_DIR"); env && *env) dirs.emplace_back(env);
-    std::error_code ec;
-    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-    if (!ec) dirs.push_back(exe.parent_path() / ".." / "share" / "facescan" / "profiles");
-#ifdef FACESCAN_PROFILE_DIR
-    dirs.emplace_back(FACESCAN_PROFILE_DIR);
-#endif
-    return dirs;
-}
-
 // Cyclone's memory sizes: B, kB/KiB (1024), MB/MiB, GB/GiB.
 std::optional<uint64_t> parseMemSize(const std::string& text) {
     static const std::regex kSize(R"(^\s*([0-9]+)\s*(B|kB|KiB|MB|MiB|GB|GiB)?\s*$)");
@@ -93,22 +82,22 @@ std::map<uint32_t, DomainEntry> g_domains;
 
 }  // namespace
 
-StatusOr<std::string> loadProfileXml(const std::string& profile) {
-    if (profile.find('/') != std::string::npos || profile.ends_with(".xml")) {
-        auto text = readFile(profile);
-        if (!text) return notFound("cannot read DDS profile file '" + profile + "'");
-        return *text;
-    }
+StatusOr<fs::path> findProfileFile(const std::string& profile) {
+    if (profile.find('/') != std::string::npos || profile.ends_with(".xml")) return fs::path(profile);
     if (profile != "loopback" && profile != "lan") {
         return invalidArgument("unknown DDS profile '" + profile + "': use loopback, lan or a path to FILE.xml");
     }
-    std::string searched;
-    for (const fs::path& dir : profileDirs()) {
-        if (auto text = readFile(dir / (profile + ".xml"))) return *text;
-        searched += " " + dir.string();
-    }
-    return notFound("DDS profile '" + profile + ".xml' not found in:" + searched +
-                    " (set FACESCAN_PROFILE_DIR to the folder holding it)");
+    // FACESCAN_PROFILE_DIR (a folder of profiles) overrides; then the share/facescan/profiles of the installed or
+    // build tree (wire/data_files.hpp).
+    if (const char* env = std::getenv("FACESCAN_PROFILE_DIR"); env && *env) return fs::path(env) / (profile + ".xml");
+    return findShareFile("profiles/" + profile + ".xml");
+}
+
+StatusOr<std::string> loadProfileXml(const std::string& profile) {
+    ASSIGN_OR_RETURN(const fs::path path, findProfileFile(profile));
+    auto text = readFile(path);
+    if (!text) return notFound("cannot read DDS profile file '" + path.string() + "'");
+    return *text;
 }
 
 Status checkSocketBuffers(const std::string& profile_xml) {

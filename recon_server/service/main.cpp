@@ -7,6 +7,8 @@
 #include <vector>
 
 #include "service/server.hpp"
+#include "service/session_store.hpp"
+#include "wire/dds.hpp"
 #include "wire/dds_options.hpp"
 
 int main(int argc, char** argv) {
@@ -19,6 +21,23 @@ int main(int argc, char** argv) {
     }
     if (parsed->help) {
         std::fputs(service::serverUsage().c_str(), stdout);
+        return 0;
+    }
+    if (parsed->check) {  // what an administrator runs after editing the config file
+        const service::ServerParams& p = parsed->params;
+        Status s = service::checkDataDir(p.data_dir);
+        const auto profile_file = wire::findProfileFile(p.domain.profile);
+        if (s.isOk()) {
+            auto xml = wire::loadProfileXml(p.domain.profile);
+            s = xml.isOk() ? wire::checkSocketBuffers(*xml) : xml.status();
+        }
+        if (!s.isOk()) {
+            std::fprintf(stderr, "facescan-server: configuration NOT ok: %s\n", s.message().c_str());
+            return 1;
+        }
+        std::printf("facescan-server: configuration ok: profile %s (%s), domain %u, data in %s, preset %s\n",
+                    p.domain.profile.c_str(), profile_file->c_str(), p.domain.domain_id, p.data_dir.c_str(),
+                    p.preset.c_str());
         return 0;
     }
     // Block the stop signals in every thread (the server's threads inherit this mask) and wait for them here.

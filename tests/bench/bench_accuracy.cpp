@@ -24,12 +24,15 @@ int usage(std::FILE* out) {
     std::fprintf(
         out,
         "usage: facescan-bench accuracy --mesh M --gt G [--nose X,Y,Z] [--init FILE] [--no-align] [--json]\n"
+        "                               [--offset-mm D] [--save-mesh OUT]\n"
         "       facescan-bench accuracy --baseline-frame [--distance M] [--head builtin|scan] [--frame I]"
         " [--json]\n"
         "  G is a head-frame mesh (y up, face along +z; e.g. head_gt.ply of a synthetic TUM folder); its nose\n"
         "  tip is found unless --nose gives it. --init FILE: 4x4 row-major T_gt_mesh guess, or a\n"
         "  T_camera0_head.txt (mesh in the first camera frame), whose inverse is used when --init-inverse.\n"
-        "  Face region: G within 0.11 m of the nose tip, facing forward. Distances in mm, M to G surface.\n");
+        "  Face region: G within 0.11 m of the nose tip, facing forward. Distances in mm, M to G surface.\n"
+        "  --offset-mm D moves every vertex of M D mm along its normal first (a uniform inflation, the known\n"
+        "  answer: `--mesh G --gt G --offset-mm 1` must read 1 mm); --save-mesh OUT writes M as measured.\n");
     return out == stdout ? 0 : 2;
 }
 
@@ -46,23 +49,24 @@ std::optional<recon::Pose> readPose(const std::string& path) {
 
 void printReport(const char* what, const eval::AccuracyReport& r, bool json) {
     std::printf("%s\n", what);
-    std::printf("  %-30s %9.3f\n  %-30s %9.3f\n  %-30s %9.3f\n  %-30s %9.3f\n", "mean |d| (mm)", r.mean_mm, "RMS (mm)",
-                r.rms_mm, "median (mm)", r.median_mm, "p90 (mm)", r.p90_mm);
-    std::printf("  %-30s %9.4f\n  %-30s %9.4f\n  %-30s %9.4f\n  %-30s %9d\n  %-30s %9d\n  %-30s %9d\n",
-                "completeness (<= 2 mm)", r.completeness, "completeness, observed part", r.completeness_observed,
-                "outliers (> 5 mm)", r.outliers, "mesh vertices used", r.mesh_vertices_used, "GT face vertices",
-                r.gt_face_vertices, "GT face vertices observed", r.gt_observed_vertices);
-    if (json) {
-        std::printf(
-            "{\"mean_mm\":%.4f,\"rms_mm\":%.4f,\"median_mm\":%.4f,\"p90_mm\":%.4f,\"completeness\":%.5f,"
-            "\"completeness_observed\":%.5f,\"observable_share\":%.5f,\"outliers\":%.5f,\"mesh_vertices_used\":%d}\n",
-            r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, r.completeness, r.completeness_observed,
-            static_cast<double>(r.gt_observed_vertices) / r.gt_face_vertices, r.outliers, r.mesh_vertices_used);
-    }
+    const eval::DistanceFigures& u = r.unaligned;
+    std::printf("  %-30s %9s %12s\n", "", "aligned", "unaligned");
+    std::printf("  %-30s %9.3f %12.3f\n  %-30s %9.3f %12.3f\n  %-30s %9.3f %12.3f\n  %-30s %9.3f %12.3f\n",
+                "mean |d| (mm)", r.mean_mm, u.mean_mm, "RMS (mm)", r.rms_mm, u.rms_mm, "median (mm)", r.median_mm,
+                u.median_mm, "p90 (mm)", r.p90_mm, u.p90_mm);
+    std::printf("  %-30s %9d %12d\n", "samples over the face", r.mesh_vertices_used, u.samples);
+    std::printf("  %-30s %9.3f   (> 0: M inflated, found and left in the distances)\n", "uniform normal offset (mm)",
+                r.offset_mm);
+    std::printf("  %-30s %9.4f %12.4f\n", "outliers (> 5 mm)", r.outliers, u.outliers);
+    std::printf("  %-30s %9.4f\n  %-30s %9.4f\n  %-30s %9d\n  %-30s %9d\n", "completeness (<= 2 mm)", r.completeness,
+                "completeness, observed part", r.completeness_observed, "GT face vertices", r.gt_face_vertices,
+                "GT face vertices observed", r.gt_observed_vertices);
+    if (json) std::printf("%s\n", eval::accuracyJson(r).c_str());
 }
 
 int runAccuracy(const std::vector<std::string>& args) {
-    std::string mesh_path, gt_path, init_path, head_arg = "default";
+    std::string mesh_path, gt_path, init_path, head_arg = "default", save_path;
+    float offset_mm = 0;
     std::optional<Eigen::Vector3f> nose;
     bool json = false, baseline = false, init_inverse = false;
     eval::AccuracyParams params;
@@ -83,6 +87,10 @@ int runAccuracy(const std::vector<std::string>& args) {
             mesh_path = args[++i];
         } else if (a == "--gt" && v) {
             gt_path = args[++i];
+        } else if (a == "--offset-mm" && v) {
+            offset_mm = std::strtof(args[++i].c_str(), nullptr);
+        } else if (a == "--save-mesh" && v) {
+            save_path = args[++i];
         } else if (a == "--init" && v) {
             init_path = args[++i];
         } else if (a == "--head" && v) {
@@ -143,6 +151,13 @@ int runAccuracy(const std::vector<std::string>& args) {
     if (!mesh.isOk() || !gt.isOk()) {
         std::fprintf(stderr, "accuracy: %s\n", (!mesh.isOk() ? mesh.status() : gt.status()).toString().c_str());
         return 1;
+    }
+    if (offset_mm != 0) *mesh = eval::offsetAlongNormals(*mesh, offset_mm * 1e-3f);
+    if (!save_path.empty()) {
+        if (const Status st = eval::writeMesh(*mesh, save_path); !st.isOk()) {
+            std::fprintf(stderr, "accuracy: %s\n", st.toString().c_str());
+            return 1;
+        }
     }
     std::optional<recon::Pose> init;
     if (!init_path.empty()) {

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "bench_command.hpp"
+#include "recon_input.hpp"
 #include "test_data.hpp"
 #include "wire/codecs.hpp"
 // clang-format off
@@ -47,7 +48,7 @@ struct Clock {
 
 struct DataSet {
     std::string name;
-    std::vector<cv::Mat> depth;   // CV_16UC1, millimetres
+    std::vector<cv::Mat> depth;   // CV_16UC1, millimetres (tum:, 7scenes: inputs: 0.2 mm)
     std::vector<cv::Mat> colour;  // CV_8UC3 (may be empty)
 };
 
@@ -123,6 +124,25 @@ std::vector<DataSet> loadDataSets(const std::string& input, size_t max_frames) {
         DataSet set{"pcl-person", {}, {}};
         addFrames(set, {*data / "pcl_kinect_person/person_depth_mm.png"}, {}, max_frames);
         if (!set.depth.empty()) sets.push_back(std::move(set));
+    }
+    if (input.rfind("tum:", 0) == 0 || input.rfind("7scenes:", 0) == 0) {
+        // A recording, read by the same loader as `recon --input`. The codecs are lossless, so the units the frames
+        // are re-quantised to (0.2 mm, TUM's 5000 per metre, what the agent sends for tum: sources) only matter
+        // through how many distinct values a frame holds; that is the recording's own quantisation here.
+        Sequence seq;
+        if (const Status s = loadSequence(input, static_cast<int>(max_frames), seq); !s.isOk()) {
+            std::fprintf(stderr, "codecs: %s\n", s.toString().c_str());
+            return sets;
+        }
+        DataSet set{fs::path(input.substr(input.find(':') + 1)).filename().string(), {}, {}};
+        for (const recon::RgbdFrame& f : seq.frames) {
+            cv::Mat raw;
+            recon::depthMetresToRaw(f.depth_m, 1.0f / 5000.0f, raw);
+            set.depth.push_back(raw);
+            if (!f.colour_bgr.empty()) set.colour.push_back(f.colour_bgr);
+        }
+        if (!set.depth.empty()) sets.push_back(std::move(set));
+        return sets;
     }
     if (sets.empty() && fs::is_directory(input)) {  // a folder of 16-bit PNGs
         DataSet set{fs::path(input).filename().string(), {}, {}};
@@ -416,7 +436,8 @@ int runCodecs(const std::vector<std::string>& args) {
             quality = std::clamp(std::stoi(args[++i]), 1, 100);
         else {
             std::printf(
-                "usage: facescan-bench codecs [--input all|synthetic|biwi|7scenes|pcl|DIR] [--frames N] [--repeat R]\n"
+                "usage: facescan-bench codecs [--input all|synthetic|biwi|7scenes|pcl|tum:DIR|7scenes:DIR|DIR]\n"
+                "                             [--frames N] [--repeat R]\n"
                 "                             [--quality Q] [--mesh-breakdown] [--json]\n"
                 "Depth codecs (ratio, encode/decode ms per frame, bit-exact checked), JPEG colour (TurboJPEG vs\n"
                 "OpenCV), Draco on a ~200k-triangle head. Means over R passes after a warm-up pass.\n"
@@ -426,7 +447,7 @@ int runCodecs(const std::vector<std::string>& args) {
     }
     const std::vector<DataSet> sets = loadDataSets(input, static_cast<size_t>(frames));
     if (sets.empty()) {
-        std::fprintf(stderr, "codecs: no frames for --input %s (shared data or facescan_synth missing?)\n",
+        std::fprintf(stderr, "codecs: no frames for --input %s (shared data missing, or no 16-bit depth PNGs there?)\n",
                      input.c_str());
         return 1;
     }

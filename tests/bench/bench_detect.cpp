@@ -3,10 +3,15 @@
 // grey image. Both are timed in the same process, frame by frame, interleaved, so load on the machine hits both.
 // Scoring: a detection matches an unmatched truth box at IoU >= 0.3; every other detection is a false positive.
 // Sources: synthetic[:frames=N] (facescan_synth at 0.5-1.5 m, with head-label IoU of the segmentation),
-// biwi:DIR (real Kinect, colour not registered), dlib:DIR (photos, no depth: stock reference only).
+// biwi:DIR (real Kinect, colour not registered), dlib:DIR (photos, no depth: stock reference only), tum:DIR (any
+// recording, e.g. from `facescan-agent --record`; it has no face boxes, so speed, how often each detector finds a
+// face and how often the two agree are reported, and --boxes writes both detectors' boxes for scoring outside).
+#include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -18,6 +23,7 @@
 #include "recon/face_detector.hpp"
 #include "recon/face_pipeline.hpp"
 #include "recon/head_segmenter.hpp"
+#include "recon_input.hpp"
 #include "test_data.hpp"
 #if __has_include("synth/kinect_simulator.hpp")
 #include "synth/kinect_simulator.hpp"
@@ -37,6 +43,9 @@ struct Tally {
     double ours_ms = 0, stock_ms = 0, candidates_ms = 0;
     dd::Score ours, stock;
     int rejected = 0;
+    // Sources without face boxes (tum:): frames where each detector found a face, and where both agree.
+    int ours_found = 0, stock_found = 0, agree = 0;
+    std::FILE* boxes_csv = nullptr;  // --boxes: one line per frame and detector (not owned)
     // Segmentation (where a head label exists).
     int segmented = 0, iou_frames = 0;
     double segment_ms = 0, iou_sum = 0, iou_min = 1;
@@ -45,6 +54,7 @@ struct Tally {
         ours.add(t.ours), stock.add(t.stock), rejected += t.rejected;
         segmented += t.segmented, segment_ms += t.segment_ms, iou_sum += t.iou_sum, iou_frames += t.iou_frames;
         iou_min = std::min(iou_min, t.iou_min);
+        ours_found += t.ours_found, stock_found += t.stock_found, agree += t.agree;
     }
 };
 
@@ -52,6 +62,23 @@ std::vector<cv::Rect> colourBoxes(const recon::FaceDetections& d) {
     std::vector<cv::Rect> boxes;
     for (const auto& f : d.faces) boxes.push_back(f.box_colour_px);
     return boxes;
+}
+
+// --boxes: source,frame,timestamp_s,detector,faces,x,y,w,h (colour pixels) with the first box of each detector
+// (ours: the nearest accepted face; stock: the largest), x..h empty when it found none.
+void writeBoxes(std::FILE* out, const Tally& t, const recon::RgbdFrame& frame, const char* detector,
+                std::vector<cv::Rect> boxes) {
+    if (!out) return;
+    std::fprintf(out, "%s,%d,%.6f,%s,%zu", t.name.c_str(), t.frames - 1, static_cast<double>(frame.timestamp_ns) * 1e-9,
+                 detector, boxes.size());
+    if (std::string(detector) == "stock") {
+        std::sort(boxes.begin(), boxes.end(), [](const cv::Rect& a, const cv::Rect& b) { return a.area() > b.area(); });
+    }
+    if (boxes.empty()) {
+        std::fprintf(out, ",,,,\n");
+    } else {
+        std::fprintf(out, ",%d,%d,%d,%d\n", boxes[0].x, boxes[0].y, boxes[0].width, boxes[0].height);
+    }
 }
 
 // One frame through both detectors; truth boxes in colour pixels.
@@ -67,10 +94,16 @@ void runFrame(recon::FaceDetector& detector, const recon::RgbdFrame& frame, cons
     const std::vector<cv::Rect> stock = detector.detectStock(grey);
     t.stock_ms += msSince(t0);
     ++t.frames;
+    writeBoxes(t.boxes_csv, t, frame, "stock", stock);
     if (!ours.isOk()) {
         std::fprintf(stderr, "detect: %s\n", ours.status().toString().c_str());
+        writeBoxes(t.boxes_csv, t, frame, "ours", {});
         return;
     }
+    writeBoxes(t.boxes_csv, t, frame, "ours", colourBoxes(*ours));
+    t.ours_found += ours->faces.empty() ? 0 : 1;
+    t.stock_found += stock.empty() ? 0 : 1;
+    t.agree += dd::scoreDetections(stock, colourBoxes(*ours)).hits > 0 ? 1 : 0;
     t.candidates_ms += ours->candidates_ms;
     t.rejected += ours->rejected;
     t.ours.add(dd::scoreDetections(truth, colourBoxes(*ours)));
@@ -86,9 +119,10 @@ double maskIou(const cv::Mat& a, const cv::Mat& b) {
 #ifdef FACESCAN_BENCH_HAVE_SYNTH
 // Four sequences with the face (nose tip) at 0.5, 0.8, 1.1 and 1.5 m: SequenceParams::distance_m places the
 // head-frame origin, 0.10 m behind the nose tip. The head turns +-25 deg and nods +-10 deg.
-Tally runSynthetic(recon::FaceDetector& detector, int frames_per_distance) {
+Tally runSynthetic(recon::FaceDetector& detector, int frames_per_distance, std::FILE* boxes_csv) {
     Tally t;
     t.name = "synthetic";
+    t.boxes_csv = boxes_csv;
     const synth::HeadModel head = synth::defaultHead();
     std::printf("synthetic subject: %s\n", head.name.c_str());
     recon::HeadSegmenter segmenter;
@@ -131,9 +165,10 @@ Tally runSynthetic(recon::FaceDetector& detector, int frames_per_distance) {
 #endif
 
 Tally runBiwi(recon::FaceDetector& detector, const std::filesystem::path& dir, double& maskgen_ms,
-              int& maskgen_zero_dets) {
+              int& maskgen_zero_dets, std::FILE* boxes) {
     Tally t;
     t.name = "biwi";
+    t.boxes_csv = boxes;
     const recon::Intrinsics k = dd::biwiDepthIntrinsics(dir);
     const recon::ColourCamera cam = dd::biwiColourCamera();
     recon::HeadSegmenter segmenter;
@@ -160,6 +195,41 @@ Tally runBiwi(recon::FaceDetector& detector, const std::filesystem::path& dir, d
         maskgen_ms += msSince(t0);
     }
     return t;
+}
+
+// tum:DIR: a recording without face boxes (intrinsics.txt or the Kinect defaults; colour registered to depth, as
+// TUM's and `facescan-agent --record` folders are). Speed, and how often each detector finds a face.
+StatusOr<Tally> runTum(recon::FaceDetector& detector, const std::string& dir, int max_frames, std::FILE* boxes) {
+    Sequence seq;
+    RETURN_IF_ERROR(loadSequence("tum:" + dir, max_frames, seq));
+    Tally t;
+    t.name = std::filesystem::path(dir).filename().string();
+    if (t.name.empty()) t.name = std::filesystem::path(dir).parent_path().filename().string();
+    t.boxes_csv = boxes;
+    const recon::ColourCamera cam = recon::ColourCamera::registeredTo(seq.k);
+    int no_colour = 0;
+    std::fprintf(stderr, "detect: %s: %zu frames\n", dir.c_str(), seq.frames.size());
+    for (const recon::RgbdFrame& frame : seq.frames) {
+        if (frame.colour_bgr.empty()) {
+            ++no_colour;
+            continue;
+        }
+        runFrame(detector, frame, seq.k, cam, {}, t);
+    }
+    if (t.frames == 0) {
+        return invalidArgument("tum:" + dir + ": none of its " + std::to_string(no_colour) +
+                               " frames has a colour image of the depth image's size (rgb.txt); the detector needs "
+                               "colour");
+    }
+    if (no_colour > 0) std::fprintf(stderr, "detect: %s: %d frames without colour skipped\n", dir.c_str(), no_colour);
+    return t;
+}
+
+void printUnlabelledRow(const Tally& t) {
+    const double n = std::max(1, t.frames);
+    std::printf("%-10s %6d %9.2f %9.2f %8.2fx   no face boxes: a face in %d (ours) / %d (stock) frames, agree in %d\n",
+                t.name.c_str(), t.frames, t.ours_ms / n, t.stock_ms / n, t.ours_ms > 0 ? t.stock_ms / t.ours_ms : 0.0,
+                t.ours_found, t.stock_found, t.agree);
 }
 
 struct DlibResult {
@@ -199,18 +269,28 @@ void printRow(const Tally& t) {
 
 int runDetect(const std::vector<std::string>& args) {
     bool json = false;
-    int synth_frames = 30;
+    int synth_frames = 30, max_frames = 0;
     std::vector<std::string> inputs;
+    std::string boxes_path;
     for (size_t i = 0; i < args.size(); ++i) {
         if (args[i] == "--json") {
             json = true;
         } else if (args[i] == "--input" && i + 1 < args.size()) {
             inputs.push_back(args[++i]);
+        } else if (args[i] == "--boxes" && i + 1 < args.size()) {
+            boxes_path = args[++i];
+        } else if (args[i] == "--frames" && i + 1 < args.size()) {
+            max_frames = std::max(0, std::atoi(args[++i].c_str()));
         } else if (args[i] == "--help" || args[i] == "-h") {
             std::printf(
-                "usage: facescan-bench detect [--input SRC]... [--json]\n"
-                "  SRC: synthetic[:frames=N] (N per distance, faces at 0.5-1.5 m; default 30), biwi:DIR, dlib:DIR.\n"
-                "  Without --input: all three, from the shared data folder when present.\n");
+                "usage: facescan-bench detect [--input SRC]... [--frames N] [--boxes OUT.csv] [--json]\n"
+                "  SRC: synthetic[:frames=N] (N per distance, faces at 0.5-1.5 m; default 30), biwi:DIR, dlib:DIR,\n"
+                "       tum:DIR (a recording without face boxes: speed, frames with a face per detector, agreement).\n"
+                "  Without --input: synthetic, biwi and dlib, from the shared data folder when present.\n"
+                "  --frames N: at most N frames of a tum: recording (default all).\n"
+                "  --boxes OUT.csv: source,frame,timestamp_s,detector,faces,x,y,w,h, one line per frame and detector\n"
+                "    (ours | stock; the first box: ours' nearest face, stock's largest; colour pixels), to score\n"
+                "    the boxes outside.\n");
             return 0;
         } else {
             std::fprintf(stderr, "detect: unknown argument '%s' (see --help)\n", args[i].c_str());
@@ -228,6 +308,21 @@ int runDetect(const std::vector<std::string>& args) {
         return 1;
     }
     recon::FaceDetector& detector = *made;
+    std::FILE* boxes = nullptr;
+    if (!boxes_path.empty()) {
+        boxes = std::fopen(boxes_path.c_str(), "w");
+        if (!boxes) {
+            std::fprintf(stderr, "detect: cannot write --boxes %s: %s\n", boxes_path.c_str(), std::strerror(errno));
+            return 1;
+        }
+        std::fprintf(boxes, "source,frame,timestamp_s,detector,faces,x,y,w,h\n");
+    }
+    struct Closer {
+        std::FILE* f;
+        ~Closer() {
+            if (f) std::fclose(f);
+        }
+    } closer{boxes};
     const recon::FaceDetectorParams& p = detector.params();
     std::printf("cascade %s, scaleFactor %.2f, minNeighbors %d; W %.2f-%.2f m, theta %.2f m, IoU >= 0.3\n",
                 p.cascade_path.c_str(), p.scale_factor, p.min_neighbours, static_cast<double>(p.face_width_min_m),
@@ -249,20 +344,29 @@ int runDetect(const std::vector<std::string>& args) {
             if (const size_t pos = in.find("frames="); pos != std::string::npos) {
                 synth_frames = std::max(1, std::atoi(in.c_str() + pos + 7));
             }
-            t = runSynthetic(detector, synth_frames);
+            t = runSynthetic(detector, synth_frames, boxes);
 #else
             std::fprintf(stderr, "detect: built without facescan_synth; skipping %s\n", in.c_str());
             continue;
 #endif
         } else if (in.rfind("biwi:", 0) == 0) {
-            t = runBiwi(detector, in.substr(5), maskgen_ms, maskgen_dets);
+            t = runBiwi(detector, in.substr(5), maskgen_ms, maskgen_dets, boxes);
             maskgen_frames = t.frames;
+        } else if (in.rfind("tum:", 0) == 0) {
+            StatusOr<Tally> tum = runTum(detector, in.substr(4), max_frames, boxes);
+            if (!tum.isOk()) {
+                std::fprintf(stderr, "detect: %s\n", tum.status().toString().c_str());
+                return 1;
+            }
+            printUnlabelledRow(*tum);  // not in all-depth: without boxes it has no recall
+            rows.push_back(*tum);
+            continue;
         } else if (in.rfind("dlib:", 0) == 0) {
             dlib = runDlib(detector, in.substr(5));
             have_dlib = true;
             continue;
         } else {
-            std::fprintf(stderr, "detect: unknown source '%s'\n", in.c_str());
+            std::fprintf(stderr, "detect: unknown source '%s' (synthetic, biwi:DIR, dlib:DIR, tum:DIR)\n", in.c_str());
             return 2;
         }
         printRow(t);
@@ -297,10 +401,11 @@ int runDetect(const std::vector<std::string>& args) {
             const double m = std::max(1, t.frames);
             std::printf(
                 "%s\"%s\":{\"frames\":%d,\"ours_ms\":%.3f,\"stock_ms\":%.3f,\"speedup\":%.3f,\"recall\":%.4f,"
-                "\"stock_recall\":%.4f,\"false_positives\":%d,\"stock_false_positives\":%d}",
+                "\"stock_recall\":%.4f,\"false_positives\":%d,\"stock_false_positives\":%d,\"ours_found\":%d,"
+                "\"stock_found\":%d,\"agree\":%d}",
                 first ? "" : ",", t.name.c_str(), t.frames, t.ours_ms / m, t.stock_ms / m,
                 t.ours_ms > 0 ? t.stock_ms / t.ours_ms : 0.0, t.ours.recall(), t.stock.recall(), t.ours.false_positives,
-                t.stock.false_positives);
+                t.stock.false_positives, t.ours_found, t.stock_found, t.agree);
             first = false;
         }
         if (have_dlib) {

@@ -130,22 +130,17 @@ PoseErrors poseErrors(const Sequence& seq, const std::vector<std::optional<Pose>
     return e;
 }
 
-std::string accuracyJson(const eval::AccuracyReport& r) {
-    char buf[320];
-    std::snprintf(buf, sizeof(buf),
-                  "{\"mean_mm\":%.4f,\"rms_mm\":%.4f,\"median_mm\":%.4f,\"p90_mm\":%.4f,\"completeness\":%.4f,"
-                  "\"completeness_observed\":%.4f,\"observable_share\":%.4f,\"outliers\":%.4f}",
-                  r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, r.completeness, r.completeness_observed,
-                  static_cast<double>(r.gt_observed_vertices) / r.gt_face_vertices, r.outliers);
-    return buf;
-}
-
 void printAccuracy(const char* what, const eval::AccuracyReport& r) {
     std::printf(
         "%-22s mean %.3f mm  rms %.3f mm  median %.3f mm  p90 %.3f mm  completeness(2 mm) %.1f %% of the face, "
         "%.1f %% of its observable part  outliers(5 mm) %.2f %%  (%d samples)\n",
         what, r.mean_mm, r.rms_mm, r.median_mm, r.p90_mm, 100.0 * r.completeness, 100.0 * r.completeness_observed,
         100.0 * r.outliers, r.mesh_vertices_used);
+    // The same surface at the true first pose, without any alignment, and the inflation the alignment found.
+    std::printf(
+        "%-22s mean %.3f mm  rms %.3f mm  median %.3f mm  p90 %.3f mm  (unaligned: true first pose)  "
+        "uniform offset %+.3f mm\n",
+        "", r.unaligned.mean_mm, r.unaligned.rms_mm, r.unaligned.median_mm, r.unaligned.p90_mm, r.offset_mm);
 }
 
 void printFrame(int i, const Sequence& seq, const recon::FrameResult& r, const recon::HeadObservation* head,
@@ -256,6 +251,30 @@ StatusOr<double> twinMean(const Options& o, const recon::ReconParams& params, co
     return acc.mean_mm;
 }
 
+// Without masks the whole frame is fused (recon::Reconstructor's contract). The volume is centred on the first
+// frame's centroid, so a scene much deeper than the volume (a head 1 m in front of a wall) leaves the head outside
+// it: the model is a sliver of background and registration fails frame after frame (299 of 300 on a synthetic TUM
+// head recording). Returns the first frame's depth spread when that is the case.
+std::optional<float> wholeFrameDepthSpreadM(const Sequence& seq, const recon::ReconParams& p, bool pipeline_mask) {
+    if (pipeline_mask || seq.frames.empty() || (!seq.masks.empty() && !seq.masks.front().empty())) return std::nullopt;
+    std::vector<float> z;
+    const cv::Mat& d = seq.frames.front().depth_m;
+    for (int v = 0; v < d.rows; v += 2)
+        for (int u = 0; u < d.cols; u += 2) {
+            const float m = d.at<float>(v, u);
+            if (m >= p.filter.min_depth_m && m <= p.filter.max_depth_m) z.push_back(m);
+        }
+    if (z.size() < 100) return std::nullopt;
+    const auto at = [&](double q) {
+        auto it = z.begin() + static_cast<std::ptrdiff_t>(q * static_cast<double>(z.size() - 1));
+        std::nth_element(z.begin(), it, z.end());
+        return *it;
+    };
+    const float spread = at(0.98) - at(0.02);
+    if (spread <= p.tsdf.volume_size_m) return std::nullopt;
+    return spread;
+}
+
 int runRecon(const std::vector<std::string>& args) {
     Options o;
     for (size_t i = 0; i < args.size(); ++i) {
@@ -328,6 +347,16 @@ int runRecon(const std::vector<std::string>& args) {
         params.icp.max_rmse_m = 0.03f;
         params.raycast.start_before_hint_m = 3.0f * params.tsdf.trunc_dist_m;  // rays must span a few voxels
         params.raycast.search_after_hint_m = 4.0f * params.tsdf.trunc_dist_m;
+    }
+    if (const std::optional<float> spread = wholeFrameDepthSpreadM(seq, params, o.pipeline_mask)) {
+        std::fprintf(stderr,
+                     "recon: %s has no head masks, so every pixel is fused (the core's empty mask = whole frame), but "
+                     "its first frame spans %.2f m in depth (2nd-98th percentile) and the volume is %.2f m: placed on "
+                     "the centroid of head and background, it holds neither and nearly every frame is rejected.\n"
+                     "  For a head recording use --mask pipeline (the server's own detection and segmentation); for "
+                     "a room, a volume that holds it (--volume-m 3).\n",
+                     o.input.c_str(), static_cast<double>(*spread), static_cast<double>(params.tsdf.volume_size_m));
+        return 2;
     }
     const double rss_frames_mb = currentRssMb();
     recon::Reconstructor rec(seq.k, params);
@@ -433,7 +462,7 @@ int runRecon(const std::vector<std::string>& args) {
                 acc->gt_observed_vertices, acc->gt_face_vertices,
                 100.0 * acc->gt_observed_vertices / acc->gt_face_vertices, seq.frames.size(), sight_s);
             printAccuracy("accuracy (all frames)", *acc);
-            acc_json = accuracyJson(*acc);
+            acc_json = eval::accuracyJson(*acc);
             own_accuracy_mean = acc->mean_mm;
             if (!o.misses_out.empty() && sightings.isOk()) {
                 if (const Status s = eval::writeMisses(gt, *sightings, mesh, *acc, nose, acc_params, o.misses_out);
@@ -445,7 +474,7 @@ int runRecon(const std::vector<std::string>& args) {
         }
         if (base.isOk()) {
             printAccuracy("baseline (1 frame)", *base);
-            base_json = accuracyJson(*base);
+            base_json = eval::accuracyJson(*base);
         }
     }
     // Robustness figures (issue 18) and, with --twin, the same motion without the scenario's event.

@@ -33,9 +33,11 @@ int main(int argc, char** argv) {
             rc = 1;
             continue;
         }
-        std::printf("%s: %zu faces, mean %.3f mm, rms %.3f mm, median %.3f mm, p90 %.3f mm, completeness %.3f\n",
-                    argv[i], mesh->n_faces(), acc->mean_mm, acc->rms_mm, acc->median_mm, acc->p90_mm,
-                    acc->completeness);
+        std::printf(
+            "%s: %zu faces, mean %.3f mm, rms %.3f mm, median %.3f mm, p90 %.3f mm, completeness %.3f; unaligned mean "
+            "%.3f mm, uniform offset %+.3f mm\n",
+            argv[i], mesh->n_faces(), acc->mean_mm, acc->rms_mm, acc->median_mm, acc->p90_mm, acc->completeness,
+            acc->unaligned.mean_mm, acc->offset_mm);
     }
     return rc;
 }

@@ -128,6 +128,30 @@ TEST(SessionStore, WritesAtomicallyAndLeavesNoTemporaryFiles) {
     EXPECT_FALSE(std::filesystem::exists(dir / "missing" / "x.txt"));
 }
 
+TEST(ServerParams, ShippedConfigFileParsesAndPointsAtTheStateDirectory) {
+    // deploy/config/server.conf is /etc/facescan/server.conf of the .deb: it must load, and keep the data where the
+    // systemd unit lets the service write.
+    auto parsed =
+        parseServerArgs({"--config", std::string(FACESCAN_SOURCE_DIR) + "/deploy/config/server.conf", "--check"});
+    ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+    EXPECT_TRUE(parsed->check);
+    EXPECT_EQ(parsed->params.data_dir, "/var/lib/facescan");
+    EXPECT_EQ(parsed->params.domain.profile, "lan");
+    EXPECT_EQ(parsed->params.preset, "face");
+}
+
+TEST(SessionStore, DataDirIsCreatedAndProvedWritableOrRefusedWithTheReason) {
+    const auto dir = tempDir("datadir");
+    ASSERT_TRUE(checkDataDir(dir / "new" / "scans").isOk());
+    EXPECT_TRUE(std::filesystem::is_directory(dir / "new" / "scans"));
+    EXPECT_TRUE(std::filesystem::is_empty(dir / "new" / "scans")) << "the write probe must not stay behind";
+    // Under a regular file nothing can be created (even as root).
+    std::ofstream(dir / "file") << "x";
+    const Status s = checkDataDir(dir / "file" / "scans");
+    EXPECT_FALSE(s.isOk());
+    EXPECT_NE(s.message().find("data dir " + (dir / "file" / "scans").string()), std::string::npos) << s.message();
+}
+
 TEST(SessionStore, JsonEscapesQuotesAndControlCharacters) {
     EXPECT_EQ(jsonEscape("a\"b\\c\nd\x01"), "a\\\"b\\\\c\\nd\\u0001");
 }

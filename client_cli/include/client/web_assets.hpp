@@ -20,7 +20,8 @@ struct WebAsset {
 };
 const std::vector<WebAsset>& webAssets();
 
-// The asset folder: $FACESCAN_WEB_DIR, else <exe>/../share/facescan/web, else the source tree's client_cli/web.
+// The asset folder: $FACESCAN_WEB_DIR, else web/ of the share/facescan folders (wire/data_files.hpp: beside the
+// program's bin/ first), else the source tree's client_cli/web.
 // NotFound, saying what to run, when none holds every asset (three.js is installed by deploy/install-deps.sh).
 StatusOr<std::filesystem::path> findWebRoot();
 // Whether `root` holds every asset; NotFound naming the first missing one and what to run.

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <string>
@@ -38,8 +39,9 @@ struct DomainConfig {
     std::string describe() const;
 };
 
-// Resolves a profile name to the XML text Cyclone is given (searching deploy/profiles of the source tree, then
-// <exe>/../share/facescan/profiles, then FACESCAN_PROFILE_DIR).
+// The file of a profile: FILE.xml as given; loopback and lan from $FACESCAN_PROFILE_DIR when set, else
+// share/facescan/profiles of the installed or build tree (data_files.hpp). loadProfileXml reads it.
+StatusOr<std::filesystem::path> findProfileFile(const std::string& profile);
 StatusOr<std::string> loadProfileXml(const std::string& profile);
 
 // Reads net.core.rmem_max and compares it with the SocketReceiveBufferSize min of the profile. When the kernel

@@ -175,6 +175,11 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
                 for (int j = i; j < 6; ++j) ata(i, j) = ata(j, i) = sum[k++];
                 atb[i] = sum[21 + i];
             }
+            // A sphere, a plane or a cylinder leaves some combination of the six unknowns unconstrained (A^T A
+            // nearly singular). Cholesky then returns whatever the rounding makes of it, a different large motion
+            // with and without FMA. A damping of 1e-6 of the mean diagonal keeps such directions still and changes
+            // the constrained ones by a relative 1e-6 at most.
+            ata.diagonal().array() += 1e-6 * ata.trace() / 6.0;
             // Eq. 4.20 by Cholesky, as the thesis does.
             const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(ata);
             const Eigen::Matrix<double, 6, 1> x = llt.solve(atb);

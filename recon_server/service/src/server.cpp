@@ -12,6 +12,8 @@
 
 #include "service/replication.hpp"
 
+#include "service/session_store.hpp"
+
 namespace facescan::service {
 namespace {
 
@@ -38,6 +40,7 @@ StatusOr<std::unique_ptr<Server>> Server::create(const ServerParams& params) {
 }
 
 Status Server::start() {
+    RETURN_IF_ERROR(checkDataDir(params_.data_dir));
     using wire::boxed;
     ASSIGN_OR_RETURN(participant_, boxed(wire::Participant::create(params_.domain)));
     const wire::Participant& p = *participant_;

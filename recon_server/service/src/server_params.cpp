@@ -276,6 +276,10 @@ StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args) {
             out.help = true;
             return out;
         }
+        if (a == "--check") {
+            out.check = true;
+            continue;
+        }
         std::string flag = a, value;
         bool has_value = false;
         if (const size_t eq = a.find('='); a.rfind("--", 0) == 0 && eq != std::string::npos) {
@@ -332,7 +336,8 @@ std::string serverUsage() {
            "  --data-dir DIR          sessions go to DIR/SESSION/ (default ./facescan-data): their replica while\n"
            "                          scanning, the results when finished; DIR/SESSION/owner.json names the owner\n"
            "  --server-id ID          this server's name on the domain, unique (default HOST-PID)\n"
-           "  --replica-interval-s S  seconds between replicas of a scan to its standby and data dir (default 1)\n" +
+           "  --replica-interval-s S  seconds between replicas of a scan to its standby and data dir (default 1)\n"
+           "  --check                 check the configuration (file, flags, DDS profile, data dir) and exit\n" +
            wire::ddsOptionsHelp(26) +
            "  --help                  this text\n\n"
            "config keys:\n" +

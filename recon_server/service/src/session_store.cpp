@@ -78,6 +78,17 @@ Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& f
     return writeFileAtomic(dir / "summary.json", files.summary_json);
 }
 
+Status checkDataDir(const std::filesystem::path& dir) {
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) return unavailable("data dir " + dir.string() + ": cannot create it: " + ec.message());
+    const std::filesystem::path probe = dir / (".write-test-" + std::to_string(::getpid()));
+    const Status s = writeFileAtomic(probe, std::string("facescan"));
+    std::filesystem::remove(probe, ec);
+    if (!s.isOk()) return unavailable("data dir " + dir.string() + " is not writable: " + s.message());
+    return Status::ok();
+}
+
 std::string jsonEscape(const std::string& s) {
     std::string out;
     out.reserve(s.size() + 2);

@@ -50,10 +50,12 @@ Status loadConfigFile(const std::filesystem::path& path, ServerParams& params);
 std::vector<std::string> settingKeys();
 
 // Parses the command line: `--preset` first (it resets the recon params), then `--config FILE`, then the other
-// flags (they override the file). `help` is set for --help/-h (params are then left at defaults).
+// flags (they override the file). `help` is set for --help/-h (params are then left at defaults); `check` for
+// --check (validate the configuration, DDS profile included, and exit).
 struct ParsedArgs {
     ServerParams params;
     bool help = false;
+    bool check = false;
 };
 StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args);
 std::string serverUsage();

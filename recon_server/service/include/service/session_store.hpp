@@ -44,6 +44,10 @@ StatusOr<std::filesystem::path> claimSessionDir(const std::filesystem::path& dat
 std::optional<std::pair<std::string, uint32_t>> readSessionOwner(const std::filesystem::path& dir);
 // A finished session needs no replica: removes DIR/replica.log (and its temporary file).
 void removeReplicaLog(const std::filesystem::path& dir);
+// Creates dir when missing and proves that a file can be written there (a probe written atomically, then
+// removed): checked when the server starts, so that a data dir the server cannot write is refused at once with
+// the reason, not discovered when the first finished scan cannot be saved.
+Status checkDataDir(const std::filesystem::path& dir);
 
 // Minimal JSON string escaping for summaries (quotes, backslash, control characters).
 std::string jsonEscape(const std::string& s);

@@ -46,6 +46,8 @@ struct Cloud {
 };
 using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, Cloud>, Cloud, 3, uint32_t>;
 constexpr int kNeighbours = 6;
+// A point in a crease may have the opposite wall's vertices nearest: look further for its own wall.
+constexpr int kFacingNeighbours = 12;
 
 }  // namespace
 
@@ -102,14 +104,21 @@ SurfaceDistance::SurfaceDistance(const recon::Mesh& mesh) : impl_(std::make_uniq
 
 SurfaceDistance::~SurfaceDistance() = default;
 
-SurfaceDistance::Hit SurfaceDistance::query(const Vec3& p) const {
+SurfaceDistance::Hit SurfaceDistance::query(const Vec3& p) const { return nearest(p, nullptr); }
+
+SurfaceDistance::Hit SurfaceDistance::query(const Vec3& p, const Vec3& facing) const {
+    const Hit hit = nearest(p, &facing);
+    return hit.face >= 0 ? hit : nearest(p, nullptr);
+}
+
+SurfaceDistance::Hit SurfaceDistance::nearest(const Vec3& p, const Vec3* facing) const {
     const Impl& m = *impl_;
     Hit hit;
     hit.distance_m = std::numeric_limits<float>::infinity();
     if (m.tree_cloud.pts.empty()) return hit;
-    uint32_t idx[kNeighbours];
-    float d2[kNeighbours];
-    const size_t found = m.tree->knnSearch(p.data(), kNeighbours, idx, d2);
+    uint32_t idx[kFacingNeighbours];
+    float d2[kFacingNeighbours];
+    const size_t found = m.tree->knnSearch(p.data(), facing ? kFacingNeighbours : kNeighbours, idx, d2);
     if (found == 0) return hit;
     for (size_t i = 0; i < found; ++i) idx[i] = static_cast<uint32_t>(m.surface_vertex[idx[i]]);
     hit.nearest_vertex = static_cast<int>(idx[0]);
@@ -118,6 +127,7 @@ SurfaceDistance::Hit SurfaceDistance::query(const Vec3& p) const {
     for (size_t i = 0; i < found; ++i) {
         for (int r = m.ring_start[idx[i]]; r < m.ring_start[idx[i] + 1]; ++r) {
             const int f = m.ring[r];
+            if (facing && m.tri_normals[f].dot(*facing) <= 0) continue;
             const auto& t = m.tris[f];
             const Vec3 q = closestOnTriangle(p, m.cloud.pts[t[0]], m.cloud.pts[t[1]], m.cloud.pts[t[2]]);
             const float d = (q - p).norm();
