@@ -11,7 +11,6 @@
 #include <thread>
 
 #include "service/replication.hpp"
-
 #include "service/session_store.hpp"
 
 namespace facescan::service {
