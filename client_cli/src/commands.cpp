@@ -88,8 +88,10 @@ int runSessions(const CliOptions& options) {
     std::printf("%-24s %-9s %10s %10s %8s %6s  %s\n", "SESSION", "STATE", "INTEGRATED", "RECEIVED", "REJECTED", "FPS",
                 "SERVER");
     for (const SessionStatus& s : *sessions) {
-        std::printf("%-24s %-9s %10u %10u %8u %6.1f  %s\n", s.session_id.c_str(), scanStateName(s.state),
-                    s.frames_integrated, s.frames_received, s.frames_rejected, s.fps, s.server_id.c_str());
+        // A session that cannot keep up (issue 16) is named as such; `facescan status` says by how much.
+        std::printf("%-24s %-9s %10u %10u %8u %6.1f  %s%s\n", s.session_id.c_str(), scanStateName(s.state),
+                    s.frames_integrated, s.frames_received, s.frames_rejected, s.fps, s.server_id.c_str(),
+                    s.behind ? "  BEHIND" : "");
     }
     return kExitOk;
 }

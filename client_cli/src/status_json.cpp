@@ -34,11 +34,11 @@ std::string statusJson(const SessionStatus& s, bool with_alive) {
                   "\"frames_received\":%u,\"frames_integrated\":%u,\"frames_rejected\":%u,\"frames_skipped\":%u,"
                   "\"frames_dropped\":%u,\"every_frame\":%s,\"fps\":%.2f,\"ms\":{\"detect\":%.3f,\"segment\":%.3f,"
                   "\"filter\":%.3f,\"icp\":%.3f,\"integrate\":%.3f,\"raycast\":%.3f,\"mesh\":%.3f},"
-                  "\"latency_p95_ms\":%.2f,\"snapshot_seq\":%u",
+                  "\"latency_p95_ms\":%.2f,\"snapshot_seq\":%u,\"behind\":%s",
                   s.frames_received, s.frames_integrated, s.frames_rejected, s.frames_skipped, s.frames_dropped,
                   s.every_frame ? "true" : "false", finite(s.fps), finite(s.ms_detect), finite(s.ms_segment),
                   finite(s.ms_filter), finite(s.ms_icp), finite(s.ms_integrate), finite(s.ms_raycast),
-                  finite(s.ms_mesh), finite(s.latency_p95_ms), s.snapshot_seq);
+                  finite(s.ms_mesh), finite(s.latency_p95_ms), s.snapshot_seq, s.behind ? "true" : "false");
     return "{\"session\":" + jsonString(s.session_id) + ",\"server\":" + jsonString(s.server_id) +
            ",\"state\":" + jsonString(scanStateName(s.state)) + ",\"detail\":" + jsonString(s.detail) + "," + numbers +
            (with_alive ? (s.alive ? ",\"alive\":true}" : ",\"alive\":false}") : "}");

@@ -59,6 +59,7 @@ facescan_wire_ScanStatus toMessage(const ScanStatusData& status) {
     m.latency_p95_ms = status.latency_p95_ms;
     m.snapshot_seq = status.snapshot_seq;
     m.updated_ns = status.updated_ns;
+    m.behind = status.behind;
     return m;
 }
 
@@ -87,6 +88,7 @@ ScanStatusData fromMessage(const facescan_wire_ScanStatus& m) {
     s.latency_p95_ms = m.latency_p95_ms;
     s.snapshot_seq = m.snapshot_seq;
     s.updated_ns = m.updated_ns;
+    s.behind = m.behind;
     return s;
 }
 

@@ -36,7 +36,7 @@ facescan_wire_CameraInfo toMessage(const CameraInfoData& info);
 StatusOr<CameraInfoData> fromMessage(const facescan_wire_CameraInfo& msg);
 
 // ScanStatus as a C++ value: the server fills it, the client and tests read it. One conversion each way, so the
-// message's 22 fields are listed in exactly one place (messages.cpp).
+// message's 23 fields are listed in exactly one place (messages.cpp).
 struct ScanStatusData {
     std::string session_id;
     std::string server_id;
@@ -53,6 +53,7 @@ struct ScanStatusData {
     float latency_p95_ms = 0;  // capture to pose known
     uint32_t snapshot_seq = 0;
     int64_t updated_ns = 0;  // server's CLOCK_REALTIME when published
+    bool behind = false;     // live session not keeping up: throttled or skipping frames (detail says how much)
 };
 // The message points at `status`'s strings: keep it alive until the sample is written.
 facescan_wire_ScanStatus toMessage(const ScanStatusData& status);

@@ -375,6 +375,7 @@ void Server::publishStatus(const SessionStats& s) {
     d.latency_p95_ms = s.latency_p95_ms;
     d.snapshot_seq = s.snapshot_seq;
     d.updated_ns = realtimeNowNs();
+    d.behind = s.behind;
     (void)status_writer_->write(wire::toMessage(d));
 }
 
