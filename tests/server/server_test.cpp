@@ -357,9 +357,11 @@ TEST(ServerSession, ASessionThatFallsBehindIsReportedAndDoesNotStallAnother) {
     auto still = rig.client->waitForStatus(
         "flooded", [](const StatusCopy& s) { return s.behind; }, 10s);
     ASSERT_TRUE(still) << "the flooded session stopped being reported behind";
-    std::printf("flooded: %s (received %u, skipped %u)\nsteady: %s (integrated %u of 45, skipped %u)\n",
-                still->detail.c_str(), still->frames_received, still->frames_skipped, status->detail.c_str(),
-                status->frames_integrated, status->frames_skipped);
+    std::printf(
+        "flooded: %s (received %u, skipped %u)\nsteady: %s (integrated %u of 45, skipped %u, capture-to-pose "
+        "p95 %.1f ms)\n",
+        still->detail.c_str(), still->frames_received, still->frames_skipped, status->detail.c_str(),
+        status->frames_integrated, status->frames_skipped, status->latency_p95_ms);
 }
 
 TEST(ServerSession, ShutdownFinishesOpenSessionsToDisk) {
