@@ -50,6 +50,7 @@ facescan_wire_ScanStatus toMessage(const ScanStatusData& status) {
     m.owner_epoch = status.owner_epoch;
     m.failovers = status.failovers;
     m.last_takeover_ms = status.last_takeover_ms;
+    m.behind = status.behind;
     return m;
 }
 
@@ -82,6 +83,7 @@ ScanStatusData fromMessage(const facescan_wire_ScanStatus& m) {
     s.owner_epoch = m.owner_epoch;
     s.failovers = m.failovers;
     s.last_takeover_ms = m.last_takeover_ms;
+    s.behind = m.behind;
     return s;
 }
 

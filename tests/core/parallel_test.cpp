@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "allocation_counter.hpp"
+#include "cpu_burn.hpp"
 #include "recon/face_pipeline.hpp"
 #include "recon/reconstructor.hpp"
 #include "recon/scan_step.hpp"
@@ -118,6 +119,61 @@ TEST(ParallelFor, WorkersShareTheWork) {
         shared = on_other_threads.load() > 0;
     }
     EXPECT_TRUE(shared) << "no chunk ever ran off the calling thread";
+}
+
+// Issue 16: a serial thread runs its calls alone, covering everything, while the pool stays with the others.
+TEST(ParallelFor, SerialThreadRunsItsCallsAloneAndOthersKeepThePool) {
+    std::thread t([] {
+        setParallelSerial(true);
+        EXPECT_TRUE(parallelSerial());
+        const std::thread::id self = std::this_thread::get_id();
+        std::atomic<int> elsewhere{0};
+        parallelFor(0, 64, [&](int lo, int hi) {
+            if (std::this_thread::get_id() != self) elsewhere += hi - lo;
+        });
+        EXPECT_EQ(elsewhere.load(), 0) << "a serial thread's chunks ran on the pool";
+        EXPECT_EQ(firstWrong(cover(-5, 1000)), -1);
+    });
+    t.join();
+    EXPECT_FALSE(parallelSerial()) << "serial is per thread";
+    EXPECT_EQ(firstWrong(cover(0, 1000)), -1);
+}
+
+// Issue 16: with accounting on, the CPU pool workers spend on a thread's calls is charged to that thread (what a
+// session worker's frames cost, whoever ran them); off, or serial, nothing is charged.
+TEST(ParallelFor, PoolWorkersChargeTheirCpuToTheCallingThread) {
+    if (parallelThreadCount() < 2) GTEST_SKIP() << "one hardware thread: no pool workers";
+    std::thread t([] {
+        const std::thread::id self = std::this_thread::get_id();
+        auto run = [&](std::atomic<int64_t>& elsewhere_ns) {
+            parallelFor(0, 32, [&](int lo, int hi) {
+                testing::burnCpuNs(200'000LL * (hi - lo));
+                if (std::this_thread::get_id() != self) elsewhere_ns += 200'000LL * (hi - lo);
+            });
+        };
+        std::atomic<int64_t> off_ns{0};
+        run(off_ns);
+        EXPECT_EQ(parallelPoolCpuNs(), 0) << "charged while accounting was off";
+        setParallelAccounting(true);
+        bool charged = false;
+        for (int attempt = 0; attempt < 20 && !charged; ++attempt) {  // a loaded machine may leave the worker out
+            std::atomic<int64_t> elsewhere_ns{0};
+            const int64_t before = parallelPoolCpuNs();
+            run(elsewhere_ns);
+            const int64_t got = parallelPoolCpuNs() - before;
+            // At least the CPU the worker's chunks burnt (plus its claiming and polling).
+            EXPECT_GE(got, elsewhere_ns.load());
+            charged = elsewhere_ns.load() > 0;
+        }
+        EXPECT_TRUE(charged) << "no chunk ever ran on a pool worker";
+        setParallelSerial(true);
+        const int64_t before = parallelPoolCpuNs();
+        std::atomic<int64_t> serial_ns{0};
+        run(serial_ns);
+        EXPECT_EQ(parallelPoolCpuNs(), before);
+        setParallelAccounting(false);
+    });
+    t.join();
 }
 
 TEST(ParallelFor, ConcurrentCallersFromFourThreads) {

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
+#include <atomic>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -297,6 +298,76 @@ TEST(ServerSession, SessionsBeyondMaxSessionsAreRefusedWithAReason) {
     auto ok = rig.client->command("first", facescan_wire_CMD_GET_STATUS, 5s);
     ASSERT_TRUE(ok.isOk());
     EXPECT_TRUE(ok->ok) << ok->error;
+}
+
+// Issue 16, bad input: one session fed frames that are no use (a depth image full of noise, a head filling the
+// frame at 0.4 m) and a stream faster than it can process, next to a session scanning a head. The bad frames are
+// rejected at detection (their cost is bounded there); the flooded session skips frames and its status says it
+// is behind; the other keeps integrating. (Throttling itself is tested with CPU time in frame_load_test.)
+testing::EncodedSequence badSequence() {
+    testing::EncodedSequence out = testing::renderSequence(4, 1, 0.4f);  // the head fills the frame
+    const recon::Intrinsics& k = out.intrinsics;
+    wire::FrameEncoder encoder;
+    cv::Mat depth(k.height_px, k.width_px, CV_16UC1), colour(k.height_px, k.width_px, CV_8UC3);
+    cv::RNG rng(16);
+    for (int i = 0; i < 4; ++i) {
+        rng.fill(depth, cv::RNG::UNIFORM, 400, 1500);  // millimetres, as the test agent's CameraInfo says
+        rng.fill(colour, cv::RNG::UNIFORM, 0, 256);
+        out.frames.emplace_back();
+        EXPECT_TRUE(encoder.encode(depth, colour, out.frames.back()).isOk());
+    }
+    return out;
+}
+
+TEST(ServerSession, ASessionThatFallsBehindIsReportedAndDoesNotStallAnother) {
+    const uint32_t domain = privateDomain(17);
+    const ServerParams params = testParams(domain, "behind");
+    Rig rig = makeRig(params);
+    ASSERT_TRUE(rig.server && rig.client);
+    const testing::EncodedSequence bad = badSequence();
+    auto flooded = makeAgent(domain, "flooded", /*every_frame=*/false);
+    auto steady = makeAgent(domain, "steady", false);
+    ASSERT_TRUE(flooded && steady);
+    // Bad frames and head frames (which cost the full loop) as fast as the writer takes them, all test long.
+    std::atomic<bool> stop{false};
+    std::thread flood([&] {
+        for (uint32_t seq = 0; !stop; ++seq) {
+            const auto& frames = seq % 2 ? bad.frames : sequence().frames;
+            (void)flooded->sendFrame(seq, frames[seq / 2 % frames.size()]);
+            if (seq % 64 == 0) std::this_thread::sleep_for(1ms);  // leave the writer's peer a breath
+        }
+    });
+    struct Stop {
+        std::atomic<bool>& stop;
+        std::thread& t;
+        ~Stop() {
+            stop = true;
+            t.join();
+        }
+    } stopper{stop, flood};
+
+    // The session that cannot keep up says so, by name, first in its detail.
+    auto behind = rig.client->waitForStatus(
+        "flooded", [](const StatusCopy& s) { return s.behind && s.frames_skipped > 0; }, 30s);
+    ASSERT_TRUE(behind) << "the flooded session was never reported behind";
+    EXPECT_EQ(behind->detail.rfind("behind: ", 0), 0u) << behind->detail;
+
+    // Meanwhile the other session scans (the single-session test's bar: throughput depends on the machine, live
+    // mode skips what it cannot process; a stalled loop would integrate next to nothing).
+    ASSERT_TRUE(steady->stream(sequence(), 45, 30.0f, /*end_of_stream=*/false).isOk());
+    auto status = rig.client->waitForStatus(
+        "steady", [](const StatusCopy& s) { return s.frames_received == 45 && settled(s); }, 30s);
+    ASSERT_TRUE(status) << "the steady session never settled";
+    EXPECT_GE(status->frames_integrated, 10u) << status->detail << "; skipped " << status->frames_skipped;
+    EXPECT_EQ(status->frames_dropped, 0u);
+    auto still = rig.client->waitForStatus(
+        "flooded", [](const StatusCopy& s) { return s.behind; }, 10s);
+    ASSERT_TRUE(still) << "the flooded session stopped being reported behind";
+    std::printf(
+        "flooded: %s (received %u, skipped %u)\nsteady: %s (integrated %u of 45, skipped %u, capture-to-pose "
+        "p95 %.1f ms)\n",
+        still->detail.c_str(), still->frames_received, still->frames_skipped, status->detail.c_str(),
+        status->frames_integrated, status->frames_skipped, status->latency_p95_ms);
 }
 
 TEST(ServerSession, ShutdownFinishesOpenSessionsToDisk) {

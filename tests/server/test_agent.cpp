@@ -19,10 +19,11 @@ int64_t wallNowNs() {
 
 }  // namespace
 
-EncodedSequence renderSequence(int frames, uint64_t seed) {
+EncodedSequence renderSequence(int frames, uint64_t seed, float distance_m) {
     synth::SequenceParams sp;
     sp.frames = frames;
     sp.seed = seed;
+    sp.distance_m = distance_m;
     // The default motion (a 10 s left-right turn at 30 Hz): a short test sequence sees its first, frontal part.
     const synth::KinectSimulator sim(synth::defaultHead(), sp);
     EncodedSequence out;

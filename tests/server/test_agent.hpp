@@ -22,7 +22,8 @@ struct EncodedSequence {
     recon::Intrinsics intrinsics;
     std::vector<wire::EncodedFrame> frames;
 };
-EncodedSequence renderSequence(int frames, uint64_t seed = 1);
+// distance_m: camera to the head at rest (0.4 m: the head fills the frame, the slowest frames the loop sees).
+EncodedSequence renderSequence(int frames, uint64_t seed = 1, float distance_m = 0.7f);
 
 class TestAgent {
  public:

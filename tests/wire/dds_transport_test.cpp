@@ -203,6 +203,7 @@ TEST(WireMessages, ScanStatusRoundTripsAndAnUnknownStateReadsAsWaiting) {
     d.latency_p95_ms = 23.5f;
     d.snapshot_seq = 9;
     d.updated_ns = 123456789012345;
+    d.behind = true;
     const ScanStatusData back = fromMessage(toMessage(d));
     EXPECT_EQ(back.session_id, "s-1");
     EXPECT_EQ(back.server_id, "box");
@@ -220,6 +221,7 @@ TEST(WireMessages, ScanStatusRoundTripsAndAnUnknownStateReadsAsWaiting) {
     EXPECT_FLOAT_EQ(back.latency_p95_ms, 23.5f);
     EXPECT_EQ(back.snapshot_seq, 9u);
     EXPECT_EQ(back.updated_ns, 123456789012345);
+    EXPECT_TRUE(back.behind);
 
     facescan_wire_ScanStatus m = toMessage(d);
     m.state = static_cast<facescan_wire_ScanState>(99);  // a state from a newer server

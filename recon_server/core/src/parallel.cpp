@@ -1,6 +1,7 @@
 #include "recon/parallel.hpp"
 
 #include <pthread.h>
+#include <time.h>
 
 #include <algorithm>
 #include <array>
@@ -16,6 +17,16 @@
 
 namespace facescan::recon {
 namespace {
+
+thread_local bool t_serial = false;
+thread_local bool t_accounting = false;
+thread_local std::atomic<int64_t> t_pool_cpu_ns{0};  // written by pool workers, read by its thread
+
+int64_t threadCpuNs() {
+    timespec ts{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
 
 constexpr int kSlots = 16;  // jobs open at once (concurrent sessions plus nesting); beyond that a call runs alone
 constexpr int kMaxWorkers = 63;
@@ -45,6 +56,7 @@ struct JobView {
     int64_t n = 0;  // end - begin does not fit an int for every pair of ints
     int n_chunks = 0;
     uint32_t generation = 0;
+    std::atomic<int64_t>* cpu_ns = nullptr;  // the owner's accounting sink, or null
 };
 
 // One open job. Slots belong to the pool and live as long as it, so a worker may touch a slot's atomics after the
@@ -96,7 +108,7 @@ class Pool {
 
     // Publishes a job and wakes workers for it; nullptr when every slot is taken or the pool is stopping (the
     // caller then runs the job alone).
-    Slot* open(detail::ChunkFn fn, void* body, int begin, int64_t n, int n_chunks);
+    Slot* open(detail::ChunkFn fn, void* body, int begin, int64_t n, int n_chunks, std::atomic<int64_t>* cpu_ns);
     // Runs the unclaimed chunks of the caller's own job, waits for those workers took, frees the slot.
     void runAndClose(Slot& s);
 
@@ -157,7 +169,7 @@ void Pool::startLocked() {
     g_pool.store(this);
 }
 
-Slot* Pool::open(detail::ChunkFn fn, void* body, int begin, int64_t n, int n_chunks) {
+Slot* Pool::open(detail::ChunkFn fn, void* body, int begin, int64_t n, int n_chunks, std::atomic<int64_t>* cpu_ns) {
     Slot* slot = nullptr;
     bool wake_all = false;
     int wake = 0;
@@ -173,7 +185,7 @@ Slot* Pool::open(detail::ChunkFn fn, void* body, int begin, int64_t n, int n_chu
         }
         if (slot == nullptr) return nullptr;
         const uint32_t generation = slot->job.generation + 1;
-        slot->job = JobView{fn, body, begin, n, n_chunks, generation};
+        slot->job = JobView{fn, body, begin, n, n_chunks, generation, cpu_ns};
         slot->open = true;
         published_.fetch_add(1, std::memory_order_relaxed);
         slot->remaining.store(n_chunks, std::memory_order_relaxed);
@@ -248,15 +260,24 @@ void Pool::workerLoop(int id) {
         polled = false;
         const JobView j = s->job;
         lock.unlock();
+        const int64_t cpu0 = j.cpu_ns ? threadCpuNs() : 0;
+        // The last chunk this worker ran is finished only after it failed to claim another: until then the owner
+        // keeps waiting, so its accounting sink (on the owner's thread) is still there to add this job's CPU to.
+        bool unfinished = false;
         uint64_t v = s->claim.load(std::memory_order_acquire);
         // Stop when the job closed and the slot holds another one, or nothing is left to claim.
         while (claimGeneration(v) == j.generation && claimFront(v) < claimBack(v)) {
             if (!s->claim.compare_exchange_weak(v, v - 1, std::memory_order_acq_rel, std::memory_order_acquire)) {
                 continue;  // v now holds the current value
             }
+            if (unfinished) finishChunk(*s);
             runChunk(j, claimBack(v) - 1);
-            finishChunk(*s);
+            unfinished = true;
             v = s->claim.load(std::memory_order_acquire);
+        }
+        if (unfinished) {
+            if (j.cpu_ns) j.cpu_ns->fetch_add(threadCpuNs() - cpu0, std::memory_order_relaxed);
+            finishChunk(*s);
         }
         lock.lock();
     }
@@ -306,11 +327,11 @@ void parallelForErased(int begin, int end, ChunkFn fn, void* body) {
     if (n <= 0) return;
     const int n_chunks = static_cast<int>(std::min<int64_t>(n, plannedThreads() * kChunksPerThread));
     Slot* slot = nullptr;
-    if (plannedThreads() > 1 && n > 1 && !g_pool_gone.load(std::memory_order_relaxed)) {
-        slot = pool().open(fn, body, begin, n, n_chunks);
+    if (plannedThreads() > 1 && n > 1 && !t_serial && !g_pool_gone.load(std::memory_order_relaxed)) {
+        slot = pool().open(fn, body, begin, n, n_chunks, t_accounting ? &t_pool_cpu_ns : nullptr);
     }
     if (slot == nullptr) {
-        fn(body, begin, end);  // one core, one index, every slot taken, or the process is exiting
+        fn(body, begin, end);  // one core, one index, a serial thread, every slot taken, or the process is exiting
         return;
     }
     pool().runAndClose(*slot);
@@ -319,5 +340,10 @@ void parallelForErased(int begin, int end, ChunkFn fn, void* body) {
 }  // namespace detail
 
 int parallelThreadCount() { return plannedThreads(); }
+
+void setParallelSerial(bool serial) { t_serial = serial; }
+bool parallelSerial() { return t_serial; }
+void setParallelAccounting(bool on) { t_accounting = on; }
+int64_t parallelPoolCpuNs() { return t_pool_cpu_ns.load(std::memory_order_acquire); }
 
 }  // namespace facescan::recon

@@ -436,6 +436,7 @@ void Server::publishStatus(const SessionStats& s) {
     d.owner_epoch = s.epoch;
     d.failovers = s.failovers;
     d.last_takeover_ms = s.last_takeover_ms;
+    d.behind = s.behind;
     (void)status_writer_->write(wire::toMessage(d));
 }
 

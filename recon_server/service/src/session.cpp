@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <opencv2/imgcodecs.hpp>
 
 #include "recon/marching_cubes.hpp"
@@ -14,6 +15,7 @@ namespace {
 constexpr size_t kLatencyWindow = 512;  // frames; latency percentiles are over the last this many tracked frames
 constexpr int64_t kFpsWindowNs = 2'000'000'000;  // the status fps counts frames processed in the last 2 s
 constexpr float kEmaAlpha = 0.1f;                // per-stage ms in the status: exponential average over ~10 frames
+constexpr float kBehindSkipFraction = 0.1f;      // a live session skipping more of its recent frames is behind
 
 float msSince(int64_t t0_ns) { return static_cast<float>(steadyNowNs() - t0_ns) * 1e-6f; }
 
@@ -168,6 +170,7 @@ Status Session::start(const wire::CameraInfoData& camera, const wire::ReplicaDat
             ++stats_.frames_skipped;
         }
     }
+    load_ = std::make_unique<FrameLoad>(camera.rate_hz);
     worker_ = std::thread([this] { workerLoop(); });
     lk.unlock();
     cv_.notify_all();
@@ -272,6 +275,11 @@ void Session::requestFinish(const std::string& why, FinishCallback done) {
 }
 
 void Session::workerLoop() {
+    load_->join();
+    struct Leave {
+        FrameLoad& load;
+        ~Leave() { load.leave(); }
+    } leave{*load_};
     for (;;) {
         std::unique_lock lk(mutex_);
         cv_.wait(lk, [&] { return stop_ || !control_.empty() || !queue_.empty(); });
@@ -323,7 +331,10 @@ void Session::workerLoop() {
         const uint64_t digest =
             wire::frameDigest(stats_.frames_digest, working_.depth.data(), working_.depth.size(),
                               working_.colour.data(), working_.colour.size());  // the worker alone writes it
+        load_->beginFrame();
         processFrame(working_);
+        load_->endFrame();
+        noteLoad();
         copySnapshotIfAsked();
         lk.lock();
         stats_.frames_digest = digest;
@@ -385,6 +396,18 @@ void Session::processFrame(PendingFrame& pending) {
     stats_.detail = detail(std::string("frame rejected: ") + r.reason);
 }
 
+void Session::noteLoad() {
+    std::lock_guard lk(mutex_);
+    // Frames skipped since the last processed one: live sessions keep only the newest, so a slow frame shows here.
+    const auto skipped = static_cast<float>(stats_.frames_skipped - skipped_at_last_frame_);
+    skipped_at_last_frame_ = stats_.frames_skipped;
+    const float fraction = skipped / (skipped + 1.0f);
+    stats_.skipped_recent += FrameLoad::kEmaAlpha * (fraction - stats_.skipped_recent);
+    stats_.throttled = load_->throttled();
+    stats_.frame_cpu_ms = load_->costMs();
+    stats_.frame_budget_ms = load_->budgetMs();
+}
+
 void Session::recordLatency(float ms) {
     if (latency_ms_.size() < kLatencyWindow) {
         latency_ms_.push_back(ms);
@@ -417,6 +440,14 @@ SessionStats Session::stats() const {
                      ms_sum_.integrate * inv,
                      ms_sum_.raycast * inv,
                      0};
+    }
+    s.behind = !s.every_frame && stats_.state != SessionState::kFinished &&
+               (s.throttled || s.skipped_recent > kBehindSkipFraction);
+    if (s.behind) {
+        char what[160];
+        std::snprintf(what, sizeof what, "behind: %.0f %% of frames skipped, %.0f ms of CPU a frame (budget %.0f ms)%s",
+                      100.0f * s.skipped_recent, s.frame_cpu_ms, s.frame_budget_ms, s.throttled ? ", throttled" : "");
+        s.detail = std::string(what) + "; " + s.detail;
     }
     s.latency_p50_ms = percentile(latency_ms_, 0.5f);
     s.latency_p95_ms = percentile(latency_ms_, 0.95f);

@@ -9,6 +9,7 @@
 // calls come microseconds apart), then sleep on a condition variable: no CPU while idle.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <type_traits>
 
@@ -23,6 +24,16 @@ using ChunkFn = void (*)(void* body, int lo, int hi);
 void parallelForErased(int begin, int end, ChunkFn fn, void* body);
 
 }  // namespace detail
+
+// Per-thread control and accounting (issue 16, "bad input": one session's slow frames must not monopolise the
+// pool that every session shares). Both act on the calling thread's own calls only.
+// Serial: its parallelFor calls run on itself alone, leaving the pool's workers to the other threads.
+void setParallelSerial(bool serial);
+bool parallelSerial();
+// Accounting: pool workers add the CPU time they spend on its calls (two clock reads per worker and call, none
+// while off), so CLOCK_THREAD_CPUTIME_ID plus this is what the thread's work cost, whoever ran it.
+void setParallelAccounting(bool on);
+int64_t parallelPoolCpuNs();  // since accounting was first turned on for the calling thread
 
 // Threads that run chunks of one parallelFor: the pool's workers plus the caller (1 on a single core).
 int parallelThreadCount();

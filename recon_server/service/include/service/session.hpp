@@ -20,6 +20,7 @@
 #include "recon/marching_cubes.hpp"
 #include "recon/reconstructor.hpp"
 #include "recon/scan_step.hpp"
+#include "service/frame_load.hpp"
 #include "service/server_params.hpp"
 #include "wire/mesh_codec.hpp"
 #include "wire/messages.hpp"
@@ -77,6 +78,13 @@ struct SessionStats {
     float last_takeover_ms = 0;  // the owner's last sign of life to the first frame integrated after the takeover
     uint32_t next_seq = 0;       // the next frame the session takes (the agent resends from here)
     uint64_t frames_digest = wire::kFrameDigestSeed;  // of the frames processed, in order
+    // Issue 16, bad input: the worker's load (service/frame_load.hpp). A live session that is throttled or skips
+    // more than kBehindSkipFraction of its recent frames is behind; stats() then says so first in the detail.
+    bool behind = false;
+    bool throttled = false;
+    float frame_cpu_ms = 0;     // CPU a frame, recent average (pool workers' share included)
+    float frame_budget_ms = 0;  // CPU a frame the session may use now
+    float skipped_recent = 0;   // fraction of recent frames skipped (exponential average)
 };
 
 // What became of a received frame (Session::pushFrame).
@@ -185,6 +193,7 @@ class Session {
     void processFrame(PendingFrame& pending);
     void copySnapshotIfAsked();
     void finalize(const std::string& why, const FinishCallback& done);
+    void noteLoad();  // after a frame: the worker's load and recent skips into stats_
     void recordLatency(float ms);
     std::string summaryJson(const SessionStats& s, const MeshResult& m) const;
 
@@ -224,7 +233,10 @@ class Session {
     bool final_snapshot_sent_ = false;
     std::atomic<int64_t> last_activity_ns_{0};
 
+    uint32_t skipped_at_last_frame_ = 0;
+
     // Worker-only state (no lock).
+    std::unique_ptr<FrameLoad> load_;  // made with the worker (it needs the source's rate)
     std::unique_ptr<recon::FacePipeline> pipeline_;
     wire::FrameDecoder decoder_;
     recon::RgbdFrame frame_;
