@@ -151,7 +151,8 @@ TEST(Failover, LoneServerKilledAndRestartedOnItsDataDirResumesWithoutLosingAFram
     const std::string owner = recordAndMaybeKill(rig, "rec", kFrames / 2, dir / "replica.log");
     ASSERT_EQ(owner, "solo");
     // The agent waits for a server (and says so) with the frames it has not seen confirmed.
-    ASSERT_TRUE(waitUntil([&] { return readText(rig.agentLog("rec")).find("WAITING") != std::string::npos; }, 10s));
+    ASSERT_TRUE(
+        waitUntil([&] { return readText(rig.agentLog("rec")).find("waiting for one") != std::string::npos; }, 15s));
     EXPECT_TRUE(fs::exists(dir / "replica.log")) << "no replica in the data dir";
     rig.startServer("solo");  // the same id and data dir, as systemd restarts it
     ASSERT_EQ(rig.agent("rec").wait(120s), 0) << readText(rig.agentLog("rec"));
