@@ -10,13 +10,14 @@
 #   spread     three servers and six live sessions started one after another: sessions per server
 # On loopback the takeover is bounded by the DDS lease (3 s in the loopback and lan profiles): a killed process
 # is noticed when its lease lapses, as a powered-off machine would be.
-#   usage: tests/bench/cluster.sh [ROUNDS (default 3)] [FRAMES (default 120)]
+#   usage: tests/bench/cluster.sh [ROUNDS (default 3)] [FRAMES (default 600: on a quiet machine a shorter
+#          recording finishes before the kill half way through it lands)]
 #   env:   BUILD_DIR (default ./build), REPLICA_INTERVAL_S (default 1)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
 rounds=${1:-3}
-frames=${2:-120}
+frames=${2:-600}
 interval=${REPLICA_INTERVAL_S:-1}
 BUILD_DIR=${BUILD_DIR:-$root/build}
 server_bin=$BUILD_DIR/recon_server/service/facescan-server
