@@ -2,7 +2,8 @@
 // "unknown source" and "no frames"), detect's --boxes writes one line per frame and detector, and recon refuses a
 // mask-less recording much deeper than its volume with a message that says what to do, instead of rejecting
 // nearly every frame. The recording: 5 frames of the Lee Perry-Smith head at 0.7 m with a wall behind, written as a
-// TUM folder by `facescan-bench synth --tum`, as a user's `facescan-agent --record` folder would be.
+// TUM folder by `facescan-bench synth --tum`, laid out as a TUM RGB-D benchmark folder (what `--source tum:DIR` of
+// facescan-agent also reads).
 #include <gtest/gtest.h>
 #include <unistd.h>
 
