@@ -73,12 +73,16 @@ run() {
     [ -f "$f" ] || { echo "security_overhead: no summary (logs in $dir)" >&2; return 1; }
     local discovery agent_cpu stream fps p50 p95 integrated
     discovery=$(sed -n 's/.*server found \([0-9.]*\) s after joining.*/\1/p' "$dir/agent.log")
-    agent_cpu=$(sed -n 's/.*; cpu \([0-9.]*\) s$/\1/p' "$dir/agent.log")
+    agent_cpu=$(sed -n 's/.*stream ended; cpu \([0-9.]*\) s\b.*/\1/p' "$dir/agent.log")
     stream=$(sed -n 's/.*"duration_s": \([0-9.e+-]*\).*/\1/p' "$f")
     fps=$(sed -n 's/.*"fps": \([0-9.e+-]*\).*/\1/p' "$f")
     p50=$(sed -n 's/.*"latency_ms": {"p50": \([0-9.e+-]*\),.*/\1/p' "$f")
     p95=$(sed -n 's/.*"latency_ms": {[^}]*"p95": \([0-9.e+-]*\)}.*/\1/p' "$f")
     integrated=$(sed -n 's/.*"integrated": \([0-9]*\).*/\1/p' "$f")
+    # An empty field would shift every column after it: refuse rather than print misleading figures.
+    for v in discovery agent_cpu server_cpu stream fps p50 p95 integrated; do
+        [ -n "${!v}" ] || { echo "security_overhead: no $v in the logs of $dir (format changed?)" >&2; return 1; }
+    done
     echo "$mode $discovery $agent_cpu $server_cpu $stream $fps $p50 $p95 $integrated"
 }
 
