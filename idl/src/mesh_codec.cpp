@@ -297,6 +297,9 @@ Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mes
     const size_t nv = dm->num_points();
     const size_t nf = dm->num_faces();
     if (nv > max_vertices || nf > max_faces) return outOfRange("decoded Draco mesh exceeds the caps");
+    // facescan's encoder refuses a mesh without triangles, so an empty one is not ours (found by fuzz_mesh_draco:
+    // it decoded to a mesh with no normals, which every receiver assumes).
+    if (nf == 0 || nv == 0) return dataLoss("Draco mesh has no triangles");
 
     const draco::PointAttribute* pos = dm->GetNamedAttribute(draco::GeometryAttribute::POSITION);
     const draco::PointAttribute* nrm = dm->GetNamedAttribute(draco::GeometryAttribute::NORMAL);

@@ -447,8 +447,9 @@ int runCodecs(const std::vector<std::string>& args) {
     }
     const std::vector<DataSet> sets = loadDataSets(input, static_cast<size_t>(frames));
     if (sets.empty()) {
-        std::fprintf(stderr, "codecs: no frames for --input %s (shared data missing, or no 16-bit depth PNGs there?)\n",
-                     input.c_str());
+        const bool recording = input.rfind("tum:", 0) == 0 || input.rfind("7scenes:", 0) == 0;
+        std::fprintf(stderr, "codecs: no frames for --input %s (%s)\n", input.c_str(),
+                     recording ? "the reason is above" : "shared data missing, or no 16-bit depth PNGs there?");
         return 1;
     }
     const wire::DepthCodecParams shipped;

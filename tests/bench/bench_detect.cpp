@@ -4,8 +4,9 @@
 // Scoring: a detection matches an unmatched truth box at IoU >= 0.3; every other detection is a false positive.
 // Sources: synthetic[:frames=N] (facescan_synth at 0.5-1.5 m, with head-label IoU of the segmentation),
 // biwi:DIR (real Kinect, colour not registered), dlib:DIR (photos, no depth: stock reference only), tum:DIR (any
-// recording, e.g. from `facescan-agent --record`; it has no face boxes, so speed, how often each detector finds a
-// face and how often the two agree are reported, and --boxes writes both detectors' boxes for scoring outside).
+// recording, e.g. a TUM RGB-D folder or `facescan-bench synth --tum`; it has no face boxes, so speed, how often
+// each detector finds a face and how often the two agree are reported, and --boxes writes both detectors' boxes
+// for scoring outside).
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
@@ -198,7 +199,7 @@ Tally runBiwi(recon::FaceDetector& detector, const std::filesystem::path& dir, d
 }
 
 // tum:DIR: a recording without face boxes (intrinsics.txt or the Kinect defaults; colour registered to depth, as
-// TUM's and `facescan-agent --record` folders are). Speed, and how often each detector finds a face.
+// TUM's and `facescan-bench synth --tum` folders are). Speed, and how often each detector finds a face.
 StatusOr<Tally> runTum(recon::FaceDetector& detector, const std::string& dir, int max_frames, std::FILE* boxes) {
     Sequence seq;
     RETURN_IF_ERROR(loadSequence("tum:" + dir, max_frames, seq));

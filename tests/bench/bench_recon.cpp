@@ -60,6 +60,8 @@ struct Options {
     // --mask pipeline: the head mask comes from the server's own FacePipeline (Viola-Jones + depth, segmentation,
     // tracked-box seeding), run inside the timed loop as facescan-server does; default: the input's own mask.
     bool pipeline_mask = false;
+    // --mask none: every pixel of every frame (the core's empty mask), also for inputs that carry a head mask.
+    bool no_mask = false;
     bool twin = false;  // --twin: also scan the scenario's twin without its event (scenario_figures.hpp)
 };
 
@@ -232,6 +234,13 @@ std::string twinInput(const Sequence& seq, const std::string& input) {
     return "";
 }
 
+// --mask none: the input's own masks are dropped, so the core fuses whole frames.
+void dropMasksIfAsked(const Options& o, Sequence& seq) {
+    if (!o.no_mask) return;
+    for (cv::Mat& m : seq.masks) m = cv::Mat();
+    seq.mask_source = "none (--mask none: whole frames)";
+}
+
 // The mean accuracy of the scan of `input` (the twin of a scenario), run as the main sequence was.
 StatusOr<double> twinMean(const Options& o, const recon::ReconParams& params, const std::string& input) {
     Sequence seq;
@@ -244,6 +253,7 @@ StatusOr<double> twinMean(const Options& o, const recon::ReconParams& params, co
                          recon::FacePipeline::create({}, seq.k, recon::ColourCamera::registeredTo(seq.k)));
         pipeline.emplace(std::move(created));
     }
+    dropMasksIfAsked(o, seq);
     (void)runLoop(seq, rec, pipeline ? &*pipeline : nullptr, false);
     const recon::Mesh& gt = seq.sim->head().mesh;
     ASSIGN_OR_RETURN(const eval::AccuracyReport acc, eval::measureAccuracy(rec.extractMesh(), gt, eval::findNoseTip(gt),
@@ -296,9 +306,12 @@ int runRecon(const std::vector<std::string>& args) {
             o.misses_out = next(), o.gt_accuracy = true;
         else if (a == "--observed-tol-m")
             o.observed_tol_m = std::strtof(next().c_str(), nullptr);  // junk reads 0, which validate() refuses
-        else if (a == "--mask" && i + 1 < args.size() && (args[i + 1] == "pipeline" || args[i + 1] == "input"))
-            o.pipeline_mask = next() == "pipeline";
-        else if (a == "--json")
+        else if (a == "--mask" && i + 1 < args.size() &&
+                 (args[i + 1] == "pipeline" || args[i + 1] == "input" || args[i + 1] == "none")) {
+            const std::string mode = next();
+            o.pipeline_mask = mode == "pipeline";
+            o.no_mask = mode == "none";
+        } else if (a == "--json")
             o.json = true;
         else if (a == "--verbose")
             o.verbose = true;
@@ -312,13 +325,15 @@ int runRecon(const std::vector<std::string>& args) {
             std::printf(
                 "usage: facescan-bench recon [--input SRC] [--frames N] [--preset face|fast] [--mesh OUT.ply]\n"
                 "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply] [--observed-tol-m M]\n"
-                "       [--volume-m M] [--trunc-m M] [--mask input|pipeline] [--twin] [--verbose] [--json]\n"
+                "       [--volume-m M] [--trunc-m M] [--mask input|pipeline|none] [--twin] [--verbose] [--json]\n"
                 "SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR\n"
                 "Synthetic input also reports the robustness figures of issue 18 (tracked share, re-acquisition,\n"
                 "wrong poses, foreign surface). --twin (implies --gt-accuracy) also scans the same motion without the\n"
                 "scenario's event (the gap's subject turns in view; no occluder) and prints the difference of means.\n"
                 "--mask pipeline: find the head per frame with the server's FacePipeline (timed in the loop)\n"
                 "     instead of the input's mask (synthetic: the renderer's head label; tum/7scenes: none).\n"
+                "--mask none: fuse whole frames (the core's empty mask); refused when the first frame is much deeper\n"
+                "     than the volume (a head in front of a wall).\n"
                 "%s\n",
                 synth::syntheticOptionsHelp());
             return a == "--help" ? 0 : 2;
@@ -336,6 +351,7 @@ int runRecon(const std::vector<std::string>& args) {
         std::fprintf(stderr, "recon: %s\n", s.toString().c_str());
         return 1;
     }
+    dropMasksIfAsked(o, seq);
     recon::ReconParams params = o.preset == "fast" ? recon::ReconParams::fast() : recon::ReconParams::faceDefaults();
     if (o.volume_m > 0) params.tsdf.volume_size_m = o.volume_m;
     if (o.trunc_m > 0) params.tsdf.trunc_dist_m = o.trunc_m;
@@ -350,7 +366,8 @@ int runRecon(const std::vector<std::string>& args) {
     }
     if (const std::optional<float> spread = wholeFrameDepthSpreadM(seq, params, o.pipeline_mask)) {
         std::fprintf(stderr,
-                     "recon: %s has no head masks, so every pixel is fused (the core's empty mask = whole frame), but "
+                     "recon: %s is fused without head masks (none in the input, or --mask none), so every pixel counts "
+                     "(the core's empty mask = whole frame), but "
                      "its first frame spans %.2f m in depth (2nd-98th percentile) and the volume is %.2f m: placed on "
                      "the centroid of head and background, it holds neither and nearly every frame is rejected.\n"
                      "  For a head recording use --mask pipeline (the server's own detection and segmentation); for "

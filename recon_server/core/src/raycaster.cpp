@@ -28,16 +28,31 @@ bool clipToCube(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float n_max,
     return s0 < s1;
 }
 
+// The zero crossing between a sample in front of the surface (s_front, d_front > 0) and one behind it (s_back,
+// d_back <= 0): eq. 4.28, then one regula falsi step (with steps of up to mu, D is not linear over the bracket).
+float refineCrossing(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox,
+                     float s_front, float d_front, float s_back, float d_back) {
+    float s_hit = s_front + (s_back - s_front) * d_front / (d_front - d_back);  // eq. 4.28
+    float d_hit;
+    if (g.sample(o_vox + dir_vox * s_hit, d_hit) == VoxelBlockGrid::Cell::kOk) {
+        if (d_hit > 0.0f) {
+            s_hit += (s_back - s_hit) * d_hit / (d_hit - d_back);
+        } else if (d_hit < 0.0f) {
+            s_hit = s_front + (s_hit - s_front) * d_front / (d_front - d_hit);
+        }
+    }
+    return s_hit;
+}
+
 // Marches one ray (eq. 4.27) in voxel coordinates between s_begin and s_end (units: voxels along the unit ray
 // direction dir_vox); returns the interpolated zero crossing (eq. 4.28) or a negative value when there is none.
+// With have_prev, the march continues from a sample already taken (prev_s, prev_d > 0) instead.
 float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox, float s_begin,
-               float s_end, float step_vox) {
+               float s_end, float step_vox, bool have_prev = false, float prev_s = 0.0f, float prev_d = 0.0f) {
     using Cell = VoxelBlockGrid::Cell;
-    float s = s_begin;
-    float prev_d = 0.0f, prev_s = 0.0f;
-    bool have_prev = false;
     const float block_skip = static_cast<float>(kBlockSide) * 0.5f;
     const float free_step_per_d = g.trunc_dist_m / g.voxel_size_m;  // voxels of free space per unit of D
+    float s = have_prev ? prev_s + std::max(1.0f, std::min(step_vox, prev_d * free_step_per_d)) : s_begin;
     while (s <= s_end) {
         float d;
         const Cell cell = g.sample(o_vox + dir_vox * s, d);
@@ -47,19 +62,7 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
             s += cell == Cell::kUnallocated ? block_skip : step_vox;
             continue;
         }
-        if (have_prev && prev_d > 0.0f && d <= 0.0f) {
-            float s_hit = prev_s + (s - prev_s) * prev_d / (prev_d - d);  // eq. 4.28
-            // One regula falsi step: with steps of up to mu, D is not linear over the whole bracket.
-            float d_hit;
-            if (g.sample(o_vox + dir_vox * s_hit, d_hit) == Cell::kOk) {
-                if (d_hit > 0.0f) {
-                    s_hit += (s - s_hit) * d_hit / (d_hit - d);
-                } else if (d_hit < 0.0f) {
-                    s_hit = prev_s + (s_hit - prev_s) * prev_d / (prev_d - d_hit);
-                }
-            }
-            return s_hit;
-        }
+        if (have_prev && prev_d > 0.0f && d <= 0.0f) return refineCrossing(g, o_vox, dir_vox, prev_s, prev_d, s, d);
         if (have_prev && prev_d < 0.0f && d > 0.0f) return -1.0f;  // leaving a back face: not a visible surface
         prev_d = d;
         prev_s = s;
@@ -69,6 +72,34 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
         s += d > 0.0f ? std::max(1.0f, std::min(step_vox, d * free_step_per_d)) : step_vox;
     }
     return -1.0f;
+}
+
+// A ray with a measured depth: the model surface lies within noise of it (the frame was just integrated there), so
+// D at the measurement already says how far the crossing is. In front of it (0 < D < 1) the march goes on forward
+// from there; behind it (D <= 0) it steps back by what D says until D turns positive, which brackets the crossing
+// nearest the measurement. About three samples instead of six from start_before_hint_m in front. Where D there is
+// unobserved or truncated (no surface within mu), the full march from s_begin decides.
+float marchFromHint(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox,
+                    float s_begin, float s_hint, float s_end, float step_vox) {
+    using Cell = VoxelBlockGrid::Cell;
+    const float free_step_per_d = g.trunc_dist_m / g.voxel_size_m;
+    float d;
+    if (!(s_hint > s_begin && s_hint < s_end) || g.sample(o_vox + dir_vox * s_hint, d) != Cell::kOk || d >= 1.0f ||
+        d <= -1.0f) {
+        return marchRay(g, o_vox, dir_vox, s_begin, s_end, step_vox);
+    }
+    if (d > 0.0f) return marchRay(g, o_vox, dir_vox, s_hint, s_end, step_vox, true, s_hint, d);
+    float s_back = s_hint, d_back = d;
+    for (;;) {
+        const float s = s_back - std::max(1.0f, std::min(step_vox, -d_back * free_step_per_d));
+        if (s < s_begin) return marchRay(g, o_vox, dir_vox, s_begin, s_end, step_vox);
+        float d_front;
+        if (g.sample(o_vox + dir_vox * s, d_front) != Cell::kOk)
+            return marchRay(g, o_vox, dir_vox, s_begin, s_end, step_vox);
+        if (d_front > 0.0f) return refineCrossing(g, o_vox, dir_vox, s, d_front, s_back, d_back);
+        s_back = s;
+        d_back = d_front;
+    }
 }
 
 // The unit surface normal at p_vox (eq. 4.30); false where the gradient is unavailable or zero.
@@ -128,6 +159,7 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
                 float s0, s1;                                           // voxel units along dir_vox
                 if (!clipToCube(o_vox, dir_vox, n_max, s0, s1)) continue;
                 float z_hint = hint ? hint[u] : 0.0f;
+                const bool measured = z_hint > 0.0f;
                 float widen_m = 0.0f;
                 if (hint && !(z_hint > 0.0f)) {
                     // No measurement here (ROI margin, dropout, background inside the head box): the nearest
@@ -142,7 +174,9 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
                     s1 = std::min(s1, (z_hint + params_.search_after_hint_m + widen_m) * ray_len / vs);
                     if (!(s0 < s1)) continue;
                 }
-                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
+                const float s_hit = measured
+                                        ? marchFromHint(grid, o_vox, dir_vox, s0, z_hint * ray_len / vs, s1, step_vox)
+                                        : marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
                 if (s_hit < 0.0f) continue;
                 const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
                 Eigen::Vector3f n_world;
