@@ -31,6 +31,16 @@ struct Intrinsics {
         const float inv_z = 1.0f / p_camera.z();
         return {p_camera.x() * fx_px * inv_z + cx_px, p_camera.y() * fy_px * inv_z + cy_px};
     }
+    // The pixel whose centre is nearest to the sub-pixel position px (std::lround's result), false when that is off
+    // the image (NaN included). Without lround, a libm call: per-point loops use this.
+    bool nearestPixel(const Eigen::Vector2f& px, int& u_px, int& v_px) const {
+        const float fu = px.x() + 0.5f, fv = px.y() + 0.5f;
+        if (!(fu >= 0.0f && fv >= 0.0f && fu < static_cast<float>(width_px) && fv < static_cast<float>(height_px)))
+            return false;
+        u_px = static_cast<int>(fu);
+        v_px = static_cast<int>(fv);
+        return true;
+    }
     // Thesis eq. 4.9: camera-frame point of pixel (u, v) at depth z (metres).
     Eigen::Vector3f backProject(float u_px, float v_px, float z_m) const {
         return {(u_px - cx_px) * z_m / fx_px, (v_px - cy_px) * z_m / fy_px, z_m};
