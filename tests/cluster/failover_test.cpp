@@ -61,6 +61,18 @@ std::vector<std::pair<std::string, Eigen::Vector3d>> readTrajectory(const fs::pa
     return out;
 }
 
+// A recording that survived one failover: every frame the agent sent was received and integrated (or rejected)
+// exactly once, none dropped, the integrated bytes are the agent's (digest), and the trajectory has a pose for each.
+void expectNoFrameLost(const Finished& got, const ClusterRig& rig, const fs::path& dir) {
+    EXPECT_EQ(got.received, kFrames) << got.summary;
+    EXPECT_EQ(got.integrated + got.rejected, kFrames) << got.summary;
+    EXPECT_GE(got.integrated, kFrames - 5) << got.summary;
+    EXPECT_EQ(got.dropped, 0);
+    EXPECT_EQ(got.failovers, 1);
+    EXPECT_EQ(got.digest, agentDigest(rig, "rec"));
+    EXPECT_EQ(readTrajectory(dir / "trajectory.txt").size(), static_cast<size_t>(got.integrated));
+}
+
 // Runs a recording to its end; the owner is killed once `kill_after` frames were sent (0: never) and, when
 // `replica` is given, once that replica file exists (on a loaded machine 30 frames can go before the first one).
 std::string recordAndMaybeKill(ClusterRig& rig, const std::string& session, int kill_after,
@@ -157,13 +169,7 @@ TEST(Failover, LoneServerKilledAndRestartedOnItsDataDirResumesWithoutLosingAFram
     rig.startServer("solo");  // the same id and data dir, as systemd restarts it
     ASSERT_EQ(rig.agent("rec").wait(120s), 0) << readText(rig.agentLog("rec"));
     const Finished got = finishedSession(dir);
-    EXPECT_EQ(got.received, kFrames) << got.summary;
-    EXPECT_EQ(got.integrated + got.rejected, kFrames) << got.summary;
-    EXPECT_GE(got.integrated, kFrames - 5) << got.summary;
-    EXPECT_EQ(got.dropped, 0);
-    EXPECT_EQ(got.failovers, 1);
-    EXPECT_EQ(got.digest, agentDigest(rig, "rec"));
-    EXPECT_EQ(readTrajectory(dir / "trajectory.txt").size(), static_cast<size_t>(got.integrated));
+    expectNoFrameLost(got, rig, dir);
     EXPECT_FALSE(fs::exists(dir / "replica.log")) << "a finished session keeps no replica";
     const std::string log = readText(rig.serverLog("solo").string() + ".2");
     EXPECT_NE(log.find("resuming"), std::string::npos) << log;
@@ -187,13 +193,7 @@ TEST(Failover, OwnerKilledBeforeItsFirstReplicaLosesNoFrame) {
         << readText(rig.serverLog(other));
     const fs::path dir = rig.dataDir(other) / "rec";
     const Finished got = finishedSession(dir);
-    EXPECT_EQ(got.received, kFrames) << got.summary;
-    EXPECT_EQ(got.integrated + got.rejected, kFrames) << got.summary;
-    EXPECT_GE(got.integrated, kFrames - 5) << got.summary;
-    EXPECT_EQ(got.dropped, 0);
-    EXPECT_EQ(got.failovers, 1);
-    EXPECT_EQ(got.digest, agentDigest(rig, "rec"));
-    EXPECT_EQ(readTrajectory(dir / "trajectory.txt").size(), static_cast<size_t>(got.integrated));
+    expectNoFrameLost(got, rig, dir);
 }
 
 TEST(Failover, LiveScanCarriesOnAfterATakeoverAndItsStatusReportsIt) {
