@@ -10,9 +10,6 @@
 namespace facescan::wire {
 namespace {
 
-std::string str(const char* s) { return s ? std::string(s) : std::string(); }
-char* view(const std::string& s) { return const_cast<char*>(s.c_str()); }
-
 constexpr size_t kMaxHostChars = 255;
 constexpr size_t kMaxSoftwareChars = 64;
 constexpr uint32_t kMaxSessions = 1024;  // an announced capacity above this is not believed
@@ -39,8 +36,8 @@ Status validateServerId(const std::string& server_id) { return validateId("serve
 
 facescan_wire_ServerAnnounce toMessage(const ServerAnnounceData& a) {
     facescan_wire_ServerAnnounce m{};
-    m.server_id = view(a.server_id);
-    m.host = view(a.host);
+    m.server_id = stringView(a.server_id);
+    m.host = stringView(a.host);
     m.pid = a.pid;
     m.protocol_version = a.protocol_version;
     m.incarnation = a.incarnation;
@@ -50,16 +47,16 @@ facescan_wire_ServerAnnounce toMessage(const ServerAnnounceData& a) {
     m.standby_sessions = a.standby_sessions;
     m.cpu_load = a.cpu_load;
     m.joining = a.joining;
-    m.software = view(a.software);
+    m.software = stringView(a.software);
     return m;
 }
 
 StatusOr<ServerAnnounceData> fromMessage(const facescan_wire_ServerAnnounce& m) {
     ServerAnnounceData a;
-    a.server_id = str(m.server_id);
+    a.server_id = fromDds(m.server_id);
     RETURN_IF_ERROR(validateServerId(a.server_id));
-    a.host = str(m.host);
-    a.software = str(m.software);
+    a.host = fromDds(m.host);
+    a.software = fromDds(m.software);
     if (a.host.size() > kMaxHostChars || a.software.size() > kMaxSoftwareChars) {
         return invalidArgument("announcement of '" + a.server_id + "': host or software name too long");
     }
@@ -97,9 +94,9 @@ const char* ownerStateName(OwnerState state) {
 
 facescan_wire_SessionOwner toMessage(const SessionOwnerData& o) {
     facescan_wire_SessionOwner m{};
-    m.session_id = view(o.session_id);
-    m.owner_id = view(o.owner_id);
-    m.standby_id = view(o.standby_id);
+    m.session_id = stringView(o.session_id);
+    m.owner_id = stringView(o.owner_id);
+    m.standby_id = stringView(o.standby_id);
     m.epoch = o.epoch;
     m.state = static_cast<facescan_wire_OwnerState>(o.state);
     m.resume_seq = o.resume_seq;
@@ -113,11 +110,11 @@ facescan_wire_SessionOwner toMessage(const SessionOwnerData& o) {
 
 StatusOr<SessionOwnerData> fromMessage(const facescan_wire_SessionOwner& m) {
     SessionOwnerData o;
-    o.session_id = str(m.session_id);
+    o.session_id = fromDds(m.session_id);
     RETURN_IF_ERROR(validateSessionId(o.session_id));
-    o.owner_id = str(m.owner_id);
+    o.owner_id = fromDds(m.owner_id);
     RETURN_IF_ERROR(validateServerId(o.owner_id));
-    o.standby_id = str(m.standby_id);
+    o.standby_id = fromDds(m.standby_id);
     if (!o.standby_id.empty()) RETURN_IF_ERROR(validateServerId(o.standby_id));
     if (m.epoch == 0 || m.epoch > 0x7fff) return invalidArgument("owner of '" + o.session_id + "': bad epoch");
     // Read as the 32 bits that arrived: a value outside the enum must be refused, not loaded as the enum type.
