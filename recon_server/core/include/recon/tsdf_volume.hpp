@@ -223,6 +223,7 @@ class TsdfVolume {
     std::vector<int32_t> touched_;            // pool indices of the blocks touched this frame
     cv::Mat pixel_range_weight_;  // CV_32FC2 per pixel: distance (metres) to the measured surface along its ray,
                                   // and the Algorithm 3 weight of its measurement (0 = unusable)
+    cv::Mat colour_copy_;         // a non-continuous colour image, made continuous (never for a camera's own)
 };
 
 }  // namespace facescan::recon
