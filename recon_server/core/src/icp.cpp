@@ -83,7 +83,7 @@ bool centroidAlignment(const SurfaceLevel& source, const SurfaceLevel& target_wo
 Icp::Icp(const IcpParams& p) : params_(p), partial_(kStripes) {}
 
 TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& model_world, const Pose& T_world_model,
-                          const Pose& prediction, Pose& T_world_camera) {
+                          const Pose& prediction, Pose& T_world_camera, float motion_scale) {
     TrackingResult result;
     result.T_world_camera = T_world_camera;
     const int levels = std::min({params_.levels, source.count, model_world.count});
@@ -227,7 +227,9 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
         return result;
     }
     const Pose delta = prediction.inverse() * estimate;
-    if (delta.translation().norm() > params_.max_translation_m || rotationDeg(delta) > params_.max_rotation_deg) {
+    const float scale = std::max(1.0f, motion_scale);
+    if (delta.translation().norm() > scale * params_.max_translation_m ||
+        rotationDeg(delta) > scale * params_.max_rotation_deg) {
         result.status = TrackingStatus::kLargeMotion;
         return result;
     }

@@ -60,6 +60,8 @@ Status ReacquireParams::validate() const {
     if (!(agree_m > 0.0f && conflict_m > agree_m)) return invalidArgument("reacquire needs 0 < agree_m < conflict_m");
     if (!(min_agree_share > 0.0f && min_agree_share <= 1.0f && max_conflict_share >= 0.0f && max_rmse_m > 0.0f))
         return invalidArgument("reacquire verification thresholds out of range");
+    if (!(min_covered_share > 0.0f && min_covered_share <= 1.0f))
+        return invalidArgument("reacquire min_covered_share must be in (0, 1]");
     return Status::ok();
 }
 
@@ -88,6 +90,13 @@ PoseCheck Reacquirer::verify(const VoxelBlockGrid& grid, const SurfacePyramid& f
 
 bool Reacquirer::accepts(const PoseCheck& c) const {
     return c.measured > 0 && c.agreeShare() >= params_.min_agree_share &&
+           c.conflictShare() <= params_.max_conflict_share && c.rmse_m <= params_.max_rmse_m;
+}
+
+bool Reacquirer::acceptsNewView(const PoseCheck& c) const {
+    return c.measured > 0 &&
+           static_cast<float>(c.associated) >= params_.min_covered_share * static_cast<float>(c.measured) &&
+           static_cast<float>(c.agreeing) >= params_.min_agree_share * static_cast<float>(c.associated) &&
            c.conflictShare() <= params_.max_conflict_share && c.rmse_m <= params_.max_rmse_m;
 }
 

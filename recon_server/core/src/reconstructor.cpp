@@ -1,6 +1,7 @@
 #include "recon/reconstructor.hpp"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -54,6 +55,8 @@ Status ReconParams::validate() const {
     if (!(min_visible_share >= 0.0f && resume_visible_share >= min_visible_share && resume_visible_share <= 1.0f))
         return invalidArgument("need 0 <= min_visible_share <= resume_visible_share <= 1");
     if (min_head_pixels < 1) return invalidArgument("min_head_pixels must be >= 1");
+    if (!(source_fps >= 0.0f && max_motion_scale >= 1.0f))
+        return invalidArgument("source_fps must be >= 0 and max_motion_scale >= 1");
     if (roi_margin_px < 0) return invalidArgument("roi_margin_px must be >= 0");
     return Status::ok();
 }
@@ -118,6 +121,13 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     result.ms.filter = watch.lapMs();
     if (valid < params_.min_head_pixels) return reject(TrackingStatus::kNoHead, "too few valid head pixels");
 
+    // A model of one fused frame that lost the head for good starts over from this frame: re-acquisition cannot
+    // verify a fit against one view once the head has turned away from it (most of what the frame shows is new),
+    // so such a session would stay lost; one frame of model is all that is given up.
+    if (have_model_ && frames_integrated_ == 1 && consecutive_failures_ >= params_.icp.max_failures_before_reacquire) {
+        reset();
+        result.restarted = true;
+    }
     if (!have_model_) {
         // The first frame defines the reference orientation (thesis 4.1): world = this camera.
         if (!volume_.placed() && !volume_.place(frame_.levels[0]))
@@ -154,7 +164,7 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
             return result;
         }
         Pose estimate = T_world_camera_;
-        if (!registerFrame(valid, result, estimate)) {
+        if (!registerFrame(valid, motionScale(frame.timestamp_ns), result, estimate)) {
             const char* why = "registration failed";
             switch (result.tracking.status) {
                 case TrackingStatus::kNotEnoughPoints: why = "too few correspondences with the model"; break;
@@ -217,7 +227,19 @@ bool Reconstructor::headMostlyHidden(int visible) {
     return true;
 }
 
-bool Reconstructor::registerFrame(int valid, FrameResult& result, Pose& estimate) {
+float Reconstructor::motionScale(int64_t timestamp_ns) const {
+    if (params_.source_fps <= 0.0f || trajectory_.empty()) return 1.0f;
+    const double periods = static_cast<double>(timestamp_ns - trajectory_.back().first) * 1e-9 * params_.source_fps;
+    return std::clamp(static_cast<float>(periods), 1.0f, params_.max_motion_scale);
+}
+
+bool Reconstructor::beyondFrameLimits(const Pose& estimate) const {
+    const Pose delta = T_world_camera_.inverse() * estimate;
+    const float rotation_deg = Eigen::AngleAxisf(delta.linear()).angle() * static_cast<float>(180.0 / M_PI);
+    return delta.translation().norm() > params_.icp.max_translation_m || rotation_deg > params_.icp.max_rotation_deg;
+}
+
+bool Reconstructor::registerFrame(int valid, float motion_scale, FrameResult& result, Pose& estimate) {
     // Registration against the ray-cast model (thesis 4.1.3, frame-to-model). The prediction is the last pose, as
     // in the thesis. A constant-velocity prediction was tried and made tracking unstable on the synthetic head: it
     // re-applies the error along the head's weakly constrained (sliding) direction every frame, and the error grew
@@ -228,7 +250,7 @@ bool Reconstructor::registerFrame(int valid, FrameResult& result, Pose& estimate
         centroidAlignment(frame_.levels[0], model_.levels[0], estimate);
     }
     // Motion limits are measured from the last good pose, not from the centroid-shifted start.
-    result.tracking = icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate);
+    result.tracking = icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate, motion_scale);
     if (!params_.reacquire.enabled) return result.tracking.ok();
     if (consecutive_failures_ > 0 || verify_next_) {
         // After a loss (or hidden frames) nothing is fused before a fit is verified: the plain fit, else the best
@@ -241,7 +263,16 @@ bool Reconstructor::registerFrame(int valid, FrameResult& result, Pose& estimate
         if (icp_ok || result.hypotheses > 0) result.tracking.status = TrackingStatus::kUnverified;
         return false;
     }
-    if (result.tracking.ok()) return true;
+    if (result.tracking.ok()) {
+        // Frames were skipped (motion_scale > 1) and the fit moved further than one frame allows: fused only once
+        // verified, so wider limits never fuse a wrong fit. The right one passes even against a single fused
+        // frame (TracksAFrameElevenFramesAfterTheOnlyFusedOne).
+        if (motion_scale <= 1.0f || !beyondFrameLimits(estimate)) return true;
+        result.verified = true;
+        result.check = reacquirer_.verify(volume_.grid(), frame_, estimate);
+        if (reacquirer_.acceptsNewView(result.check)) return true;
+        result.tracking.status = TrackingStatus::kUnverified;
+    }
     // The first failed frame: the head may have turned fast. One search, bounded like any other.
     const TrackingStatus failed = result.tracking.status;
     if (reacquire(false, estimate, valid, result)) {
@@ -267,6 +298,14 @@ bool Reconstructor::reacquire(bool icp_ok, const Pose& icp_estimate, int valid_p
             return true;
         }
     }
+    // Lost for good and told to search less often (setSearchEvery: the server is behind): the frames between
+    // searches try the plain fit only, so a lost session does not take the cores from the others.
+    if (consecutive_failures_ >= params_.icp.max_failures_before_reacquire && ++frames_since_search_ < search_every_) {
+        result.search_deferred = true;
+        result.reacquire_ms = watch.elapsedMs();
+        return false;
+    }
+    frames_since_search_ = 0;
     const ReacquireResult found = reacquirer_.search(volume_.grid(), frame_, T_world_camera_, region_);
     result.hypotheses = found.hypotheses;
     if (found.refined > 0) {
@@ -341,6 +380,7 @@ void Reconstructor::reset() {
     have_model_ = false;
     visible_ref_px_ = 0.0f;
     verify_next_ = false;
+    frames_since_search_ = 0;
     frames_integrated_ = 0;
     consecutive_failures_ = 0;
     region_ = HeadRegion{};

@@ -146,7 +146,9 @@ Status Session::start(const wire::CameraInfoData& camera, const wire::ReplicaDat
     }
     lk.unlock();
     // Built outside the lock: loading the cascade and reserving the volume take a moment.
-    auto recon = std::make_shared<recon::Reconstructor>(camera.intrinsics, params_.recon);
+    recon::ReconParams recon_params = params_.recon;  // ICP's motion limits are per frame of this source
+    if (camera.rate_hz > 0.0f) recon_params.source_fps = camera.rate_hz;
+    auto recon = std::make_shared<recon::Reconstructor>(camera.intrinsics, recon_params);
     if (!recon->initStatus().isOk()) return recon->initStatus();
     if (replica) RETURN_IF_ERROR(recon->restoreState(replica->state));
     auto pipeline = recon::FacePipeline::create(params_.face, camera.intrinsics,
@@ -334,6 +336,7 @@ void Session::workerLoop() {
         load_->beginFrame();
         processFrame(working_);
         load_->endFrame();
+        recon_->setSearchEvery(load_->searchEvery());  // a lost session over budget searches less often
         noteLoad();
         copySnapshotIfAsked();
         lk.lock();
@@ -385,6 +388,7 @@ void Session::processFrame(PendingFrame& pending) {
         ++stats_.frames_integrated;
         stats_.state = SessionState::kScanning;
         stats_.detail = detail(head.depth_only ? "face found (depth only)" : "face found");
+        if (r.restarted) trajectory_.clear();  // a model of one frame restarted: world = this frame's camera
         if (!recon_->trajectory().empty()) trajectory_.push_back(recon_->trajectory().back());
         last_pose_ = recon_->lastPose();
         if (takeover_from_ns_ != 0) noteFirstFrameAfterTakeover(pending.seq, now);

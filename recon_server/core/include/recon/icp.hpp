@@ -67,9 +67,11 @@ class Icp {
     explicit Icp(const IcpParams& p);
 
     // T_world_camera: in, the initial guess; out, the estimate when status is kTracked (left unchanged otherwise,
-    // and returned in the result either way). `prediction` is what the motion limits are measured against.
+    // and returned in the result either way). `prediction` is what the motion limits are measured against;
+    // motion_scale (>= 1) multiplies them: the limits are per frame, and a frame may come several frames after the
+    // prediction's (a live server skips frames when it is behind).
     TrackingResult align(const SurfacePyramid& source, const SurfacePyramid& model_world, const Pose& T_world_model,
-                         const Pose& prediction, Pose& T_world_camera);
+                         const Pose& prediction, Pose& T_world_camera, float motion_scale = 1.0f);
 
     const IcpParams& params() const { return params_; }
 

@@ -40,6 +40,10 @@ struct ReacquireParams {
     float min_agree_share = 0.65f;     // ratio of measured points that must be inliers
     float max_conflict_share = 0.05f;  // ratio of associated points allowed to contradict free space
     float max_rmse_m = 0.0015f;        // metres; RMS distance of the inliers
+    // A fit after skipped frames (acceptsNewView): the frame may show surface the model has not seen yet (a model of
+    // one frame covered 60 % of a frame 9.6 deg later), so the inlier share counts over the points the model has a
+    // surface for, of which there must be at least this share of the measured points.
+    float min_covered_share = 0.5f;  // ratio
     Status validate() const;
 };
 
@@ -67,6 +71,10 @@ class Reacquirer {
     // Verifies one pose: casts the model from it at level 1 around the frame's depth and checks agreement.
     PoseCheck verify(const VoxelBlockGrid& grid, const SurfacePyramid& frame, const Pose& T_world_camera);
     bool accepts(const PoseCheck& check) const;
+    // The same thresholds for a tracked fit that moved further than one frame allows because frames were skipped:
+    // agreement over the points the model covers (min_covered_share of them at least), as the model may not have
+    // seen all the frame shows yet.
+    bool acceptsNewView(const PoseCheck& check) const;
 
     const ReacquireParams& params() const { return params_; }
 

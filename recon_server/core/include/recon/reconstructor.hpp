@@ -51,6 +51,12 @@ struct ReconParams {
     // trust the pose for fusion.
     float min_visible_share = 0.5f;     // ratio
     float resume_visible_share = 0.8f;  // ratio; after such frames, fusion resumes only above this share
+    // ICP's motion limits hold per frame of a source at source_fps. A frame that comes n frame periods after the
+    // last tracked one (its timestamp says so: a live server that is behind skips frames) may have moved n times as
+    // far, up to max_motion_scale times; a fit beyond the one-frame limits is fused only once verified (the
+    // re-acquisition's check).
+    float source_fps = 30.0f;       // frames per second; 0 = every frame counts as the next one
+    float max_motion_scale = 4.0f;  // ratio
 
     // Meyer's values (DESIGN.md section 1): 256^3 voxels over 0.386 m, mu 5 mm, W max 256, bilateral 1 px / 50 mm,
     // 3 levels, ICP 20/15/10 iterations, gates 50-200 mm and 30-45 deg, re-acquire after 5 failed frames.
@@ -74,6 +80,9 @@ struct FrameResult {
                                    // good pose with centroid pre-alignment (eq. 4.11), never by starting over
     int consecutive_failures = 0;  // count; rejected frames in a row, this one included
     bool reacquired = false;       // after a loss: the pose came from the hypothesis search (and was verified)
+    bool search_deferred = false;  // lost, and searches are rationed (setSearchEvery): only the plain fit was tried
+    bool restarted = false;        // a model of one frame had lost the head: the scan started over from this frame
+                                   // (world = this camera; the trajectory holds this frame only)
     bool verified = false;         // after a loss: the fit was verified before fusing (check holds the figures)
     PoseCheck check;               // the verification's figures (the winner's, or the best rejected fit's)
     int hypotheses = 0;            // count; re-acquisition hypotheses tried this frame
@@ -137,6 +146,10 @@ class Reconstructor {
     // Where the head can be (world frame), fixed at the first frame; invalid before it.
     const HeadRegion& headRegion() const { return region_; }
     int consecutiveFailures() const { return consecutive_failures_; }
+    // While lost, run the hypothesis search (~20 casts and fits, tens of ms) on one frame in `frames` only; the
+    // others try the plain fit from the last good pose and its verification. 1 (the default) = every frame. A
+    // server that is behind rations a lost session's searches so it does not starve the others (frame thread).
+    void setSearchEvery(int frames) { search_every_ = frames < 1 ? 1 : frames; }
     // Verifies a pose for the current frame as re-acquisition does (for tests and diagnostics): run after a
     // processFrame of that frame, which leaves the filtered frame in place.
     PoseCheck verifyPose(const Pose& T_world_camera);
@@ -153,7 +166,12 @@ class Reconstructor {
     bool headMostlyHidden(int visible_px);
     // ICP from `estimate` (in: the start, out: the fit), with verification and search after a loss; false with
     // result.tracking.status saying why.
-    bool registerFrame(int valid_px, FrameResult& result, Pose& estimate);
+    bool registerFrame(int valid_px, float motion_scale, FrameResult& result, Pose& estimate);
+    // How many frame periods (at least 1, at most max_motion_scale) lie between the last tracked frame and one
+    // taken at timestamp_ns.
+    float motionScale(int64_t timestamp_ns) const;
+    // True when `estimate` moved from the last tracked pose by more than ICP's one-frame limits.
+    bool beyondFrameLimits(const Pose& estimate) const;
     // After a loss: verify a plain ICP fit, else search hypotheses; true with T_world_camera_ set when verified.
     bool reacquire(bool icp_ok, const Pose& icp_estimate, int valid_px, FrameResult& result);
 
@@ -177,6 +195,8 @@ class Reconstructor {
     HeadRegion region_;            // fixed at the first frame (part of the scan's state, like the volume and the pose)
     float visible_ref_px_ = 0.0f;  // running mean of the head's pixels (pyramid level 2) over fused frames
     bool verify_next_ = false;     // a mostly hidden frame was not fused: verify the next fit before fusing
+    int search_every_ = 1;         // count; setSearchEvery
+    int frames_since_search_ = 0;  // count; lost frames since the last hypothesis search
     std::vector<std::pair<int64_t, Pose>> trajectory_;
     mutable std::mutex volume_mutex_;  // guards volume_ between processFrame and snapshot/preview callers
 };

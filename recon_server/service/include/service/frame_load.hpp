@@ -20,6 +20,9 @@ class FrameLoad {
     static constexpr int kThrottledNice = 5;         // CFS weight 335 against 1024 at nice 0: about a quarter
     static constexpr float kReleaseFraction = 0.7f;  // of the budget: hysteresis, so a session does not flap
     static constexpr float kEmaAlpha = 0.2f;         // ~5 frames: one noise frame is enough to react to
+    // A throttled session that lost tracking runs its hypothesis search (tens of ms) on one frame in this many
+    // (recon::Reconstructor::setSearchEvery); the frames between try the cheap plain fit only.
+    static constexpr int kThrottledSearchEvery = 4;
 
     // source_rate_hz: the frame rate the session's source delivers (CameraInfo).
     explicit FrameLoad(float source_rate_hz);
@@ -37,6 +40,7 @@ class FrameLoad {
     void endFrame();
 
     bool throttled() const { return throttled_; }
+    int searchEvery() const { return throttled_ ? kThrottledSearchEvery : 1; }
     float costMs() const { return cost_ms_; }  // CPU a frame, recent average
     float budgetMs() const;                    // CPU a frame this session may use now
     static int runningWorkers();               // sessions with a worker (joined and not left)
