@@ -177,6 +177,60 @@ TEST_F(SphereTest, RaycastNormalsAreRadial) {
     EXPECT_LT(max_radial, 0.5 * volume_->params().voxelSizeM());  // eq. 4.28 interpolated crossing
 }
 
+// gradient() gathers the 32 voxels of p's cell and the cross around it once and interpolates the grid's central
+// differences; that must be exactly the central differences of six trilinear samples one voxel apart (eq. 4.30,
+// the formula it replaced), with the same validity, near the surface (block edges included) and at the cube's
+// border.
+TEST_F(SphereTest, GradientEqualsCentralDifferencesOfSixTrilinearSamples) {
+    const VoxelBlockGrid& g = volume_->grid();
+    const auto six_samples = [&](const Eigen::Vector3f& p, Eigen::Vector3f& grad) {
+        for (int a = 0; a < 3; ++a) {
+            Eigen::Vector3f lo = p, hi = p;
+            lo[a] -= 1.0f;
+            hi[a] += 1.0f;
+            float f_lo, f_hi;
+            if (g.sample(lo, f_lo) != VoxelBlockGrid::Cell::kOk || g.sample(hi, f_hi) != VoxelBlockGrid::Cell::kOk)
+                return false;
+            grad[a] = f_hi - f_lo;
+        }
+        return true;
+    };
+    std::mt19937 rng(16);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    const float mu = volume_->params().trunc_dist_m;
+    const float n = static_cast<float>(g.resolution_vox);
+    int valid = 0, compared = 0;
+    double max_diff = 0.0;
+    for (int i = 0; i < 200000; ++i) {
+        Eigen::Vector3f p_vox;
+        if (i % 4 != 3) {
+            // Within 1.5 mu of the sphere, where the ray caster takes its normals.
+            const Eigen::Vector3f dir = Eigen::Vector3f(unit(rng), unit(rng), unit(rng)).normalized();
+            p_vox = g.toVoxel(centre_ + dir * (radius_ + 1.5f * mu * unit(rng)));
+        } else {
+            // Anywhere in and just around the cube: empty blocks and the border.
+            p_vox =
+                Eigen::Vector3f(unit(rng), unit(rng), unit(rng)).cwiseProduct(Eigen::Vector3f::Constant(0.52f * n)) +
+                Eigen::Vector3f::Constant(0.5f * n);
+        }
+        Eigen::Vector3f want = Eigen::Vector3f::Zero(), got = Eigen::Vector3f::Zero();
+        const bool want_ok = six_samples(p_vox, want), got_ok = g.gradient(p_vox, got);
+        ASSERT_EQ(want_ok, got_ok) << "at voxel " << p_vox.transpose();
+        ++compared;
+        if (!want_ok) continue;
+        ++valid;
+        max_diff = std::max(max_diff, static_cast<double>((want - got).cwiseAbs().maxCoeff()));
+    }
+    EXPECT_GT(valid, 50000) << "of " << compared;
+    // Float rounding only: p -+ 1 is rounded before its fraction is taken (D is in units of mu, |D| <= 1).
+    EXPECT_LT(max_diff, 1e-5);
+    // The cube's border: a gradient needs voxels c0 - 1 .. c0 + 2 inside it.
+    Eigen::Vector3f unused;
+    EXPECT_FALSE(g.gradient(Eigen::Vector3f(0.5f, 64.0f, 64.0f), unused));
+    EXPECT_FALSE(g.gradient(Eigen::Vector3f(64.0f, n - 2.5f, 64.0f), unused));
+    EXPECT_FALSE(g.gradient(Eigen::Vector3f(64.0f, 64.0f, std::numeric_limits<float>::quiet_NaN()), unused));
+}
+
 TEST_F(SphereTest, MarchingCubesIsClosedGenusZeroAndOnTheSphere) {
     const Mesh mesh = extractMesh(volume_->grid(), MeshParams{});
     ASSERT_GT(mesh.n_faces(), 1000u);

@@ -111,13 +111,38 @@ bool surfaceNormal(const VoxelBlockGrid& g, const Eigen::Vector3f& p_vox, Eigen:
     return true;
 }
 
-// Depth of the nearest pixel of a hint row with a measurement, within `radius` pixels of u; 0 when none.
-float nearestHint(const float* hint, int u, int u_begin, int u_end, int radius) {
-    for (int r = 1; r <= radius; ++r) {
-        if (u - r >= u_begin && hint[u - r] > 0.0f) return hint[u - r];
-        if (u + r < u_end && hint[u + r] > 0.0f) return hint[u + r];
+// The nearest measured pixel of one hint row within `radius` of each pixel, for a left-to-right scan: amortised
+// O(row) instead of up to 2 * radius reads per pixel without a measurement. Ties go left.
+class RowHints {
+ public:
+    RowHints(const float* hint, int u_begin, int u_end, int radius)
+        : hint_(hint), u_end_(u_end), radius_(radius), left_(u_begin - radius - 1), right_(u_begin) {}
+    // Call for u = u_begin, u_begin + 1, ... in order; the depth of the nearest measured pixel other than u, 0
+    // when none lies within the radius.
+    float nearest(int u) {
+        if (right_ <= u) {
+            right_ = u + 1;
+            while (right_ < u_end_ && !(hint_[right_] > 0.0f)) ++right_;
+        }
+        const int d_left = u - left_, d_right = right_ - u;
+        if (d_left <= radius_ && d_left <= d_right) return hint_[left_];
+        if (right_ < u_end_ && d_right <= radius_) return hint_[right_];
+        return 0.0f;
     }
-    return 0.0f;
+    // Call after pixel u: it is measured.
+    void measured(int u) { left_ = u; }
+
+ private:
+    const float* hint_;
+    int u_end_, radius_;
+    int left_;   // the last measured pixel before the current one (far left: none)
+    int right_;  // the first measured pixel after the current one, u_end_ when none
+};
+
+// Whether the voxel-space point lies in the cube of voxel centres [0, n_max]^3.
+bool insideCube(const Eigen::Vector3f& p_vox, float n_max) {
+    return p_vox.x() >= 0.0f && p_vox.y() >= 0.0f && p_vox.z() >= 0.0f && p_vox.x() <= n_max && p_vox.y() <= n_max &&
+           p_vox.z() <= n_max;
 }
 
 }  // namespace
@@ -146,33 +171,49 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
     const Eigen::Matrix3f r = T_world_camera.linear();
     const Eigen::Vector3f o_vox = grid.toVoxel(T_world_camera.translation());
     const bool have_hint = !depth_hint_m.empty();
+    const int u_begin = roi.x, u_end = roi.x + roi.width;
     parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
         for (int v = v_lo; v < v_hi; ++v) {
             auto* vert = out.vertex.ptr<cv::Vec3f>(v);
             auto* norm = out.normal.ptr<cv::Vec3f>(v);
+            std::fill(vert + u_begin, vert + u_end, cv::Vec3f(kNaN, kNaN, kNaN));
+            std::fill(norm + u_begin, norm + u_end, cv::Vec3f(kNaN, kNaN, kNaN));
             const float* hint = have_hint ? depth_hint_m.ptr<float>(v) : nullptr;
-            for (int u = roi.x; u < roi.x + roi.width; ++u) {
-                vert[u] = norm[u] = cv::Vec3f(kNaN, kNaN, kNaN);
-                const Eigen::Vector3f ray_cam = k.ray(static_cast<float>(u), static_cast<float>(v));
-                const float ray_len = ray_cam.norm();                   // metres along the ray per metre of depth
-                const Eigen::Vector3f dir_vox = r * ray_cam / ray_len;  // unit direction; voxel units per vs
-                float s0, s1;                                           // voxel units along dir_vox
-                if (!clipToCube(o_vox, dir_vox, n_max, s0, s1)) continue;
+            RowHints row_hints(hint, u_begin, u_end, params_.hint_search_px);
+            const float ray_y = k.ray(0.0f, static_cast<float>(v)).y();
+            for (int u = u_begin; u < u_end; ++u) {
                 float z_hint = hint ? hint[u] : 0.0f;
                 const bool measured = z_hint > 0.0f;
                 float widen_m = 0.0f;
-                if (hint && !(z_hint > 0.0f)) {
+                if (hint && measured) row_hints.measured(u);
+                if (hint && !measured) {
                     // No measurement here (ROI margin, dropout, background inside the head box): the nearest
                     // measured pixel of the row, with a wider window, says where the head can be. Without one the
-                    // ray is skipped: marching the whole cube for background pixels cost most of the ray cast.
-                    z_hint = nearestHint(hint, u, roi.x, roi.x + roi.width, params_.hint_search_px);
+                    // ray is skipped, before any of its set-up: marching the whole cube for background pixels
+                    // cost most of the ray cast.
+                    z_hint = row_hints.nearest(u);
                     widen_m = params_.hint_widen_m;
                     if (!(z_hint > 0.0f) && !params_.march_without_hint) continue;
                 }
+                const Eigen::Vector3f ray_cam(k.ray(static_cast<float>(u), 0.0f).x(), ray_y, 1.0f);
+                const float ray_len = ray_cam.norm();                   // metres along the ray per metre of depth
+                const Eigen::Vector3f dir_vox = r * ray_cam / ray_len;  // unit direction; voxel units per vs
+                float s0, s1;                                           // voxel units along dir_vox
                 if (z_hint > 0.0f) {
-                    s0 = std::max(s0, (z_hint - params_.start_before_hint_m - widen_m) * ray_len / vs);
-                    s1 = std::min(s1, (z_hint + params_.search_after_hint_m + widen_m) * ray_len / vs);
+                    // The hint's window; clipped to the cube only where it leaves it (rarely: the cube holds the
+                    // head), which is what clipping first and intersecting gave.
+                    s0 = (z_hint - params_.start_before_hint_m - widen_m) * ray_len / vs;
+                    s1 = (z_hint + params_.search_after_hint_m + widen_m) * ray_len / vs;
+                    if (!(s0 >= 0.0f && insideCube(o_vox + dir_vox * s0, n_max) &&
+                          insideCube(o_vox + dir_vox * s1, n_max))) {
+                        float c0, c1;
+                        if (!clipToCube(o_vox, dir_vox, n_max, c0, c1)) continue;
+                        s0 = std::max(s0, c0);
+                        s1 = std::min(s1, c1);
+                    }
                     if (!(s0 < s1)) continue;
+                } else if (!clipToCube(o_vox, dir_vox, n_max, s0, s1)) {
+                    continue;
                 }
                 const float s_hit = measured
                                         ? marchFromHint(grid, o_vox, dir_vox, s0, z_hint * ray_len / vs, s1, step_vox)
