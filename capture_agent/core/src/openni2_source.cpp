@@ -17,6 +17,7 @@
 #include <mutex>
 #include <opencv2/imgproc.hpp>
 #include <sstream>
+#include <thread>
 
 #include "capture/frame_source.hpp"
 
@@ -32,6 +33,9 @@ constexpr auto kLiveSilenceLimit = std::chrono::milliseconds(1000);
 constexpr auto kLiveFirstFrameLimit = std::chrono::milliseconds(5000);
 // A recording's player answers a manual trigger at once; this long without the next record means it is corrupt.
 constexpr auto kFileSilenceLimit = std::chrono::milliseconds(3000);
+// Between stopping a recording's streams and destroying them: several of the file player's 10 ms idle sleeps (see
+// close()).
+constexpr auto kPlayerSettle = std::chrono::milliseconds(50);
 // Colour reads per depth frame while looking for the matching colour (synced pairs need one).
 constexpr int kMaxColourReads = 4;
 
@@ -440,14 +444,17 @@ StatusOr<bool> OpenNi2Source::next(CapturedFrame& out) {
 
 void OpenNi2Source::close() {
     latest_colour_.release();
-    if (depth_.isValid()) {
-        depth_.stop();
-        depth_.destroy();
-    }
-    if (colour_.isValid()) {
-        colour_.stop();
-        colour_.destroy();
-    }
+    // Both streams stop before either is destroyed. OpenNI 2.2's file player (libOniFile PlayerDevice::MainLoop)
+    // walks its stream list without its lock, spinning at end of file while a stream is started, and
+    // destroyStream unlinks and frees a stream without the lock either: destroying under the spin crashed about
+    // one playback in eight on a loaded machine. With every stream stopped the loop only looks at the list once
+    // per 10 ms sleep, so after a pause of a few of those the destroy cannot meet it mid-walk (upstream bug; its
+    // close() joins the thread, but only after the streams are gone).
+    if (depth_.isValid()) depth_.stop();
+    if (colour_.isValid()) colour_.stop();
+    if (is_file_ && (depth_.isValid() || colour_.isValid())) std::this_thread::sleep_for(kPlayerSettle);
+    if (depth_.isValid()) depth_.destroy();
+    if (colour_.isValid()) colour_.destroy();
     has_colour_stream_ = false;
     playback_ = nullptr;
     if (device_.isValid()) device_.close();
