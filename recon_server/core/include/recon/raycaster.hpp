@@ -19,9 +19,13 @@ struct RaycastParams {
                                         // estimated: the model is within noise of it), rays start this far in
                                         // front of it...
     float search_after_hint_m = 0.03f;  // metres; ...and give up this far behind it
-    int hint_search_px = 12;            // pixels; a ROI pixel without a hint borrows the nearest one of its row
-                                        // within this distance (covers the ROI margin and dropouts)...
-    float hint_widen_m = 0.03f;         // metres; ...with the search window widened by this on both sides
+    int hint_search_px = 4;             // pixels; a ROI pixel without a hint borrows the nearest one of its row
+                                        // within this distance (covers the silhouette's motion to the next
+                                        // frame and dropouts)...
+    float hint_widen_m = 0.015f;        // metres; ...with the search window widened by this on both sides.
+                                        // 12 px and 0.03 m marched 61 % of the samples for rays that mostly
+                                        // missed; 4 px and 0.015 m: ray cast -25 %, same accuracy and tracking
+                                        // in every synthetic scenario and on 7-Scenes (issue 16 note).
     bool march_without_hint = false;    // rays with no hint even then march the whole cube (empty blocks are
                                         // skipped half a block at a time); false = no surface there. Without
                                         // any hint image (empty depth_hint_m) rays always march the whole cube.
