@@ -246,8 +246,19 @@ Status getState(ByteReader& r, recon::ReconState& s) {
 
 uint64_t frameDigest(uint64_t digest, const uint8_t* depth, size_t depth_size, const uint8_t* colour,
                      size_t colour_size) {
-    for (size_t i = 0; i < depth_size; ++i) digest = (digest ^ depth[i]) * 1099511628211ull;
-    for (size_t i = 0; i < colour_size; ++i) digest = (digest ^ colour[i]) * 1099511628211ull;
+    constexpr uint64_t kPrime = 1099511628211ull;
+    auto mix = [&](const uint8_t* p, size_t n) {
+        size_t i = 0;
+        for (; i + 8 <= n; i += 8) {
+            uint64_t word = 0;
+            for (int b = 7; b >= 0; --b) word = word << 8 | p[i + static_cast<size_t>(b)];  // one load on x86/arm
+            digest = (digest ^ word) * kPrime;
+        }
+        for (; i < n; ++i) digest = (digest ^ p[i]) * kPrime;
+        digest = (digest ^ static_cast<uint64_t>(n)) * kPrime;  // where depth ends and colour begins
+    };
+    mix(depth, depth_size);
+    mix(colour, colour_size);
     return digest;
 }
 

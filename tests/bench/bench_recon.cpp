@@ -33,6 +33,7 @@
 #include "eval/observed_region.hpp"
 #include "eval/scenario_figures.hpp"
 #include "recon/face_pipeline.hpp"
+#include "recon/parallel.hpp"
 #include "recon/reconstructor.hpp"
 #include "recon/scan_step.hpp"
 #include "recon_input.hpp"
@@ -63,6 +64,10 @@ struct Options {
     // --mask none: every pixel of every frame (the core's empty mask), also for inputs that carry a head mask.
     bool no_mask = false;
     bool twin = false;  // --twin: also scan the scenario's twin without its event (scenario_figures.hpp)
+    // --serial: the recon core's parallel loops run on the loop's own thread (recon::setParallelSerial), as a busy
+    // server's sessions do: the per-stage times are then the serial CPU cost of a frame, without the pool's
+    // hand-offs (which on one core, e.g. under taskset, cost more than the small loops they share).
+    bool serial = false;
 };
 
 double peakRssMb() {
@@ -317,6 +322,8 @@ int runRecon(const std::vector<std::string>& args) {
             o.verbose = true;
         else if (a == "--twin")
             o.twin = o.gt_accuracy = true;
+        else if (a == "--serial")
+            o.serial = true;
         else if (a == "--volume-m")
             o.volume_m = std::stof(next());
         else if (a == "--trunc-m")
@@ -325,7 +332,8 @@ int runRecon(const std::vector<std::string>& args) {
             std::printf(
                 "usage: facescan-bench recon [--input SRC] [--frames N] [--preset face|fast] [--mesh OUT.ply]\n"
                 "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply] [--observed-tol-m M]\n"
-                "       [--volume-m M] [--trunc-m M] [--mask input|pipeline|none] [--twin] [--verbose] [--json]\n"
+                "       [--volume-m M] [--trunc-m M] [--mask input|pipeline|none] [--twin] [--serial] [--verbose]\n"
+                "       [--json]\n"
                 "SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR\n"
                 "Synthetic input also reports the robustness figures of issue 18 (tracked share, re-acquisition,\n"
                 "wrong poses, foreign surface). --twin (implies --gt-accuracy) also scans the same motion without the\n"
@@ -334,6 +342,8 @@ int runRecon(const std::vector<std::string>& args) {
                 "     instead of the input's mask (synthetic: the renderer's head label; tum/7scenes: none).\n"
                 "--mask none: fuse whole frames (the core's empty mask); refused when the first frame is much deeper\n"
                 "     than the volume (a head in front of a wall).\n"
+                "--serial: run the recon core's parallel loops on the loop's thread alone (as a loaded server's\n"
+                "     sessions do): the stage times are the serial CPU cost of a frame.\n"
                 "%s\n",
                 synth::syntheticOptionsHelp());
             return a == "--help" ? 0 : 2;
@@ -394,7 +404,9 @@ int runRecon(const std::vector<std::string>& args) {
     }
 
     const int n = static_cast<int>(seq.frames.size());
+    recon::setParallelSerial(o.serial);
     const LoopResult loop = runLoop(seq, rec, pipeline ? &*pipeline : nullptr, o.verbose);
+    recon::setParallelSerial(false);
     const std::vector<std::optional<Pose>>& estimate = loop.estimate;
     const recon::StageTimesMs& sum = loop.sum;
     const int rejected = loop.rejected, warmup = loop.warmup;
@@ -407,8 +419,8 @@ int runRecon(const std::vector<std::string>& args) {
     const double mesh_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tm).count();
     const double fps = n / loop_s;
 
-    std::printf("facescan-bench recon: %s, %d frames, preset %s, mask: %s\n", o.input.c_str(), n, o.preset.c_str(),
-                seq.mask_source.c_str());
+    std::printf("facescan-bench recon: %s, %d frames, preset %s, mask: %s%s\n", o.input.c_str(), n, o.preset.c_str(),
+                seq.mask_source.c_str(), o.serial ? "; serial (the core's loops on one thread)" : "");
     std::printf("volume %d^3 voxels of %.2f mm, %d blocks allocated (%.1f MB of voxels)\n", params.tsdf.resolution_vox,
                 1000.0 * params.tsdf.voxelSizeM(), rec.volume().grid().allocated_blocks,
                 rec.volume().grid().allocated_blocks * recon::kBlockVoxels * sizeof(recon::Voxel) / 1048576.0);

@@ -370,6 +370,35 @@ TEST(ServerSession, ASessionThatFallsBehindIsReportedAndDoesNotStallAnother) {
         status->frames_integrated, status->frames_skipped, status->latency_p95_ms);
 }
 
+// Issue 16: a live server that is behind skips frames, so the frame after the first one it fused may come many
+// frames later (behind a slow first frame: 7-11 frames, the head turned by up to ~10 deg). Here the agent sends
+// frame 0, then frame 11 on: every frame processed after the gap is tracked (the motion limits scale with the frame
+// periods between the source timestamps, at the CameraInfo's rate), where the session used to stay lost with a
+// model of one frame, searching every frame.
+TEST(ServerSession, ALiveSessionTracksOnWhenFramesAfterItsFirstWereSkipped) {
+    const uint32_t domain = privateDomain(18);
+    const ServerParams params = testParams(domain, "skipped");
+    Rig rig = makeRig(params);
+    ASSERT_TRUE(rig.server && rig.client);
+    auto agent = makeAgent(domain, "skip-1", /*every_frame=*/false);
+    ASSERT_TRUE(agent);
+    const EncodedSequence& seq = sequence();
+    ASSERT_TRUE(agent->sendFrame(0, seq.frames[0]).isOk());
+    ASSERT_TRUE(rig.client->waitForStatus(
+        "skip-1", [](const StatusCopy& s) { return s.frames_integrated == 1; }, 20s));
+    constexpr uint32_t kFirstAfterGap = 11, kEnd = 21;
+    for (uint32_t i = kFirstAfterGap; i < kEnd; ++i) {
+        ASSERT_TRUE(agent->sendFrame(i, seq.frames[i]).isOk());
+        std::this_thread::sleep_for(100ms);  // time to process each on a loaded machine
+    }
+    auto status = rig.client->waitForStatus(
+        "skip-1", [](const StatusCopy& s) { return s.frames_received == 11 && settled(s); }, 20s);
+    ASSERT_TRUE(status) << "status never settled";
+    EXPECT_EQ(status->frames_rejected, 0u) << status->detail;
+    EXPECT_GE(status->frames_integrated, 3u) << status->detail << "; skipped " << status->frames_skipped;
+    EXPECT_EQ(status->state, static_cast<uint32_t>(facescan_wire_STATE_SCANNING)) << status->detail;
+}
+
 TEST(ServerSession, ShutdownFinishesOpenSessionsToDisk) {
     const uint32_t domain = privateDomain(16);
     const ServerParams params = testParams(domain, "shutdown");

@@ -66,8 +66,9 @@ Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out);
 // belong to the same session and owner epoch and continue base.round. Leaves base unchanged on error.
 Status mergeReplica(ReplicaData& base, const ReplicaData& delta);
 
-// Running digest of accepted frames: FNV-1a 64 over depth then colour bytes (a recording that arrived bit-exact
-// has the digest the agent computed while sending it).
+// Running digest of accepted frames: FNV-1a 64 over depth then colour, eight bytes (little-endian) a step, then
+// the tail byte by byte, then the size (a recording that arrived bit-exact has the digest the agent computed while
+// sending it). A step per word, not per byte: the byte-wise hash was 0.8 % of the server's CPU (issue 16).
 uint64_t frameDigest(uint64_t digest, const uint8_t* depth, size_t depth_size, const uint8_t* colour,
                      size_t colour_size);
 inline constexpr uint64_t kFrameDigestSeed = 1469598103934665603ull;

@@ -1,6 +1,7 @@
 #include "recon/depth_filter.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 
@@ -19,6 +20,26 @@ cv::Rect halfRoi(const cv::Rect& roi, const cv::Size& coarse_size) {
     const int x1 = std::min((roi.x + roi.width + 1) / 2, coarse_size.width);
     const int y1 = std::min((roi.y + roi.height + 1) / 2, coarse_size.height);
     return {x0, y0, std::max(0, x1 - x0), std::max(0, y1 - y0)};
+}
+
+// A level whose ROI has fewer pixels than this is computed on the calling thread: handing it to the pool costs more
+// than the work (the coarse pyramid levels; on one core every parallelFor is a wake-up and a hand-back).
+constexpr int kParallelMinPx = 16384;
+
+template <class Rows>
+void forRows(const cv::Rect& roi, Rows&& rows) {
+    if (roi.area() < kParallelMinPx) {
+        rows(roi.y, roi.y + roi.height);
+    } else {
+        parallelFor(roi.y, roi.y + roi.height, rows);
+    }
+}
+
+// Thesis eq. 4.9 for one pixel: its camera-frame point, NaN where the depth is 0.
+cv::Vec3f vertexAt(const Intrinsics& k, int u, int v, float z) {
+    if (!(z > 0.0f)) return cv::Vec3f(kNaN, kNaN, kNaN);
+    const Eigen::Vector3f p = k.backProject(static_cast<float>(u), static_cast<float>(v), z);
+    return cv::Vec3f(p.x(), p.y(), p.z());
 }
 
 }  // namespace
@@ -104,15 +125,20 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
     const int side = 2 * radius + 1;
     const float inv_step = 1.0f / range_step_m_;
     constexpr int kBeyond = static_cast<int>(kRangeSteps);  // index of the table's trailing 0
+    // The level's vertex map (eq. 4.9) and the count of valid pixels come out of the same pass.
+    std::atomic<int> valid{0};
     parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
+        int valid_here = 0;
         for (int v = v_lo; v < v_hi; ++v) {
             float* dst = l0.depth_m.ptr<float>(v);
+            auto* vertex = l0.vertex.ptr<cv::Vec3f>(v);
             const float* centre_row = masked_.ptr<float>(v);
             const int dv_lo = std::max(-radius, roi.y - v), dv_hi = std::min(radius, roi.y + roi.height - 1 - v);
             for (int u = roi.x; u < roi.x + roi.width; ++u) {
                 const float zc = centre_row[u];
                 if (zc <= 0.0f) {
                     dst[u] = 0.0f;
+                    vertex[u] = cv::Vec3f(kNaN, kNaN, kNaN);
                     continue;
                 }
                 const int du_lo = std::max(-radius, roi.x - u), du_hi = std::min(radius, roi.x + roi.width - 1 - u);
@@ -129,8 +155,11 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
                     }
                 }
                 dst[u] = sum_wz / sum_w;  // sum_w >= 1 (the centre pixel)
+                vertex[u] = vertexAt(l0.k, u, v, dst[u]);
+                ++valid_here;
             }
         }
+        valid.fetch_add(valid_here, std::memory_order_relaxed);
     });
 
     // Coarser levels: mean of the valid 2x2 children close in depth to the first valid one.
@@ -163,17 +192,12 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
         }
     }
 
-    int valid = 0;
     for (int l = 0; l < out.count; ++l) {
         SurfaceLevel& lv = out.levels[l];
-        computeVertexMap(lv.k, lv.depth_m, lv.roi, lv.vertex);
+        if (l > 0) computeVertexMap(lv.k, lv.depth_m, lv.roi, lv.vertex);  // level 0's came with the filter
         computeNormalMap(lv.vertex, lv.roi, p.pyramid_max_step_m, lv.normal);
     }
-    for (int v = roi.y; v < roi.y + roi.height; ++v) {
-        const float* z = l0.depth_m.ptr<float>(v);
-        for (int u = roi.x; u < roi.x + roi.width; ++u) valid += z[u] > 0.0f ? 1 : 0;
-    }
-    return valid;
+    return valid.load();
 }
 
 int validCentroid(const SurfaceLevel& lv, Eigen::Vector3f& centroid) {
@@ -192,25 +216,18 @@ int validCentroid(const SurfaceLevel& lv, Eigen::Vector3f& centroid) {
 }
 
 void computeVertexMap(const Intrinsics& k, const cv::Mat& depth_m, const cv::Rect& roi, cv::Mat& vertex) {
-    parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
+    forRows(roi, [&](int v_lo, int v_hi) {
         for (int v = v_lo; v < v_hi; ++v) {
             const float* z = depth_m.ptr<float>(v);
             auto* dst = vertex.ptr<cv::Vec3f>(v);
-            for (int u = roi.x; u < roi.x + roi.width; ++u) {
-                if (z[u] > 0.0f) {
-                    const Eigen::Vector3f p = k.backProject(static_cast<float>(u), static_cast<float>(v), z[u]);
-                    dst[u] = cv::Vec3f(p.x(), p.y(), p.z());
-                } else {
-                    dst[u] = cv::Vec3f(kNaN, kNaN, kNaN);
-                }
-            }
+            for (int u = roi.x; u < roi.x + roi.width; ++u) dst[u] = vertexAt(k, u, v, z[u]);
         }
     });
 }
 
 void computeNormalMap(const cv::Mat& vertex, const cv::Rect& roi, float max_step_m, cv::Mat& normal) {
     const float max_step2 = max_step_m * max_step_m;
-    parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
+    forRows(roi, [&](int v_lo, int v_hi) {
         for (int v = v_lo; v < v_hi; ++v) {
             const auto* row = vertex.ptr<cv::Vec3f>(v);
             const bool has_next_row = v + 1 < roi.y + roi.height;

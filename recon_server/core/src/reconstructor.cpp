@@ -55,8 +55,8 @@ Status ReconParams::validate() const {
     if (!(min_visible_share >= 0.0f && resume_visible_share >= min_visible_share && resume_visible_share <= 1.0f))
         return invalidArgument("need 0 <= min_visible_share <= resume_visible_share <= 1");
     if (min_head_pixels < 1) return invalidArgument("min_head_pixels must be >= 1");
-    if (!(source_fps >= 0.0f && max_motion_scale >= 1.0f))
-        return invalidArgument("source_fps must be >= 0 and max_motion_scale >= 1");
+    if (!(source_fps >= 0.0f && source_fps <= 1000.0f && max_motion_scale >= 1.0f && max_motion_scale <= 100.0f))
+        return invalidArgument("source_fps must be in [0, 1000] and max_motion_scale in [1, 100]");
     if (roi_margin_px < 0) return invalidArgument("roi_margin_px must be >= 0");
     return Status::ok();
 }

@@ -45,6 +45,13 @@ float percentile(std::vector<float> v, float q) {
     return v[k];
 }
 
+// Live snapshots: the coarse stride of --snapshot-stride, otherwise the final mesh's parameters.
+recon::MeshParams snapshotMeshParams(const ServerParams& params) {
+    recon::MeshParams mp = params.recon.mesh;
+    mp.stride_vox = params.snapshot_stride_vox;
+    return mp;
+}
+
 }  // namespace
 
 int64_t steadyNowNs() {
@@ -93,17 +100,6 @@ facescan_wire_RgbdFrame PendingFrame::view() const {
     return msg;
 }
 
-namespace {
-
-// Live snapshots: the coarse stride of --snapshot-stride, otherwise the final mesh's parameters.
-recon::MeshParams snapshotMeshParams(const ServerParams& params) {
-    recon::MeshParams mp = params.recon.mesh;
-    mp.stride_vox = params.snapshot_stride_vox;
-    return mp;
-}
-
-}  // namespace
-
 Session::Session(std::string session_id, const ServerParams& params, std::function<void()> space_freed)
     : id_(std::move(session_id)),
       params_(params),
@@ -146,8 +142,9 @@ Status Session::start(const wire::CameraInfoData& camera, const wire::ReplicaDat
     }
     lk.unlock();
     // Built outside the lock: loading the cascade and reserving the volume take a moment.
-    recon::ReconParams recon_params = params_.recon;  // ICP's motion limits are per frame of this source
-    if (camera.rate_hz > 0.0f) recon_params.source_fps = camera.rate_hz;
+    recon::ReconParams recon_params = params_.recon;
+    recon_params.source_fps =
+        camera.rate_hz > 0.0f && camera.rate_hz <= 1000.0f ? camera.rate_hz : 0.0f;  // limits per frame
     auto recon = std::make_shared<recon::Reconstructor>(camera.intrinsics, recon_params);
     if (!recon->initStatus().isOk()) return recon->initStatus();
     if (replica) RETURN_IF_ERROR(recon->restoreState(replica->state));
@@ -445,13 +442,16 @@ SessionStats Session::stats() const {
                      ms_sum_.raycast * inv,
                      0};
     }
-    s.behind = !s.every_frame && stats_.state != SessionState::kFinished &&
+    // Only while frames flow ("agent gone" stays the whole detail); while lost, the advice to the person first.
+    const bool lost = stats_.state == SessionState::kLost;
+    const bool flowing = !processed_ns_.empty() && processed_ns_.back() >= now - kFpsWindowNs;
+    s.behind = !s.every_frame && stats_.state != SessionState::kFinished && flowing &&
                (s.throttled || s.skipped_recent > kBehindSkipFraction);
     if (s.behind) {
         char what[160];
         std::snprintf(what, sizeof what, "behind: %.0f %% of frames skipped, %.0f ms of CPU a frame (budget %.0f ms)%s",
                       100.0f * s.skipped_recent, s.frame_cpu_ms, s.frame_budget_ms, s.throttled ? ", throttled" : "");
-        s.detail = std::string(what) + "; " + s.detail;
+        s.detail = lost ? s.detail + "; " + what : std::string(what) + "; " + s.detail;
     }
     s.latency_p50_ms = percentile(latency_ms_, 0.5f);
     s.latency_p95_ms = percentile(latency_ms_, 0.95f);

@@ -45,8 +45,11 @@ struct IcpParams {
     // Residual scale of the robust (Huber) weight (metres; 0 = plain least squares as in the thesis). Pairs that
     // pass the gates but sit far off the tangent plane (hair, silhouette) then pull less.
     float huber_m = 0.003f;
-    float convergence_rel = 1e-4f;          // ratio; stop a level when the error (eq. 4.21) changes less than this
-    float convergence_step_m = 1e-5f;       // metres; or when the update moves points less than this
+    float convergence_rel = 1e-4f;  // ratio; stop a level when the error (eq. 4.21) changes less than this
+    // metres; or when the update moves points less than this. 50 um is 1/30 of a voxel: on the synthetic head,
+    // against 10 um, the finest level ran 29 % fewer pair evaluations with the same accuracy (mean 0.095 mm,
+    // completeness 72.5 %, ATE 1.78 mm; facescan-bench recon --input synthetic --mask pipeline --gt-accuracy).
+    float convergence_step_m = 5e-5f;
     int min_inliers = 200;                  // count; fewer correspondences at the finest level = kNotEnoughPoints
     float min_inlier_share = 0.2f;          // ratio; of the source's valid pixels at the finest level
     float max_rmse_m = 0.01f;               // metres; a larger final residual = kDiverged

@@ -293,8 +293,9 @@ class TsdfVolume {
     std::vector<uint64_t> block_generation_;  // per pool slot: the generation that last touched it
     std::vector<uint8_t> block_flag_;         // per block: touched this frame
     std::vector<int32_t> touched_;            // pool indices of the blocks touched this frame
-    cv::Mat pixel_range_m_;                   // CV_32F, metres: distance to the measured surface along each pixel's ray
-    cv::Mat pixel_weight_;                    // CV_32F: Algorithm 3 weight of each pixel's measurement, 0 = unusable
+    cv::Mat pixel_range_weight_;  // CV_32FC2 per pixel: distance (metres) to the measured surface along its ray,
+                                  // and the Algorithm 3 weight of its measurement (0 = unusable)
+    cv::Mat colour_copy_;         // a non-continuous colour image, made continuous (never for a camera's own)
 };
 
 }  // namespace facescan::recon

@@ -79,7 +79,8 @@ struct SessionStats {
     uint32_t next_seq = 0;       // the next frame the session takes (the agent resends from here)
     uint64_t frames_digest = wire::kFrameDigestSeed;  // of the frames processed, in order
     // Issue 16, bad input: the worker's load (service/frame_load.hpp). A live session that is throttled or skips
-    // more than kBehindSkipFraction of its recent frames is behind; stats() then says so first in the detail.
+    // more than kBehindSkipFraction of its recent frames is behind; stats() then says so in the detail, first
+    // unless the face is lost (the advice to the person comes first then).
     bool behind = false;
     bool throttled = false;
     float frame_cpu_ms = 0;     // CPU a frame, recent average (pool workers' share included)
