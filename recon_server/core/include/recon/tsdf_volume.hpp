@@ -207,24 +207,35 @@ inline bool VoxelBlockGrid::gradient(const Eigen::Vector3f& p_vox, Eigen::Vector
             block_index[((block_lo[2] + (k >> 2)) * bps + block_lo[1] + ((k >> 1) & 1)) * bps + block_lo[0] + (k & 1)];
         block_of[k] = b < 0 ? kUnobservedBlock : &voxels[static_cast<size_t>(b) * kBlockVoxels];
     }
-    // Voxel (c0 - 1 + i, c0 - 1 + j, c0 - 1 + l) for i, j, l in 0..3.
-    const auto at = [&](int i, int j, int l) -> const Voxel& {
-        return block_of[bit[0][i] | (bit[1][j] << 1) | (bit[2][l] << 2)][off[0][i] + off[1][j] + off[2][l]];
-    };
+    // The differences at the 8 corners and the least weight of the 32 voxels, given where voxel
+    // (c0 - 1 + i, c0 - 1 + j, c0 - 1 + l), i, j, l in 0..3, lies.
     float diff[3][8];
-    float w = 1.0f;
+    const auto gather = [&diff](auto at) {
+        float w = 1.0f;
 #pragma GCC unroll 8
-    for (int corner = 0; corner < 8; ++corner) {
-        const int i = 1 + (corner & 1), j = 1 + ((corner >> 1) & 1), l = 1 + (corner >> 2);
-        const Voxel &x_lo = at(i - 1, j, l), &x_hi = at(i + 1, j, l);
-        const Voxel &y_lo = at(i, j - 1, l), &y_hi = at(i, j + 1, l);
-        const Voxel &z_lo = at(i, j, l - 1), &z_hi = at(i, j, l + 1);
-        w = std::min(w, std::min(at(i, j, l).weight, std::min(std::min(x_lo.weight, x_hi.weight),
-                                                              std::min(std::min(y_lo.weight, y_hi.weight),
-                                                                       std::min(z_lo.weight, z_hi.weight)))));
-        diff[0][corner] = x_hi.tsdf - x_lo.tsdf;
-        diff[1][corner] = y_hi.tsdf - y_lo.tsdf;
-        diff[2][corner] = z_hi.tsdf - z_lo.tsdf;
+        for (int corner = 0; corner < 8; ++corner) {
+            const int i = 1 + (corner & 1), j = 1 + ((corner >> 1) & 1), l = 1 + (corner >> 2);
+            const Voxel &x_lo = at(i - 1, j, l), &x_hi = at(i + 1, j, l);
+            const Voxel &y_lo = at(i, j - 1, l), &y_hi = at(i, j + 1, l);
+            const Voxel &z_lo = at(i, j, l - 1), &z_hi = at(i, j, l + 1);
+            w = std::min(w, std::min(at(i, j, l).weight, std::min(std::min(x_lo.weight, x_hi.weight),
+                                                                  std::min(std::min(y_lo.weight, y_hi.weight),
+                                                                           std::min(z_lo.weight, z_hi.weight)))));
+            diff[0][corner] = x_hi.tsdf - x_lo.tsdf;
+            diff[1][corner] = y_hi.tsdf - y_lo.tsdf;
+            diff[2][corner] = z_hi.tsdf - z_lo.tsdf;
+        }
+        return w;
+    };
+    float w;
+    if (cross == 0) {
+        // All 32 in one block (a quarter of the calls): constant offsets from one pointer.
+        const Voxel* p = block_of[0] + off[0][0] + off[1][0] + off[2][0];
+        w = gather([p](int i, int j, int l) -> const Voxel& { return p[i + kBlockSide * (j + kBlockSide * l)]; });
+    } else {
+        w = gather([&](int i, int j, int l) -> const Voxel& {
+            return block_of[bit[0][i] | (bit[1][j] << 1) | (bit[2][l] << 2)][off[0][i] + off[1][j] + off[2][l]];
+        });
     }
     if (!(w > 0.0f)) return false;
     const float fx = p_vox.x() - static_cast<float>(c0[0]);
