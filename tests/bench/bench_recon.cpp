@@ -56,6 +56,7 @@ struct Options {
     bool verbose = false;
     float volume_m = 0;  // 0 = preset
     float trunc_m = 0;
+    int model_level = -1;  // --model-level: ReconParams::model_level (-1 = the preset's)
     std::string misses_out;  // --gt-misses: GT face vertices coloured by why they are not covered
     float observed_tol_m = eval::ObservedRegionParams().surface_tolerance_m;  // metres, see observed_region.hpp
     // --mask pipeline: the head mask comes from the server's own FacePipeline (Viola-Jones + depth, segmentation,
@@ -328,12 +329,14 @@ int runRecon(const std::vector<std::string>& args) {
             o.volume_m = std::stof(next());
         else if (a == "--trunc-m")
             o.trunc_m = std::stof(next());
+        else if (a == "--model-level")
+            o.model_level = std::atoi(next().c_str());  // junk reads 0: the full-resolution model
         else {
             std::printf(
                 "usage: facescan-bench recon [--input SRC] [--frames N] [--preset face|fast] [--mesh OUT.ply]\n"
                 "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply] [--observed-tol-m M]\n"
                 "       [--volume-m M] [--trunc-m M] [--mask input|pipeline|none] [--twin] [--serial] [--verbose]\n"
-                "       [--json]\n"
+                "       [--model-level L] [--json]\n"
                 "SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR\n"
                 "Synthetic input also reports the robustness figures of issue 18 (tracked share, re-acquisition,\n"
                 "wrong poses, foreign surface). --twin (implies --gt-accuracy) also scans the same motion without the\n"
@@ -344,6 +347,7 @@ int runRecon(const std::vector<std::string>& args) {
                 "     than the volume (a head in front of a wall).\n"
                 "--serial: run the recon core's parallel loops on the loop's thread alone (as a loaded server's\n"
                 "     sessions do): the stage times are the serial CPU cost of a frame.\n"
+                "--model-level L: ray cast the model at pyramid level L (0 = full resolution, the default; 1 = half).\n"
                 "%s\n",
                 synth::syntheticOptionsHelp());
             return a == "--help" ? 0 : 2;
@@ -365,6 +369,7 @@ int runRecon(const std::vector<std::string>& args) {
     recon::ReconParams params = o.preset == "fast" ? recon::ReconParams::fast() : recon::ReconParams::faceDefaults();
     if (o.volume_m > 0) params.tsdf.volume_size_m = o.volume_m;
     if (o.trunc_m > 0) params.tsdf.trunc_dist_m = o.trunc_m;
+    if (o.model_level >= 0) params.model_level = o.model_level;
     if (o.volume_m > 1.0f) {
         // A room-sized volume (7-Scenes): everything in range is "the head", the cube sits mid-scene.
         params.tsdf.centre_behind_surface_m = 0.0f;

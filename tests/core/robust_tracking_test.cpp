@@ -88,6 +88,24 @@ TEST(Robustness, TheGentleSequenceIsTrackedInEveryFrameFromTheModel) {
     EXPECT_GE(from_model, sp.frames - 10) << "once tracked, the head comes from the model, not from detection";
 }
 
+// ReconParams::model_level 1 (the model cast at half resolution): ICP pairs the frame's levels with the coarser
+// model's, the segmenter reads each depth pixel's prediction from the model pixel covering it, and the predicted
+// box is in depth pixels. Before the segmenter knew the scale, every frame fell back to detection.
+TEST(Robustness, AHalfResolutionModelTracksTheGentleSequenceFromTheModel) {
+    synth::SequenceParams sp = scenario("gentle");
+    sp.frames = 60;
+    sp.seed = 17;
+    ReconParams params = ReconParams::faceDefaults();
+    params.model_level = 1;
+    const ScenarioRun run = runScenario(sp, params);
+    EXPECT_EQ(run.figures.tracked_in_view, sp.frames);
+    EXPECT_EQ(run.figures.wrong_poses, 0) << "max error " << run.figures.max_pose_err_mm << " mm";
+    EXPECT_EQ(run.figures.foreign_vertices, 0) << "torso fused";
+    int from_model = 0;
+    for (const ScanStep& s : run.steps) from_model += s.head.from_model;
+    EXPECT_GE(from_model, sp.frames - 10) << "once tracked, the head comes from the model, not from detection";
+}
+
 TEST(Robustness, WideFastTurnsAboveATorsoAreTracked) {
     synth::SequenceParams sp = scenario("wide");
     sp.frames = 150;  // a whole yaw cycle: 0 -> 60 -> 0 -> -60 -> 0 deg at up to 2.8 deg a frame

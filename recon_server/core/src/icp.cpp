@@ -86,7 +86,14 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
                           const Pose& prediction, Pose& T_world_camera, float motion_scale) {
     TrackingResult result;
     result.T_world_camera = T_world_camera;
-    const int levels = std::min({params_.levels, source.count, model_world.count});
+    const int levels = std::min(params_.levels, source.count);
+    if (model_world.count < 1) return result;
+    // The model may be cast coarser than the frame (ReconParams::model_level): whole levels coarser, source level
+    // l pairs with the model level of its own size, or with the model's finest where the source is finer.
+    int model_shift = 0;
+    while (model_shift < kMaxPyramidLevels &&
+           (source.levels[0].k.width_px >> model_shift) > model_world.levels[0].k.width_px)
+        ++model_shift;
     Pose estimate = T_world_camera;
     const Pose T_model_world = T_world_model.inverse();
 
@@ -95,7 +102,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
     bool solve_failed = false;
     for (int level = levels - 1; level >= 0; --level) {
         const SurfaceLevel& src = source.levels[level];
-        const SurfaceLevel& dst = model_world.levels[level];
+        const SurfaceLevel& dst = model_world.levels[std::clamp(level - model_shift, 0, model_world.count - 1)];
         const float dist_gate2 = params_.dist_gate_m[level] * params_.dist_gate_m[level];
         const float cos_gate = static_cast<float>(std::cos(params_.normal_gate_deg[level] * kDegToRad));
         const float huber = params_.huber_m;

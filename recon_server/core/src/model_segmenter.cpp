@@ -57,8 +57,17 @@ void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const 
     out.head_box_px = {};
     seeds_ = 0;
     if (const char* problem = depthInputProblem(depth_m, k)) return out.markNotFound(depth_m, problem);
+    // The model may be cast at a coarser pyramid level (ReconParams::model_level): its pixel (u >> s, v >> s)
+    // predicts the depth pixel (u, v); shift = s.
+    int shift = 0;
+    if (prediction.model != nullptr) {
+        while (shift < 4 && (prediction.model->k.width_px << shift) < depth_m.cols) ++shift;
+    }
     if (prediction.model == nullptr || prediction.model->roi.empty() || !prediction.region.valid ||
-        prediction.model->vertex.size() != depth_m.size()) {
+        (prediction.model->k.width_px << shift) != depth_m.cols ||
+        (prediction.model->k.height_px << shift) != depth_m.rows ||
+        prediction.model->vertex.rows < prediction.model->k.height_px ||
+        prediction.model->vertex.cols < prediction.model->k.width_px) {
         return out.markNotFound(depth_m, "no model prediction");
     }
     const int w = depth_m.cols, h = depth_m.rows;
@@ -69,7 +78,9 @@ void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const 
     state_.create(depth_m.size(), CV_8UC1);
 
     const SurfaceLevel& model = *prediction.model;
-    const cv::Rect roi_m = model.roi & bounds;
+    const cv::Rect roi_m =
+        cv::Rect(model.roi.x << shift, model.roi.y << shift, model.roi.width << shift, model.roi.height << shift) &
+        bounds;
     const Pose T_camera_world = prediction.T_world_camera.inverse();
     const Pose& T_world_camera = prediction.T_world_camera;
     const HeadRegion& region = prediction.region;
@@ -89,12 +100,13 @@ void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const 
             const int v_begin = roi_m.y + roi_m.height * s / kStripes;
             const int v_end = roi_m.y + roi_m.height * (s + 1) / kStripes;
             for (int v = v_begin; v < v_end; ++v) {
-                const auto* vert = model.vertex.ptr<cv::Vec3f>(v);
+                const auto* vert_row = model.vertex.ptr<cv::Vec3f>(v >> shift);
                 const float* z = depth_m.ptr<float>(v);
                 uint8_t* st = state_.ptr<uint8_t>(v);
                 for (int u = roi_m.x; u < roi_m.x + roi_m.width; ++u) {
-                    if (std::isnan(vert[u][0])) continue;
-                    const Eigen::Vector3f p_cam = T_camera_world * Eigen::Vector3f(vert[u][0], vert[u][1], vert[u][2]);
+                    const cv::Vec3f& vert = vert_row[u >> shift];
+                    if (std::isnan(vert[0])) continue;
+                    const Eigen::Vector3f p_cam = T_camera_world * Eigen::Vector3f(vert[0], vert[1], vert[2]);
                     ++acc.predicted;
                     acc.z_sum += p_cam.z();
                     acc.u0 = std::min(acc.u0, u), acc.u1 = std::max(acc.u1, u);

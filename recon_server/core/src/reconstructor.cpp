@@ -58,6 +58,8 @@ Status ReconParams::validate() const {
     if (!(source_fps >= 0.0f && source_fps <= 1000.0f && max_motion_scale >= 1.0f && max_motion_scale <= 100.0f))
         return invalidArgument("source_fps must be in [0, 1000] and max_motion_scale in [1, 100]");
     if (roi_margin_px < 0) return invalidArgument("roi_margin_px must be >= 0");
+    if (model_level < 0 || model_level >= filter.levels)
+        return invalidArgument("model_level must be >= 0 and below filter.levels");
     return Status::ok();
 }
 
@@ -72,9 +74,14 @@ Reconstructor::Reconstructor(const Intrinsics& k, const ReconParams& p)
       reacquirer_(k.valid() ? k : Intrinsics{}, p.reacquire, p.icp) {
     const Intrinsics kk = k.valid() ? k : Intrinsics{};
     frame_.allocate(kk, p.filter.levels);
-    model_.allocate(kk, p.filter.levels);
+    const int model_level = init_status_.isOk() ? p.model_level : 0;
+    params_.model_level = model_level;
+    const Intrinsics k_model = kk.scaled(model_level);
+    model_.allocate(k_model, std::max(1, p.filter.levels - model_level));
     hint_m_.create(kk.height_px, kk.width_px, CV_32FC1);
     hint_m_.setTo(0.0f);
+    hint_model_m_.create(k_model.height_px, k_model.width_px, CV_32FC1);
+    hint_model_m_.setTo(0.0f);
     trajectory_.reserve(kTrajectoryReserve);
 }
 
@@ -357,12 +364,48 @@ bool Reconstructor::predictHead(HeadPrediction& out) const {
     out.model = &model_.levels[0];
     out.T_world_camera = T_world_model_;
     out.region = region_;
-    out.box = model_.levels[0].roi;
+    const int s = params_.model_level;
+    const cv::Rect& r = model_.levels[0].roi;
+    out.box = cv::Rect(r.x << s, r.y << s, r.width << s, r.height << s) & cv::Rect(0, 0, k_.width_px, k_.height_px);
     return true;
 }
 
 void Reconstructor::raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_m) {
-    raycaster_.cast(volume_.grid(), k_, T_world_camera_, roi, depth_hint_m, model_.levels[0]);
+    model_cast_roi_ = roi & cv::Rect(0, 0, k_.width_px, k_.height_px);
+    const int s = params_.model_level;
+    if (s == 0) {
+        raycaster_.cast(volume_.grid(), k_, T_world_camera_, model_cast_roi_, depth_hint_m, model_.levels[0]);
+    } else {
+        // The model's pixel (u, v) is the frame's 2^s x 2^s block from (u << s, v << s); its hint is the block's
+        // first measured pixel (row-major), 0 when none is.
+        const SurfaceLevel& lv = model_.levels[0];
+        const int x0 = model_cast_roi_.x >> s, y0 = model_cast_roi_.y >> s;
+        const cv::Rect roi_model = cv::Rect(cv::Point(x0, y0), cv::Point((model_cast_roi_.br().x + (1 << s) - 1) >> s,
+                                                                         (model_cast_roi_.br().y + (1 << s) - 1) >> s)) &
+                                   cv::Rect(0, 0, lv.k.width_px, lv.k.height_px);
+        cv::Mat hint;
+        if (!depth_hint_m.empty()) {
+            const int n = 1 << s;
+            for (int v = roi_model.y; v < roi_model.br().y; ++v) {
+                float* dst = hint_model_m_.ptr<float>(v);
+                for (int u = roi_model.x; u < roi_model.br().x; ++u) {
+                    float z = 0.0f;
+                    for (int dv = 0; dv < n && !(z > 0.0f); ++dv) {
+                        const int fv = (v << s) + dv;
+                        if (fv >= depth_hint_m.rows) break;
+                        const float* row = depth_hint_m.ptr<float>(fv);
+                        for (int du = 0; du < n && !(z > 0.0f); ++du) {
+                            const int fu = (u << s) + du;
+                            if (fu < depth_hint_m.cols && row[fu] > 0.0f) z = row[fu];
+                        }
+                    }
+                    dst[u] = z;
+                }
+            }
+            hint = hint_model_m_;
+        }
+        raycaster_.cast(volume_.grid(), lv.k, T_world_camera_, roi_model, hint, model_.levels[0]);
+    }
     // The hint is only valid inside the frame's ROI; outside it the rays march the cube (see RaycastParams).
     for (int l = 1; l < model_.count; ++l) {
         downsampleVertexMap(model_.levels[l - 1].vertex, model_.levels[l - 1].roi, model_.levels[l].vertex,
@@ -386,6 +429,7 @@ void Reconstructor::reset() {
     region_ = HeadRegion{};
     trajectory_.clear();
     for (int l = 0; l < model_.count; ++l) model_.levels[l].roi = cv::Rect();
+    model_cast_roi_ = cv::Rect();
 }
 
 void Reconstructor::copyVolume(TsdfSnapshot& snapshot) const {
@@ -419,7 +463,8 @@ bool Reconstructor::predictedHeadBox(cv::Rect& box) const {
         }
     }
     if (x1 < 0) return false;
-    box = cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1);
+    const int s = params_.model_level;  // model pixels -> frame pixels
+    box = cv::Rect(x0 << s, y0 << s, (x1 - x0 + 1) << s, (y1 - y0 + 1) << s) & cv::Rect(0, 0, k_.width_px, k_.height_px);
     return true;
 }
 

@@ -27,7 +27,7 @@ void Reconstructor::captureState(uint64_t since_generation, size_t trajectory_fr
     out.consecutive_failures = consecutive_failures_;
     out.T_world_camera = T_world_camera_;
     out.T_world_model = T_world_model_;
-    out.model_roi = model_.levels[0].roi;
+    out.model_roi = model_cast_roi_;
     out.region = region_;
     out.visible_ref_px = visible_ref_px_;
     out.verify_next = verify_next_;

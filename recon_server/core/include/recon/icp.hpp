@@ -64,7 +64,9 @@ struct IcpParams {
 bool centroidAlignment(const SurfaceLevel& source, const SurfaceLevel& target_world, Pose& T_world_camera);
 
 // Projective ICP of a frame (camera-frame pyramid) against the model (world-frame vertex/normal pyramid rendered
-// from T_world_model). Holds the per-thread reduction buffers, so align() does not allocate.
+// from T_world_model; its finest level may be whole levels coarser than the frame's, each frame level then pairs
+// with the model level of its size or the model's finest). Holds the per-thread reduction buffers, so align()
+// does not allocate.
 class Icp {
  public:
     explicit Icp(const IcpParams& p);

@@ -51,7 +51,8 @@ struct HeadRegion {
 
 // What the tracked model predicts about the head in the next frame (Reconstructor::predictHead).
 struct HeadPrediction {
-    const SurfaceLevel* model = nullptr;     // the ray-cast model: world-frame vertices at level 0, cast inside roi
+    const SurfaceLevel* model = nullptr;     // the ray-cast model: world-frame vertices, cast inside its roi, at the
+                                             // depth's resolution or whole pyramid levels coarser
     Pose T_world_camera = Pose::Identity();  // the pose it was cast from (the last tracked frame)
     HeadRegion region;                       // where the head can be (world frame)
     cv::Rect box;                            // the model's box in the image (depth pixels)
