@@ -56,7 +56,7 @@ struct Options {
     bool verbose = false;
     float volume_m = 0;  // 0 = preset
     float trunc_m = 0;
-    int model_level = -1;  // --model-level: ReconParams::model_level (-1 = the preset's)
+    int model_level = -1;    // --model-level: ReconParams::model_level (-1 = the preset's)
     std::string misses_out;  // --gt-misses: GT face vertices coloured by why they are not covered
     float observed_tol_m = eval::ObservedRegionParams().surface_tolerance_m;  // metres, see observed_region.hpp
     // --mask pipeline: the head mask comes from the server's own FacePipeline (Viola-Jones + depth, segmentation,

@@ -380,9 +380,10 @@ void Reconstructor::raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_
         // first measured pixel (row-major), 0 when none is.
         const SurfaceLevel& lv = model_.levels[0];
         const int x0 = model_cast_roi_.x >> s, y0 = model_cast_roi_.y >> s;
-        const cv::Rect roi_model = cv::Rect(cv::Point(x0, y0), cv::Point((model_cast_roi_.br().x + (1 << s) - 1) >> s,
-                                                                         (model_cast_roi_.br().y + (1 << s) - 1) >> s)) &
-                                   cv::Rect(0, 0, lv.k.width_px, lv.k.height_px);
+        const cv::Rect roi_model =
+            cv::Rect(cv::Point(x0, y0), cv::Point((model_cast_roi_.br().x + (1 << s) - 1) >> s,
+                                                  (model_cast_roi_.br().y + (1 << s) - 1) >> s)) &
+            cv::Rect(0, 0, lv.k.width_px, lv.k.height_px);
         cv::Mat hint;
         if (!depth_hint_m.empty()) {
             const int n = 1 << s;
@@ -464,7 +465,8 @@ bool Reconstructor::predictedHeadBox(cv::Rect& box) const {
     }
     if (x1 < 0) return false;
     const int s = params_.model_level;  // model pixels -> frame pixels
-    box = cv::Rect(x0 << s, y0 << s, (x1 - x0 + 1) << s, (y1 - y0 + 1) << s) & cv::Rect(0, 0, k_.width_px, k_.height_px);
+    box =
+        cv::Rect(x0 << s, y0 << s, (x1 - x0 + 1) << s, (y1 - y0 + 1) << s) & cv::Rect(0, 0, k_.width_px, k_.height_px);
     return true;
 }
 

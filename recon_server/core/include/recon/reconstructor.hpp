@@ -191,9 +191,9 @@ class Reconstructor {
     TsdfVolume volume_;
     Raycaster raycaster_;
     Reacquirer reacquirer_;
-    SurfacePyramid frame_;  // the current frame, camera frame
-    SurfacePyramid model_;  // the ray-cast model, world frame, seen from T_world_model_; its level 0 is the
-                            // frame's level params_.model_level
+    SurfacePyramid frame_;     // the current frame, camera frame
+    SurfacePyramid model_;     // the ray-cast model, world frame, seen from T_world_model_; its level 0 is the
+                               // frame's level params_.model_level
     cv::Rect model_cast_roi_;  // the last cast's pixels, at the frame's full resolution
     cv::Mat depth_clean_;      // CV_32F: the input with NaN/inf replaced by 0
     cv::Mat hint_m_;           // CV_32F: the frame's depth with occluded pixels replaced by the model's (next cast)
