@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cstdio>
 #include <optional>
 #include <vector>
@@ -104,6 +105,37 @@ TEST(Robustness, AHalfResolutionModelTracksTheGentleSequenceFromTheModel) {
     int from_model = 0;
     for (const ScanStep& s : run.steps) from_model += s.head.from_model;
     EXPECT_GE(from_model, sp.frames - 10) << "once tracked, the head comes from the model, not from detection";
+}
+
+// A loaded server switches a live session's model level (Reconstructor::setModelLevel): full resolution, half
+// from frame 20, full again from frame 40. Every frame stays tracked from the model, and the switch applies at the
+// next cast.
+TEST(Robustness, SwitchingTheModelLevelMidScanKeepsTracking) {
+    synth::SequenceParams sp = scenario("gentle");
+    sp.frames = 60;
+    sp.seed = 19;
+    const synth::KinectSimulator sim(synth::builtinHead(), sp);
+    Reconstructor rec(sim.intrinsics(), ReconParams::faceDefaults());
+    FacePipeline pipeline = makePipeline(sim.intrinsics());
+    const Pose T_c0_head = sim.poseAt(0);
+    RgbdFrame frame;
+    synth::FrameTruth truth;
+    int from_model = 0;
+    float worst_mm = 0.0f;
+    for (int i = 0; i < sp.frames; ++i) {
+        if (i == 20) rec.setModelLevel(1);
+        if (i == 40) rec.setModelLevel(0);
+        EXPECT_EQ(rec.modelLevel(), i <= 20 || i > 40 ? 0 : 1) << "frame " << i << ": the level of the last cast";
+        sim.render(i, frame, &truth);
+        ScanStep step;
+        scanFrame(pipeline, rec, frame, step);
+        ASSERT_TRUE(step.frame.integrated) << i << ": " << step.frame.reason;
+        from_model += step.head.from_model;
+        const Pose err = (T_c0_head * truth.T_camera_head.inverse()).inverse() * step.frame.tracking.T_world_camera;
+        worst_mm = std::max(worst_mm, 1000.0f * err.translation().norm());
+    }
+    EXPECT_GE(from_model, sp.frames - 10) << "the segmenter follows the model at either level";
+    EXPECT_LT(worst_mm, 10.0f) << "no wrong pose across the switches";
 }
 
 TEST(Robustness, WideFastTurnsAboveATorsoAreTracked) {

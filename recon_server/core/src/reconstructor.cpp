@@ -17,6 +17,16 @@ constexpr size_t kTrajectoryReserve = 18000;  // 10 minutes at 30 frames/s befor
 constexpr int kVisibilityLevel = 2;
 constexpr float kVisibleRefRate = 0.05f, kVisibleRefDecay = 0.02f;
 
+// The ray caster's parameters for a model cast model_level levels coarser than the frame: a ray without a hint
+// borrows one from as far in frame pixels as at full resolution, not 2^level times further.
+RaycastParams modelRaycastParams(const RaycastParams& p, int model_level) {
+    RaycastParams r = p;
+    if (model_level > 0 && model_level < 8 && r.hint_search_px > 0) {
+        r.hint_search_px = std::max(1, (r.hint_search_px + (1 << model_level) - 1) >> model_level);
+    }
+    return r;
+}
+
 // Valid vertices of a level inside its ROI.
 int countValid(const SurfaceLevel& lv) {
     Eigen::Vector3f unused;
@@ -74,13 +84,13 @@ Reconstructor::Reconstructor(const Intrinsics& k, const ReconParams& p)
       reacquirer_(k.valid() ? k : Intrinsics{}, p.reacquire, p.icp) {
     const Intrinsics kk = k.valid() ? k : Intrinsics{};
     frame_.allocate(kk, p.filter.levels);
-    const int model_level = init_status_.isOk() ? p.model_level : 0;
-    params_.model_level = model_level;
-    const Intrinsics k_model = kk.scaled(model_level);
-    model_.allocate(k_model, std::max(1, p.filter.levels - model_level));
+    model_level_ = next_model_level_ = init_status_.isOk() ? p.model_level : 0;
+    model_.allocate(kk.scaled(model_level_), std::max(1, p.filter.levels - model_level_));
+    raycaster_ = Raycaster(modelRaycastParams(params_.raycast, model_level_));
     hint_m_.create(kk.height_px, kk.width_px, CV_32FC1);
     hint_m_.setTo(0.0f);
-    hint_model_m_.create(k_model.height_px, k_model.width_px, CV_32FC1);
+    // Full size: holds the hint of a model at any level (rows and columns from 0).
+    hint_model_m_.create(kk.height_px, kk.width_px, CV_32FC1);
     hint_model_m_.setTo(0.0f);
     trajectory_.reserve(kTrajectoryReserve);
 }
@@ -364,7 +374,7 @@ bool Reconstructor::predictHead(HeadPrediction& out) const {
     out.model = &model_.levels[0];
     out.T_world_camera = T_world_model_;
     out.region = region_;
-    const int s = params_.model_level;
+    const int s = model_level_;
     const cv::Rect& r = model_.levels[0].roi;
     out.box = cv::Rect(r.x << s, r.y << s, r.width << s, r.height << s) & cv::Rect(0, 0, k_.width_px, k_.height_px);
     return true;
@@ -372,7 +382,12 @@ bool Reconstructor::predictHead(HeadPrediction& out) const {
 
 void Reconstructor::raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_m) {
     model_cast_roi_ = roi & cv::Rect(0, 0, k_.width_px, k_.height_px);
-    const int s = params_.model_level;
+    if (next_model_level_ != model_level_) {
+        model_level_ = next_model_level_;
+        model_.allocate(k_.scaled(model_level_), std::max(1, params_.filter.levels - model_level_));
+        raycaster_ = Raycaster(modelRaycastParams(params_.raycast, model_level_));
+    }
+    const int s = model_level_;
     if (s == 0) {
         raycaster_.cast(volume_.grid(), k_, T_world_camera_, model_cast_roi_, depth_hint_m, model_.levels[0]);
     } else {
@@ -415,6 +430,11 @@ void Reconstructor::raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_
         downsampleNormalMap(model_.levels[l - 1].normal, model_.levels[l - 1].roi, model_.levels[l].normal, unused);
     }
     T_world_model_ = T_world_camera_;
+}
+
+void Reconstructor::setModelLevel(int level) {
+    if (!init_status_.isOk()) return;
+    next_model_level_ = std::clamp(level, 0, params_.filter.levels - 1);
 }
 
 void Reconstructor::reset() {
@@ -464,7 +484,7 @@ bool Reconstructor::predictedHeadBox(cv::Rect& box) const {
         }
     }
     if (x1 < 0) return false;
-    const int s = params_.model_level;  // model pixels -> frame pixels
+    const int s = model_level_;  // model pixels -> frame pixels
     box =
         cv::Rect(x0 << s, y0 << s, (x1 - x0 + 1) << s, (y1 - y0 + 1) << s) & cv::Rect(0, 0, k_.width_px, k_.height_px);
     return true;

@@ -158,6 +158,12 @@ class Reconstructor {
     // others try the plain fit from the last good pose and its verification. 1 (the default) = every frame. A
     // server that is behind rations a lost session's searches so it does not starve the others (frame thread).
     void setSearchEvery(int frames) { search_every_ = frames < 1 ? 1 : frames; }
+    // The pyramid level of the model from the next cast on (ReconParams::model_level; clamped to the valid
+    // range): a loaded server casts coarser rather than skip frames. The current model stays in use until then;
+    // a change allocates the model's maps once.
+    void setModelLevel(int level);
+    int modelLevel() const { return model_level_; }                // of the model in use
+    int requestedModelLevel() const { return next_model_level_; }  // of the next cast
     // Verifies a pose for the current frame as re-acquisition does (for tests and diagnostics): run after a
     // processFrame of that frame, which leaves the filtered frame in place.
     PoseCheck verifyPose(const Pose& T_world_camera);
@@ -193,7 +199,7 @@ class Reconstructor {
     Reacquirer reacquirer_;
     SurfacePyramid frame_;     // the current frame, camera frame
     SurfacePyramid model_;     // the ray-cast model, world frame, seen from T_world_model_; its level 0 is the
-                               // frame's level params_.model_level
+                               // frame's level model_level_
     cv::Rect model_cast_roi_;  // the last cast's pixels, at the frame's full resolution
     cv::Mat depth_clean_;      // CV_32F: the input with NaN/inf replaced by 0
     cv::Mat hint_m_;           // CV_32F: the frame's depth with occluded pixels replaced by the model's (next cast)
@@ -207,6 +213,8 @@ class Reconstructor {
     float visible_ref_px_ = 0.0f;  // running mean of the head's pixels (pyramid level 2) over fused frames
     bool verify_next_ = false;     // a mostly hidden frame was not fused: verify the next fit before fusing
     int search_every_ = 1;         // count; setSearchEvery
+    int model_level_ = 0;          // pyramid level of model_ (ReconParams::model_level, then setModelLevel)
+    int next_model_level_ = 0;     // the level of the next cast
     int frames_since_search_ = 0;  // count; lost frames since the last hypothesis search
     std::vector<std::pair<int64_t, Pose>> trajectory_;
     mutable std::mutex volume_mutex_;  // guards volume_ between processFrame and snapshot/preview callers
