@@ -8,7 +8,8 @@
 #          every agent renders (synthetic) or decodes PNGs (TUM_DIR) on the cores the server needs.
 #   env:   BUILD_DIR (default ./build), FACESCAN_DATA_DIR (../shared/data: the real head scan), SNAPSHOT_HZ (1),
 #          TUM_DIR: stream this TUM folder instead of the synthetic Kinect (`facescan-bench synth --head scan --tum
-#          DIR` writes the same sequence); PRELOAD=1 is the same as --preload.
+#          DIR` writes the same sequence); PRELOAD=1 is the same as --preload; SERVER_ARGS: more facescan-server
+#          flags (e.g. "--set model_level=1").
 #   Ends with a table: per session, frames integrated of those sent, skipped (live mode keeps the newest frame),
 #   capture-to-pose latency p50/p95, and the snapshot thread's cost in % of a core.
 set -euo pipefail
@@ -38,7 +39,7 @@ cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; wait 
 trap cleanup EXIT
 
 "$server_bin" --profile loopback --domain "$domain" --data-dir "$work/data" --snapshot-hz "${SNAPSHOT_HZ:-1}" \
-    --max-sessions "$((sessions + 1))" >"$work/server.log" 2>&1 &
+    --max-sessions "$((sessions + 1))" ${SERVER_ARGS:-} >"$work/server.log" 2>&1 &
 server_pid=$!
 pids+=("$server_pid")
 sleep 1

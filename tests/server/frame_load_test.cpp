@@ -65,5 +65,68 @@ TEST(FrameLoad, AFrameWithinItsShareIsLeftAlone) {
     }).join();
 }
 
+// The model's resolution follows the same budget: over it while another session runs (after the first frames,
+// which detection and the model's start make slow), the session casts coarse (recon::Reconstructor::
+// setModelLevel). After a hold it goes back to full resolution if that would fit kFullModelFraction of the budget
+// (its own average, or kCoarseCostRatio times the coarse cost before it has one); alone, at once.
+TEST(FrameLoad, OverItsShareASessionCastsCoarseUntilFullResolutionWouldFit) {
+    std::thread([] {
+        FrameLoad other(30.0f), busy(100.0f);  // busy: a 10 ms frame period
+        other.join();
+        busy.join();
+        const float budget_ms = busy.budgetMs();
+        const auto ns = [&](float share) { return static_cast<int64_t>(share * budget_ms * 1e6f); };
+        for (int i = 0; i < FrameLoad::kWarmUpFrames; ++i) frame(busy, ns(3.0f));
+        EXPECT_FALSE(busy.coarseModel()) << "the first frames do not count";
+        frame(busy, ns(1.3f));
+        EXPECT_TRUE(busy.coarseModel()) << "over budget with another session running";
+        // Coarse frames at 0.75 of the budget: full resolution would cost ~1.3 budgets, so it stays coarse.
+        for (int i = 0; i < FrameLoad::kCoarseHoldFrames + 10; ++i) frame(busy, ns(0.75f));
+        EXPECT_TRUE(busy.coarseModel());
+        // At 0.3 of the budget full resolution (~0.5) fits: back to it.
+        for (int i = 0; i < 15 && busy.coarseModel(); ++i) frame(busy, ns(0.3f));
+        EXPECT_FALSE(busy.coarseModel());
+        frame(busy, ns(1.3f));
+        EXPECT_TRUE(busy.coarseModel()) << "full resolution's own average is over budget again";
+        other.leave();  // alone: the whole machine, full resolution, even for a frame full resolution would not fit
+        frame(busy, ns(10.0f));
+        EXPECT_FALSE(busy.coarseModel());
+        busy.leave();
+    }).join();
+}
+
+// Within budget by its own measure but skipping frames (other processes and the server's own threads take CPU
+// the budget does not see): coarse too. A probe of full resolution that skips again holds coarse twice as long.
+TEST(FrameLoad, ASessionThatSkipsFramesCastsCoarseAndProbesFullResolutionLessOften) {
+    std::thread([] {
+        FrameLoad other(30.0f), busy(100.0f);
+        other.join();
+        busy.join();
+        const float budget_ms = busy.budgetMs();
+        const auto ns = [&](float share) { return static_cast<int64_t>(share * budget_ms * 1e6f); };
+        for (int i = 0; i < FrameLoad::kWarmUpFrames + 3; ++i) frame(busy, ns(0.4f));
+        EXPECT_FALSE(busy.coarseModel());
+        busy.noteSkipped(0.2f);
+        frame(busy, ns(0.4f));
+        EXPECT_TRUE(busy.coarseModel()) << "skipping a fifth of its frames";
+        busy.noteSkipped(0.0f);
+        const auto framesUntilFull = [&] {
+            int n = 0;
+            while (busy.coarseModel() && n < 10 * FrameLoad::kCoarseHoldFrames) frame(busy, ns(0.2f)), ++n;
+            return n;
+        };
+        const int first_hold = framesUntilFull();
+        EXPECT_GE(first_hold, FrameLoad::kCoarseHoldFrames - 1);
+        EXPECT_LE(first_hold, FrameLoad::kCoarseHoldFrames + 1);
+        busy.noteSkipped(0.2f);  // the probe skips again at once
+        frame(busy, ns(0.4f));
+        ASSERT_TRUE(busy.coarseModel());
+        busy.noteSkipped(0.0f);
+        EXPECT_GE(framesUntilFull(), 2 * FrameLoad::kCoarseHoldFrames - 1) << "a failed probe doubles the hold";
+        other.leave();
+        busy.leave();
+    }).join();
+}
+
 }  // namespace
 }  // namespace facescan::service

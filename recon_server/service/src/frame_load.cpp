@@ -7,8 +7,10 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdio>
 
 #include "recon/parallel.hpp"
+#include "recon/reconstructor.hpp"
 
 namespace facescan::service {
 namespace {
@@ -49,6 +51,7 @@ void FrameLoad::join() {
 void FrameLoad::leave() {
     if (!joined_) return;
     throttle(false);
+    coarse_model_ = false;
     recon::setParallelAccounting(false);
     g_running_workers.fetch_sub(1, std::memory_order_relaxed);
     joined_ = false;
@@ -69,6 +72,37 @@ void FrameLoad::endFrame() {
     const bool alone = runningWorkers() <= 1;  // nobody to protect: use the whole machine
     if (!throttled_ && !alone && cost_ms_ > budget) throttle(true);
     if (throttled_ && (alone || cost_ms_ < kReleaseFraction * budget)) throttle(false);
+    chooseModel(ms, budget, alone);
+}
+
+void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
+    // The first frames (detection, the model's start: tens of ms) say nothing about the steady cost.
+    if (++frames_ <= kWarmUpFrames) return;
+    float& level_cost = coarse_model_ ? coarse_cost_ms_ : full_cost_ms_;
+    int& level_frames = coarse_model_ ? coarse_frames_ : full_frames_;
+    level_cost = level_frames++ == 0 ? frame_ms : level_cost + kEmaAlpha * (frame_ms - level_cost);
+    if (budget_ms > last_budget_ms_ * 1.1f) hold_frames_ = kCoarseHoldFrames;  // a session left: probe sooner
+    last_budget_ms_ = budget_ms;
+    ++frames_at_level_;
+    if (!coarse_model_) {
+        // Over budget, or skipping frames (the budget cannot see what other processes and the server's own
+        // threads take), while another session runs. Soon after a probe of full resolution: hold twice as long.
+        if (alone || !(full_cost_ms_ > budget_ms || skipped_recent_ > kCoarseSkipFraction)) return;
+        if (probing_ && frames_at_level_ < kProbeFrames)
+            hold_frames_ = std::min(2 * hold_frames_, kMaxCoarseHoldFrames);
+        coarse_model_ = true;
+        probing_ = false;
+        frames_at_level_ = 0;
+        return;
+    }
+    // Back to full resolution (a probe) after the hold, when it would fit: its own recent cost when it has one,
+    // else the coarse cost scaled by the measured ratio. Alone: at once.
+    const float full_ms = full_frames_ >= kWarmUpFrames ? full_cost_ms_ : coarse_cost_ms_ * kCoarseCostRatio;
+    if (alone || (frames_at_level_ >= hold_frames_ && full_ms < kFullModelFraction * budget_ms)) {
+        coarse_model_ = false;
+        probing_ = !alone;
+        frames_at_level_ = 0;
+    }
 }
 
 void FrameLoad::throttle(bool on) {
@@ -78,6 +112,19 @@ void FrameLoad::throttle(bool on) {
     // Raising the nice value is always allowed; lowering it back needs CAP_SYS_NICE or RLIMIT_NICE. Without them a
     // released worker stays at kThrottledNice (it still gets idle cores) but keeps the whole pool again.
     (void)setpriority(PRIO_PROCESS, static_cast<id_t>(tid_), base_nice_ + (on ? kThrottledNice : 0));
+}
+
+void applyModelLevel(const FrameLoad& load, int base_level, const std::string& session_id,
+                     recon::Reconstructor& reconstructor) {
+    const int level = std::max(base_level, load.coarseModel() ? 1 : 0);
+    if (level == reconstructor.requestedModelLevel()) return;
+    std::fprintf(stderr, "facescan-server: session %s: model cast at %s (%.1f ms of CPU a frame, budget %.1f ms)\n",
+                 session_id.c_str(),
+                 level == 0   ? "full resolution"
+                 : level == 1 ? "half resolution"
+                              : "a coarser level",
+                 load.costMs(), load.budgetMs());
+    reconstructor.setModelLevel(level);
 }
 
 }  // namespace facescan::service

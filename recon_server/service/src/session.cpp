@@ -334,6 +334,7 @@ void Session::workerLoop() {
         processFrame(working_);
         load_->endFrame();
         recon_->setSearchEvery(load_->searchEvery());  // a lost session over budget searches less often
+        applyModelLevel(*load_, params_.recon.model_level, id_, *recon_);
         noteLoad();
         copySnapshotIfAsked();
         lk.lock();
@@ -402,8 +403,8 @@ void Session::noteLoad() {
     // Frames skipped since the last processed one: live sessions keep only the newest, so a slow frame shows here.
     const auto skipped = static_cast<float>(stats_.frames_skipped - skipped_at_last_frame_);
     skipped_at_last_frame_ = stats_.frames_skipped;
-    const float fraction = skipped / (skipped + 1.0f);
-    stats_.skipped_recent += FrameLoad::kEmaAlpha * (fraction - stats_.skipped_recent);
+    stats_.skipped_recent += FrameLoad::kEmaAlpha * (skipped / (skipped + 1.0f) - stats_.skipped_recent);
+    load_->noteSkipped(stats_.skipped_recent);
     stats_.throttled = load_->throttled();
     stats_.frame_cpu_ms = load_->costMs();
     stats_.frame_budget_ms = load_->budgetMs();
