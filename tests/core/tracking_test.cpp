@@ -62,6 +62,44 @@ TEST(IcpOnHead, ConvergesToTruePoseFromTruthAndFromIdentity) {
     }
 }
 
+// IcpParams::finest_stride_px pairs every second pixel of every second row at the finest level: from the identity
+// it reaches the same pose as pairing every pixel, and its inlier count still stands for the whole frame (the
+// share test of kNotEnoughPoints compares it with every valid pixel).
+TEST(IcpOnHead, TheFinestLevelOnEverySecondPixelReachesThePoseOfEveryPixel) {
+    synth::SequenceParams sp;
+    sp.frames = 20;
+    sp.noise = false;
+    const synth::KinectSimulator sim(synth::builtinHead(), sp);
+    const Intrinsics k = sim.intrinsics();
+    DepthFilter filter(k, FilterParams{});
+    SurfacePyramid target, source;
+    target.allocate(k, 3);
+    source.allocate(k, 3);
+    const Rendered f0 = renderFrame(sim, 0), f5 = renderFrame(sim, 5);
+    ASSERT_GT(filter.filter(f0.frame.depth_m, f0.mask, target), 1000);
+    ASSERT_GT(filter.filter(f5.frame.depth_m, f5.mask, source), 1000);
+    IcpParams every_pixel;
+    every_pixel.finest_stride_px = 1;
+    IcpParams strided = every_pixel;
+    strided.finest_stride_px = 2;
+    Pose full = Pose::Identity(), sampled = Pose::Identity();
+    const TrackingResult r1 = Icp(every_pixel).align(source, target, Pose::Identity(), Pose::Identity(), full);
+    const TrackingResult r2 = Icp(strided).align(source, target, Pose::Identity(), Pose::Identity(), sampled);
+    ASSERT_EQ(r1.status, TrackingStatus::kTracked) << trackingStatusName(r1.status);
+    ASSERT_EQ(r2.status, TrackingStatus::kTracked) << trackingStatusName(r2.status);
+    for (const Pose& estimate : {full, sampled}) {
+        const Pose err = f5.T_c0_ci.inverse() * estimate;
+        EXPECT_LT(err.translation().norm(), 0.001f);
+        EXPECT_LT(rotationDeg(err), 0.2f);
+    }
+    const Pose between = full.inverse() * sampled;
+    EXPECT_LT(between.translation().norm(), 0.0005f);
+    EXPECT_LT(rotationDeg(between), 0.1f);
+    EXPECT_NEAR(static_cast<double>(r2.inliers) / r1.inliers, 1.0, 0.1) << r1.inliers << " vs " << r2.inliers;
+    strided.finest_stride_px = 0;
+    EXPECT_FALSE(strided.validate().isOk());
+}
+
 // Known-transform recovery over seeded random motions: frame 4 of a noise-free sequence against frame 0's
 // point cloud, ICP started from the true pose disturbed by a random rigid motion (up to 15 mm and 4 deg, a few
 // frames of fast head motion at 30 Hz). Nearly every start must converge to the truth; a start that is rejected

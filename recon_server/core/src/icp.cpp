@@ -58,6 +58,7 @@ Status IcpParams::validate() const {
     }
     if (iterations[0] < 1) return invalidArgument("icp needs at least one iteration at the finest level");
     if (!(huber_m >= 0.0f)) return invalidArgument("icp huber_m must be >= 0");
+    if (finest_stride_px < 1 || finest_stride_px > 8) return invalidArgument("icp finest_stride_px must be in [1, 8]");
     if (!(convergence_rel >= 0.0f) || !(convergence_step_m >= 0.0f))
         return invalidArgument("icp convergence thresholds must be >= 0");
     if (min_inliers < 6) return invalidArgument("icp min_inliers must be >= 6 (six unknowns)");
@@ -106,6 +107,8 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
         const float dist_gate2 = params_.dist_gate_m[level] * params_.dist_gate_m[level];
         const float cos_gate = static_cast<float>(std::cos(params_.normal_gate_deg[level] * kDegToRad));
         const float huber = params_.huber_m;
+        // Every stride-th pixel of every stride-th row at the finest level (IcpParams::finest_stride_px).
+        const int stride = level == 0 ? params_.finest_stride_px : 1;
         double prev_error = -1.0, prev_prev_error = -1.0;  // eq. 4.21 one and two iterations ago (-1: none)
         for (int it = 0; it < params_.iterations[level]; ++it) {
             // Everything an iteration needs in the model camera: source point -> world (estimate) -> model camera.
@@ -119,10 +122,10 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
                     // and two threads accumulating into them pair by pair slowed ICP by a third.
                     std::array<double, 32> acc{};
                     const int v0 = src.roi.y + rows * s / kStripes, v1 = src.roi.y + rows * (s + 1) / kStripes;
-                    for (int v = v0; v < v1; ++v) {
+                    for (int v = v0 + (stride - v0 % stride) % stride; v < v1; v += stride) {
                         const auto* vs = src.vertex.ptr<cv::Vec3f>(v);
                         const auto* ns = src.normal.ptr<cv::Vec3f>(v);
-                        for (int u = src.roi.x; u < src.roi.x + src.roi.width; ++u) {
+                        for (int u = src.roi.x; u < src.roi.x + src.roi.width; u += stride) {
                             if (std::isnan(vs[u][0]) || std::isnan(ns[u][0])) continue;
                             // Algorithm 2: transform the source vertex and normal by T, project into the model.
                             const Eigen::Vector3f p_cam(vs[u][0], vs[u][1], vs[u][2]);
@@ -172,7 +175,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
             const int count = static_cast<int>(sum[28]);
             ++result.iterations;
             if (count < 6) {
-                if (level == 0) last_inliers = count;
+                if (level == 0) last_inliers = count * stride * stride;
                 break;  // nothing to solve at this level; a finer one may still have pairs
             }
             Eigen::Matrix<double, 6, 6> ata;
@@ -197,7 +200,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
             estimate = incrementFromX(x) * estimate;  // eq. 4.13
             const double error = sum[27] / count;
             if (level == 0) {
-                last_inliers = count;
+                last_inliers = count * stride * stride;  // the pixels the sampled pairs stand for
                 last_error = error;
             }
             // Eq. 4.21 convergence: the error stopped changing, or the update moves points by almost nothing

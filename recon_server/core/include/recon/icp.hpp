@@ -28,7 +28,7 @@ struct TrackingResult {
     TrackingStatus status = TrackingStatus::kInvalidInput;
     Pose T_world_camera = Pose::Identity();  // the estimate (the prediction when the frame was rejected)
     float rmse_m = 0.0f;                     // metres; point-to-plane RMS of the inliers at the finest level
-    int inliers = 0;                         // count; correspondences at the finest level's last iteration
+    int inliers = 0;                         // count; finest-level pairs, last iteration (x finest_stride_px^2)
     int iterations = 0;                      // count; iterations run over all levels
     bool ok() const { return status == TrackingStatus::kTracked || status == TrackingStatus::kFirstFrame; }
 };
@@ -45,6 +45,12 @@ struct IcpParams {
     // Residual scale of the robust (Huber) weight (metres; 0 = plain least squares as in the thesis). Pairs that
     // pass the gates but sit far off the tangent plane (hair, silhouette) then pull less.
     float huber_m = 0.003f;
+    // pixels; the finest level pairs every n-th pixel of every n-th row. Its neighbours are nearly the same
+    // constraint (the bilateral filter already averaged them), and the coarser levels have brought the pose within
+    // a fraction of a voxel. 2 against 1, 5 seeds of each synthetic scenario (facescan-bench recon --input
+    // synthetic:scenario=S,seed=N --mask pipeline --gt-accuracy): finest ICP 1.05 -> 0.62 ms with mean distance,
+    // completeness, tracked share and losses the same within 0.008 mm / 0.1 %; 7-Scenes ATE 10.41 -> 10.35 mm.
+    int finest_stride_px = 2;
     float convergence_rel = 1e-4f;  // ratio; stop a level when the error (eq. 4.21) changes less than this
     // metres; or when the update moves points less than this. 50 um is 1/30 of a voxel: on the synthetic head,
     // against 10 um, the finest level ran 29 % fewer pair evaluations with the same accuracy (mean 0.095 mm,
