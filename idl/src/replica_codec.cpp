@@ -262,31 +262,40 @@ uint64_t frameDigest(uint64_t digest, const uint8_t* depth, size_t depth_size, c
     return digest;
 }
 
-Status encodeReplica(const ReplicaData& r, std::vector<uint8_t>& out, int zstd_level) {
+struct ReplicaEncoder::Context {
+    ZSTD_CCtx* cctx = nullptr;
+    ~Context() { ZSTD_freeCCtx(cctx); }
+};
+
+ReplicaEncoder::ReplicaEncoder(int zstd_level) : zstd_level_(zstd_level) {}
+ReplicaEncoder::~ReplicaEncoder() = default;
+
+Status ReplicaEncoder::encode(const ReplicaData& r, std::vector<uint8_t>& out) {
     if (r.full() != r.state.full) return invalidArgument("replica: base round and state disagree on full");
-    std::vector<uint8_t> body;
-    body.reserve(1024 + r.state.blocks.voxels.size() * kVoxelBytes + r.state.trajectory.size() * 56);
-    ByteWriter w(body);
+    body_.clear();
+    body_.reserve(1024 + r.state.blocks.voxels.size() * kVoxelBytes + r.state.trajectory.size() * 56);
+    ByteWriter w(body_);
     w.str(r.session_id);
     w.str(r.owner_id);
     for (const uint32_t v : {r.epoch, r.round, r.base_round, r.next_seq}) w.put<uint32_t>(v);
     putCamera(w, r.camera);
     putCounters(w, r.counters);
-    putState(w, r.state, body);
-
-    return frameReplicaBody(body.data(), body.size(), r.full(), out, zstd_level);
+    putState(w, r.state, body_);
+    return frameBody(body_.data(), body_.size(), r.full(), out);
 }
 
-Status frameReplicaBody(const uint8_t* body, size_t size, bool full, std::vector<uint8_t>& out, int zstd_level) {
+Status ReplicaEncoder::frameBody(const uint8_t* body, size_t size, bool full, std::vector<uint8_t>& out) {
     if (size > kMaxReplicaBodyBytes) return outOfRange("replica too large");
-    ZSTD_CCtx* cctx = ZSTD_createCCtx();
+    if (!ctx_) ctx_ = std::make_unique<Context>();
+    if (!ctx_->cctx) ctx_->cctx = ZSTD_createCCtx();
+    ZSTD_CCtx* cctx = ctx_->cctx;
     if (!cctx) return internalError("zstd: cannot create a context");
-    (void)ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, zstd_level);
+    (void)ZSTD_CCtx_reset(cctx, ZSTD_reset_session_and_parameters);
+    (void)ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, zstd_level_);
     (void)ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
-    out.resize(kReplicaHeaderBytes + ZSTD_compressBound(size));
-    const size_t packed =
-        ZSTD_compress2(cctx, out.data() + kReplicaHeaderBytes, out.size() - kReplicaHeaderBytes, body, size);
-    ZSTD_freeCCtx(cctx);
+    const size_t bound = ZSTD_compressBound(size);
+    if (packed_.size() < bound) packed_.resize(bound);  // never shrunk: the next round writes over it
+    const size_t packed = ZSTD_compress2(cctx, packed_.data(), packed_.size(), body, size);
     if (ZSTD_isError(packed)) return internalError(std::string("zstd: ") + ZSTD_getErrorName(packed));
     out.resize(kReplicaHeaderBytes + packed);
     const uint32_t magic = kMagic, body_size = static_cast<uint32_t>(size), packed_size = static_cast<uint32_t>(packed);
@@ -298,7 +307,16 @@ Status frameReplicaBody(const uint8_t* body, size_t size, bool full, std::vector
     std::memcpy(out.data() + 8, &body_size, 4);
     std::memcpy(out.data() + 12, &packed_size, 4);
     std::memcpy(out.data() + 16, &reserved, 8);
+    std::memcpy(out.data() + kReplicaHeaderBytes, packed_.data(), packed);
     return Status::ok();
+}
+
+Status encodeReplica(const ReplicaData& r, std::vector<uint8_t>& out, int zstd_level) {
+    return ReplicaEncoder(zstd_level).encode(r, out);
+}
+
+Status frameReplicaBody(const uint8_t* body, size_t size, bool full, std::vector<uint8_t>& out, int zstd_level) {
+    return ReplicaEncoder(zstd_level).frameBody(body, size, full, out);
 }
 
 Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out) {

@@ -88,6 +88,33 @@ TEST(ReconState, DeltasMergedOnAStandbyEqualTheFullStateAndARestoredScanContinue
     EXPECT_LT(worst_m, 0.0005f) << "the restored scan drifted from the original";
 }
 
+// The server hands last round's capture back in to reuse its buffers: a delta captured into a state that held a
+// full one equals the same delta captured into a fresh state (no block or pose of the full one left over).
+TEST(ReconState, ACaptureIntoAUsedStateEqualsOneIntoAFreshState) {
+    const Scene scene(12);
+    Reconstructor owner(scene.sim.intrinsics(), smallVolume());
+    ASSERT_TRUE(owner.initStatus().isOk());
+    for (int i = 0; i < 8; ++i) scene.feed(owner, i);
+    ReconState used;
+    owner.captureState(0, 0, used);
+    const uint64_t since = used.generation;
+    const size_t trajectory_from = used.trajectorySize();
+    for (int i = 8; i < 10; ++i) scene.feed(owner, i);
+    ReconState fresh;
+    owner.captureState(since, trajectory_from, fresh);
+    owner.captureState(since, trajectory_from, used);
+    ASSERT_FALSE(fresh.full);
+    EXPECT_FALSE(used.full);
+    EXPECT_LT(fresh.blocks.count(), static_cast<size_t>(fresh.total_blocks)) << "a delta should be smaller";
+    EXPECT_EQ(used.blocks.coords, fresh.blocks.coords);
+    ASSERT_EQ(used.blocks.voxels.size(), fresh.blocks.voxels.size());
+    EXPECT_EQ(0, std::memcmp(used.blocks.voxels.data(), fresh.blocks.voxels.data(),
+                             fresh.blocks.voxels.size() * sizeof(Voxel)));
+    EXPECT_EQ(used.trajectory_begin, fresh.trajectory_begin);
+    EXPECT_EQ(used.trajectory.size(), fresh.trajectory.size());
+    EXPECT_EQ(used.generation, fresh.generation);
+}
+
 TEST(ReconState, StatesThatDoNotFitAreRefused) {
     const Scene scene(6);
     Reconstructor owner(scene.sim.intrinsics(), smallVolume());

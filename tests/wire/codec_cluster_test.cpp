@@ -37,6 +37,24 @@ TEST(ReplicaCodec, RoundTripsFullAndDeltaStatesExactly) {
     }
 }
 
+// One encoder, round after round (the server's replication thread): a large full state, a small delta, then a
+// large one again into the same output buffer give exactly encodeReplica's bytes each time, nothing left over.
+TEST(ReplicaCodec, AReusedEncoderGivesTheBytesOfAFreshOne) {
+    ReplicaEncoder encoder;
+    std::vector<uint8_t> reused;
+    for (const auto& [blocks, full] :
+         {std::pair{40, true}, std::pair{3, false}, std::pair{40, true}, std::pair{0, false}}) {
+        const ReplicaData r = sampleReplica(blocks, full);
+        std::vector<uint8_t> fresh;
+        ASSERT_TRUE(encodeReplica(r, fresh).isOk());
+        ASSERT_TRUE(encoder.encode(r, reused).isOk());
+        EXPECT_EQ(reused, fresh) << blocks << " blocks, full " << full;
+        ReplicaData back;
+        EXPECT_TRUE(decodeReplica(reused.data(), reused.size(), back).isOk());
+        EXPECT_EQ(back.state.blocks.count(), static_cast<size_t>(blocks));
+    }
+}
+
 TEST(ReplicaCodec, TruncatedCorruptAndForeignBytesAreRefusedWithAReason) {
     std::vector<uint8_t> bytes;
     ASSERT_TRUE(encodeReplica(sampleReplica(8, true), bytes).isOk());

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -55,6 +56,30 @@ struct ReplicaData {
 
 // Encodes `r` into `out` (cleared first). zstd_level trades CPU for bytes (1 = fastest).
 Status encodeReplica(const ReplicaData& r, std::vector<uint8_t>& out, int zstd_level = 1);
+
+// encodeReplica round after round: one zstd context, and a body and compressed buffer that keep their capacity.
+// A server encodes every live session's replica once a second, megabytes each; with fresh buffers every round,
+// the kernel's zeroing of their new pages cost about as much CPU as the compression (perf at four sessions on 2
+// cores: 3.7 % of the server's CPU, against 2.3 % in zstd). The bytes are those of encodeReplica. Not
+// thread-safe: one per thread.
+class ReplicaEncoder {
+ public:
+    explicit ReplicaEncoder(int zstd_level = 1);
+    ~ReplicaEncoder();
+    ReplicaEncoder(const ReplicaEncoder&) = delete;
+    ReplicaEncoder& operator=(const ReplicaEncoder&) = delete;
+
+    // As encodeReplica: `out` is resized to the replica (its capacity is kept when it suffices).
+    Status encode(const ReplicaData& r, std::vector<uint8_t>& out);
+    Status frameBody(const uint8_t* body, size_t size, bool full, std::vector<uint8_t>& out);
+
+ private:
+    struct Context;
+    int zstd_level_;
+    std::unique_ptr<Context> ctx_;  // the zstd context, made on first use
+    std::vector<uint8_t> body_;     // the serialised body
+    std::vector<uint8_t> packed_;   // the compressed frame (kept at its largest size: no zeroing on reuse)
+};
 // The header and the compressed frame around an already serialised body (what encodeReplica does after
 // serialising): for the fuzzer, which feeds bodies straight to the parser behind a valid frame.
 Status frameReplicaBody(const uint8_t* body, size_t size, bool full, std::vector<uint8_t>& out, int zstd_level = 1);

@@ -6,7 +6,18 @@ namespace facescan::recon {
 
 void Reconstructor::captureState(uint64_t since_generation, size_t trajectory_from, ReconState& out) const {
     const TsdfParams& tp = params_.tsdf;
+    // Everything is reset but the buffers' capacity: the server captures each live session once a second, and
+    // copying megabytes of voxels into fresh pages cost the frame thread as much again in page faults.
+    std::vector<Eigen::Vector3i> coords = std::move(out.blocks.coords);
+    std::vector<Voxel> voxels = std::move(out.blocks.voxels);
+    std::vector<std::pair<int64_t, Pose>> trajectory = std::move(out.trajectory);
+    coords.clear();
+    voxels.clear();
+    trajectory.clear();
     out = ReconState{};
+    out.blocks.coords = std::move(coords);
+    out.blocks.voxels = std::move(voxels);
+    out.trajectory = std::move(trajectory);
     out.resolution_vox = tp.resolution_vox;
     out.volume_size_m = tp.volume_size_m;
     out.trunc_dist_m = tp.trunc_dist_m;

@@ -15,13 +15,12 @@ namespace {
 constexpr uint32_t kRecordMagic = 0x4c525346;  // "FSRL"
 constexpr size_t kRecordHeader = 8;
 
-std::vector<uint8_t> framed(const std::vector<uint8_t>& encoded) {
-    std::vector<uint8_t> out(kRecordHeader + encoded.size());
+void frame(const std::vector<uint8_t>& encoded, std::vector<uint8_t>& out) {
+    out.resize(kRecordHeader + encoded.size());
     const uint32_t size = static_cast<uint32_t>(encoded.size());
     std::memcpy(out.data(), &kRecordMagic, 4);
     std::memcpy(out.data() + 4, &size, 4);
     std::memcpy(out.data() + kRecordHeader, encoded.data(), encoded.size());
-    return out;
 }
 
 Status writeAll(int fd, const uint8_t* p, size_t n, const std::string& what) {
@@ -43,7 +42,8 @@ ReplicaLog::~ReplicaLog() {
 
 Status ReplicaLog::append(const std::vector<uint8_t>& encoded, bool full) {
     const std::filesystem::path path = dir_ / "replica.log";
-    const std::vector<uint8_t> record = framed(encoded);
+    frame(encoded, record_);
+    const std::vector<uint8_t>& record = record_;
     if (full || fd_ < 0) {
         if (!full) return internalError(path.string() + ": a delta cannot start a replica log");
         if (fd_ >= 0) ::close(fd_);

@@ -126,7 +126,7 @@ void Replicator::replicate(OwnedSession& o, Outgoing& out) {
         o.claim->update([&](wire::SessionOwnerData& r) { r.standby_id = standby; });
     }
     const bool full = out.need_full || out.round == 0 || out.rounds_since_full >= params_.replica_full_every;
-    ReplicaCapture cap;
+    ReplicaCapture cap = std::move(spare_capture_);  // the last round's buffers, capacity and all
     int64_t t0 = steadyNowNs();
     if (!o.session->captureReplica(full, cap, kCaptureTimeout).isOk()) return;  // finished meanwhile
     const double capture_ms = msSince(t0);
@@ -140,10 +140,11 @@ void Replicator::replicate(OwnedSession& o, Outgoing& out) {
     r.camera = std::move(cap.camera);
     r.counters = cap.counters;
     r.state = std::move(cap.state);
-    std::vector<uint8_t> bytes;
+    std::vector<uint8_t>& bytes = bytes_;
     t0 = steadyNowNs();
-    Status status = wire::encodeReplica(r, bytes, params_.replica_zstd_level);
+    Status status = encoder_.encode(r, bytes);
     const double encode_ms = msSince(t0);
+    spare_capture_.state = std::move(r.state);  // encoded: only its buffers are wanted again
     if (!status.isOk()) {
         std::fprintf(stderr, "facescan-server: session %s: cannot encode its replica: %s\n", o.id.c_str(),
                      status.toString().c_str());

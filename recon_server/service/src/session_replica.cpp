@@ -92,7 +92,8 @@ void Session::captureOnWorker(bool full, ReplicaCapture& out) {
 
 Status Session::captureReplica(bool full, ReplicaCapture& out, std::chrono::milliseconds timeout) {
     auto done = std::make_shared<std::promise<Status>>();
-    auto result = std::make_shared<ReplicaCapture>();
+    // `out`'s buffers go to the worker and come back: the caller may hand in last round's capture to reuse them.
+    auto result = std::make_shared<ReplicaCapture>(std::move(out));
     std::future<Status> outcome = done->get_future();
     {
         std::lock_guard lk(mutex_);

@@ -33,6 +33,7 @@ class ReplicaLog {
     int fd_ = -1;
     uint64_t bytes_ = 0;
     uint64_t full_bytes_ = 0;
+    std::vector<uint8_t> record_;  // the framed round; keeps its capacity (no fresh pages every round)
 };
 
 // DIR/replica.log as one full replica (its deltas merged). NotFound when there is none; a torn or corrupt tail is

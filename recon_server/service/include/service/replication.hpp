@@ -23,6 +23,7 @@
 #include "service/cluster.hpp"
 #include "service/replica_log.hpp"
 #include "service/server_params.hpp"
+#include "service/session.hpp"
 #include "wire/replica_codec.hpp"
 #include "wire/topics.hpp"
 
@@ -90,6 +91,11 @@ class Replicator {
     std::map<std::string, std::unique_ptr<wire::Writer<facescan_wire_SessionReplica>>> replica_writers_;
     std::map<std::string, std::unique_ptr<wire::Writer<facescan_wire_ReplicaAck>>> ack_writers_;
     std::map<std::string, std::unique_ptr<Outgoing>> outgoing_;  // by session id (replication thread only)
+    // Replication thread only: what one round captures and encodes, megabytes, kept from round to round so that
+    // no round writes into fresh pages (wire::ReplicaEncoder).
+    wire::ReplicaEncoder encoder_{params_.replica_zstd_level};
+    ReplicaCapture spare_capture_;
+    std::vector<uint8_t> bytes_;
 
     mutable std::mutex mutex_;  // guards incoming_, heard_, stats_
     std::map<std::string, Incoming> incoming_;
