@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <vector>
@@ -339,6 +340,27 @@ TEST_F(SphereTest, IncrementalMesherEqualsAFullRemeshAndSkipsUnchangedBlocks) {
     volume_->reset();
     volume_->grid().copyTo(grid);
     EXPECT_EQ(mesher.update(grid).triangleCount(), 0u);
+}
+
+// The live snapshot's copy of a growing model keeps its buffers (no fresh pages every second) and equals the model.
+TEST_F(SphereTest, ACopyOfAGrowingGridKeepsItsBuffers) {
+    TsdfSnapshot grid;
+    volume_->grid().copyTo(grid);
+    const Voxel* voxels_before = grid.voxels.data();
+    const int blocks_before = grid.allocated_blocks;
+    DepthFilter f(kCam, FilterParams{});
+    SurfacePyramid pyr;
+    pyr.allocate(kCam, 1);
+    const Pose T = lookAt(centre_, Eigen::Vector3f(-0.5f, 0.3f, 0.8f).normalized(), 0.6f);
+    ASSERT_GT(f.filter(sphereDepth(T, centre_, radius_), cv::Mat(), pyr), 1000);
+    volume_->integrate(pyr.levels[0], cv::Mat(), T);
+    ASSERT_GT(volume_->grid().allocated_blocks, blocks_before) << "the view should add blocks";
+    volume_->grid().copyTo(grid);
+    EXPECT_EQ(grid.voxels.data(), voxels_before);
+    ASSERT_EQ(grid.allocated_blocks, volume_->grid().allocated_blocks);
+    ASSERT_EQ(grid.voxels.size(), static_cast<size_t>(grid.allocated_blocks) * kBlockVoxels);
+    EXPECT_EQ(0, std::memcmp(grid.voxels.data(), volume_->grid().voxels.data(), grid.voxels.size() * sizeof(Voxel)));
+    EXPECT_TRUE(std::equal(grid.block_coords.begin(), grid.block_coords.end(), volume_->grid().block_coords.begin()));
 }
 
 // Defects are found by position, and removeDefects leaves none of the kinds the service promises to avoid.

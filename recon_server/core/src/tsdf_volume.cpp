@@ -128,6 +128,11 @@ void VoxelBlockGrid::copyTo(VoxelBlockGrid& dst) const {
     dst.trunc_dist_m = trunc_dist_m;
     dst.origin_world = origin_world;
     dst.block_index.assign(block_index.begin(), block_index.end());
+    // Room for as many blocks as the source has (address space: pages are only touched as blocks are written).
+    // Copied with exactly the room it needed, a model that grows between two copies reallocated the whole copy,
+    // and the kernel zeroed every page of it again: 1.6 % of a 4-session server's CPU, on the frame thread.
+    if (dst.block_coords.capacity() < block_coords.capacity()) dst.block_coords.reserve(block_coords.capacity());
+    if (dst.voxels.capacity() < voxels.capacity()) dst.voxels.reserve(voxels.capacity());
     dst.block_coords.assign(block_coords.begin(), block_coords.begin() + allocated_blocks);
     dst.voxels.assign(voxels.begin(), voxels.begin() + static_cast<ptrdiff_t>(allocated_blocks) * kBlockVoxels);
     dst.allocated_blocks = allocated_blocks;

@@ -88,7 +88,8 @@ struct VoxelBlockGrid {
     // any of those six samples' cells is unobserved. Inline (below) like sample(): the ray caster takes one per
     // pixel, marching cubes one per vertex.
     bool gradient(const Eigen::Vector3f& p_vox, Eigen::Vector3f& grad) const;
-    // Copies only the allocated blocks (and the index) into `dst`, reusing its capacity.
+    // Copies only the allocated blocks (and the index) into `dst`, reusing its capacity; `dst` gets room for as
+    // many blocks as this grid has room for, so a model that grows does not move the copy's buffers.
     void copyTo(VoxelBlockGrid& dst) const;
 };
 using TsdfSnapshot = VoxelBlockGrid;
