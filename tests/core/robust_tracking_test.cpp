@@ -75,18 +75,23 @@ ScenarioRun runScenario(const synth::SequenceParams& sp, const ReconParams& para
     return run;
 }
 
+// Every frame tracked, no wrong pose, no torso in the model, and the head found from the model once tracked.
+void expectEveryFrameTrackedFromTheModel(const ScenarioRun& run, int frames) {
+    EXPECT_EQ(run.figures.tracked_in_view, frames);
+    EXPECT_EQ(run.figures.wrong_poses, 0) << "max error " << run.figures.max_pose_err_mm << " mm";
+    EXPECT_EQ(run.figures.foreign_vertices, 0) << "torso fused";
+    int from_model = 0;
+    for (const ScanStep& s : run.steps) from_model += s.head.from_model;
+    EXPECT_GE(from_model, frames - 10) << "once tracked, the head comes from the model, not from detection";
+}
+
 TEST(Robustness, TheGentleSequenceIsTrackedInEveryFrameFromTheModel) {
     synth::SequenceParams sp = scenario("gentle");
     sp.frames = 90;
     sp.seed = 17;
     const ScenarioRun run = runScenario(sp);
-    EXPECT_EQ(run.figures.tracked_in_view, sp.frames);
     EXPECT_EQ(run.figures.losses, 0);
-    EXPECT_EQ(run.figures.wrong_poses, 0) << "max error " << run.figures.max_pose_err_mm << " mm";
-    EXPECT_EQ(run.figures.foreign_vertices, 0) << "torso fused";
-    int from_model = 0;
-    for (const ScanStep& s : run.steps) from_model += s.head.from_model;
-    EXPECT_GE(from_model, sp.frames - 10) << "once tracked, the head comes from the model, not from detection";
+    expectEveryFrameTrackedFromTheModel(run, sp.frames);
 }
 
 // ReconParams::model_level 1 (the model cast at half resolution): ICP pairs the frame's levels with the coarser
@@ -99,12 +104,7 @@ TEST(Robustness, AHalfResolutionModelTracksTheGentleSequenceFromTheModel) {
     ReconParams params = ReconParams::faceDefaults();
     params.model_level = 1;
     const ScenarioRun run = runScenario(sp, params);
-    EXPECT_EQ(run.figures.tracked_in_view, sp.frames);
-    EXPECT_EQ(run.figures.wrong_poses, 0) << "max error " << run.figures.max_pose_err_mm << " mm";
-    EXPECT_EQ(run.figures.foreign_vertices, 0) << "torso fused";
-    int from_model = 0;
-    for (const ScanStep& s : run.steps) from_model += s.head.from_model;
-    EXPECT_GE(from_model, sp.frames - 10) << "once tracked, the head comes from the model, not from detection";
+    expectEveryFrameTrackedFromTheModel(run, sp.frames);
 }
 
 // A loaded server switches a live session's model level (Reconstructor::setModelLevel): full resolution, half

@@ -35,22 +35,36 @@ Rendered renderFrame(const synth::KinectSimulator& sim, int i) {
     return r;
 }
 
+// Frames 0 and k of a noise-free turning head, filtered: ICP aligns frame k (source) to frame 0 (target).
+struct HeadFramePair {
+    const synth::KinectSimulator sim{synth::builtinHead(), noiseFree()};
+    SurfacePyramid target, source;
+    Rendered f0, fk;
+    static synth::SequenceParams noiseFree() {
+        synth::SequenceParams sp;
+        sp.frames = 20;
+        sp.noise = false;
+        return sp;
+    }
+    void filter(int k) {
+        const Intrinsics cam = sim.intrinsics();
+        DepthFilter depth_filter(cam, FilterParams{});
+        target.allocate(cam, 3);
+        source.allocate(cam, 3);
+        f0 = renderFrame(sim, 0);
+        fk = renderFrame(sim, k);
+        ASSERT_GT(depth_filter.filter(f0.frame.depth_m, f0.mask, target), 1000);
+        ASSERT_GT(depth_filter.filter(fk.frame.depth_m, fk.mask, source), 1000);
+    }
+};
+
 // ICP of frame k against frame 0's point cloud, from the true pose and from the previous one: both converge to
 // the truth (the head constrains all six degrees of freedom).
 TEST(IcpOnHead, ConvergesToTruePoseFromTruthAndFromIdentity) {
-    synth::SequenceParams sp;
-    sp.frames = 20;
-    sp.noise = false;
-    const synth::KinectSimulator sim(synth::builtinHead(), sp);
-    const Intrinsics k = sim.intrinsics();
-    const FilterParams fp;
-    DepthFilter filter(k, fp);
-    SurfacePyramid target, source;
-    target.allocate(k, 3);
-    source.allocate(k, 3);
-    const Rendered f0 = renderFrame(sim, 0), f5 = renderFrame(sim, 5);
-    ASSERT_GT(filter.filter(f0.frame.depth_m, f0.mask, target), 1000);
-    ASSERT_GT(filter.filter(f5.frame.depth_m, f5.mask, source), 1000);
+    HeadFramePair pair;
+    ASSERT_NO_FATAL_FAILURE(pair.filter(5));
+    const SurfacePyramid &target = pair.target, &source = pair.source;
+    const Rendered& f5 = pair.fk;
     Icp icp(IcpParams{});
     for (const Pose& start : {f5.T_c0_ci, Pose(Pose::Identity())}) {
         Pose estimate = start;
@@ -66,18 +80,10 @@ TEST(IcpOnHead, ConvergesToTruePoseFromTruthAndFromIdentity) {
 // it reaches the same pose as pairing every pixel, and its inlier count still stands for the whole frame (the
 // share test of kNotEnoughPoints compares it with every valid pixel).
 TEST(IcpOnHead, TheFinestLevelOnEverySecondPixelReachesThePoseOfEveryPixel) {
-    synth::SequenceParams sp;
-    sp.frames = 20;
-    sp.noise = false;
-    const synth::KinectSimulator sim(synth::builtinHead(), sp);
-    const Intrinsics k = sim.intrinsics();
-    DepthFilter filter(k, FilterParams{});
-    SurfacePyramid target, source;
-    target.allocate(k, 3);
-    source.allocate(k, 3);
-    const Rendered f0 = renderFrame(sim, 0), f5 = renderFrame(sim, 5);
-    ASSERT_GT(filter.filter(f0.frame.depth_m, f0.mask, target), 1000);
-    ASSERT_GT(filter.filter(f5.frame.depth_m, f5.mask, source), 1000);
+    HeadFramePair pair;
+    ASSERT_NO_FATAL_FAILURE(pair.filter(5));
+    const SurfacePyramid &target = pair.target, &source = pair.source;
+    const Rendered& f5 = pair.fk;
     IcpParams every_pixel;
     every_pixel.finest_stride_px = 1;
     IcpParams strided = every_pixel;
@@ -106,18 +112,10 @@ TEST(IcpOnHead, TheFinestLevelOnEverySecondPixelReachesThePoseOfEveryPixel) {
 // (kLargeMotion, kDiverged) counts as a failure, a wrong pose reported as tracked is counted separately and must
 // not happen at all.
 TEST(IcpOnHead, RecoversKnownTransformsFromSeededRandomStarts) {
-    synth::SequenceParams sp;
-    sp.frames = 20;
-    sp.noise = false;
-    const synth::KinectSimulator sim(synth::builtinHead(), sp);
-    const Intrinsics k = sim.intrinsics();
-    DepthFilter filter(k, FilterParams{});
-    SurfacePyramid target, source;
-    target.allocate(k, 3);
-    source.allocate(k, 3);
-    const Rendered f0 = renderFrame(sim, 0), f4 = renderFrame(sim, 4);
-    ASSERT_GT(filter.filter(f0.frame.depth_m, f0.mask, target), 1000);
-    ASSERT_GT(filter.filter(f4.frame.depth_m, f4.mask, source), 1000);
+    HeadFramePair pair;
+    ASSERT_NO_FATAL_FAILURE(pair.filter(4));
+    const SurfacePyramid &target = pair.target, &source = pair.source;
+    const Rendered& f4 = pair.fk;
     Icp icp(IcpParams{});
     std::mt19937 rng(20261122);
     std::uniform_real_distribution<float> unit(-1.0f, 1.0f);

@@ -91,10 +91,8 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
     if (model_world.count < 1) return result;
     // The model may be cast coarser than the frame (ReconParams::model_level): whole levels coarser, source level
     // l pairs with the model level of its own size, or with the model's finest where the source is finer.
-    int model_shift = 0;
-    while (model_shift < kMaxPyramidLevels &&
-           (source.levels[0].k.width_px >> model_shift) > model_world.levels[0].k.width_px)
-        ++model_shift;
+    const int model_shift =
+        pyramidLevelOfWidth(source.levels[0].k.width_px, model_world.levels[0].k.width_px, kMaxPyramidLevels);
     Pose estimate = T_world_camera;
     const Pose T_model_world = T_world_model.inverse();
 

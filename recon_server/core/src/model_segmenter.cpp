@@ -59,10 +59,9 @@ void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const 
     if (const char* problem = depthInputProblem(depth_m, k)) return out.markNotFound(depth_m, problem);
     // The model may be cast at a coarser pyramid level (ReconParams::model_level): its pixel (u >> s, v >> s)
     // predicts the depth pixel (u, v); shift = s.
-    int shift = 0;
-    if (prediction.model != nullptr) {
-        while (shift < 4 && (prediction.model->k.width_px << shift) < depth_m.cols) ++shift;
-    }
+    const int shift = prediction.model != nullptr
+                          ? pyramidLevelOfWidth(depth_m.cols, prediction.model->k.width_px, kMaxPyramidLevels)
+                          : 0;
     if (prediction.model == nullptr || prediction.model->roi.empty() || !prediction.region.valid ||
         (prediction.model->k.width_px << shift) != depth_m.cols ||
         (prediction.model->k.height_px << shift) != depth_m.rows ||

@@ -64,4 +64,12 @@ struct Intrinsics {
     }
 };
 
+// The pyramid level (Intrinsics::scaled) at which an image width_px wide is no wider than coarse_width_px, at most
+// max_level: how many levels coarser than the frame a model cast at a lower resolution is.
+inline int pyramidLevelOfWidth(int width_px, int coarse_width_px, int max_level) {
+    int level = 0;
+    while (level < max_level && (width_px >> level) > coarse_width_px) ++level;
+    return level;
+}
+
 }  // namespace facescan::recon

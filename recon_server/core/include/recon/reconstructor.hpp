@@ -38,10 +38,11 @@ struct ReconParams {
     int roi_margin_px = 8;         // pixels; margin around the head mask's box for filtering and ray casting
     // Pyramid level at which the model is ray cast for tracking and segmentation (0 = every pixel, 1 = every 2nd
     // pixel of every 2nd row: a quarter of the rays). ICP's finest level then pairs each frame pixel with the model
-    // pixel it projects into, ~2 mm away. Measured (facescan-bench recon --mask pipeline --model-level 1): the ray
-    // cast -59 % and a frame's serial cost 12.0 -> 9.0 ms, but ATE +20-47 % in every synthetic scenario and the
-    // wide turn's mean error +0.015 mm (with the renderer's mask instead, ATE improves: the loss is in the
-    // model-based segmentation, cause not yet found). So full resolution stays the default (issue 16 note).
+    // pixel it projects into, ~2 mm away. Measured (facescan-bench recon --mask pipeline --model-level 1, 5 seeds):
+    // the ray cast -59 % and a frame's serial cost 12.0 -> 9.0 ms; the default sequence keeps its accuracy (mean
+    // 0.0954 -> 0.0944 mm, ATE 1.61 -> 1.68 mm), but the wide turn loses some (mean +0.017 mm, ATE 1.76 -> 1.95 mm;
+    // with the renderer's mask instead, ATE improves: the loss is in the model-based segmentation, cause not yet
+    // found). So full resolution stays the default, and a loaded server casts coarse (issue 16 note).
     // Must be below filter.levels.
     int model_level = 0;
     // Robust integration: a measurement more than occluder_band_m (0 = the truncation distance mu) in front of a

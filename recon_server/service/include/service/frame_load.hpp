@@ -34,8 +34,8 @@ class FrameLoad {
     // The model's resolution, after the first kWarmUpFrames: coarse when full resolution's average cost is over
     // budget or the session skips more than kCoarseSkipFraction of its frames (noteSkipped), while others run.
     // After kCoarseHoldFrames it probes full resolution again if that would fit kFullModelFraction of the budget
-    // (its own average, or the coarse one times kCoarseCostRatio: measured 1.7, 16.9 and 10.0 ms a frame with 4
-    // sessions on 2 cores). A probe that goes coarse again within kProbeFrames doubles the hold, up to
+    // (its own average, or the coarse one times kCoarseCostRatio: measured 1.7, i.e. 16.9 against 10.0 ms a frame
+    // with 4 sessions on 2 cores). A probe that goes coarse again within kProbeFrames doubles the hold, up to
     // kMaxCoarseHoldFrames; a session leaving resets it.
     static constexpr int kWarmUpFrames = 5;
     static constexpr float kCoarseSkipFraction = 0.05f;
