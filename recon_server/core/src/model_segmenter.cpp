@@ -7,12 +7,6 @@
 #include "recon/parallel.hpp"
 
 namespace facescan::recon {
-namespace {
-
-constexpr int kStripes = 16;  // fixed stripe count of the seed pass's reduction (same sums on any core count)
-
-}  // namespace
-
 Status HeadRegionParams::validate() const {
     if (!(radius_m > 0.05f)) return invalidArgument("head region radius_m must be > 0.05");
     if (!(centre_behind_m >= 0.0f && below_lowest_m >= 0.0f && max_below_centre_m > 0.0f))
@@ -148,15 +142,33 @@ void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const 
             if (!roi_m.contains({u, v})) st[u] = 0;
         }
     }
+    // Growth starts from the seeds that have an untouched neighbour in the box: a seed whose four neighbours are
+    // all seeds adds nothing, and those were most of the head (a serial pass of 4 reads each over every head
+    // pixel). Found in parallel, per stripe of rows, and queued in stripe order.
+    const int box_rows = all.v1 - all.v0 + 1;
+    const auto untouched = [&](int u, int v) { return grow_roi.contains({u, v}) && state_.ptr<uint8_t>(v)[u] == 0; };
+    parallelFor(0, kStripes, [&](int s_lo, int s_hi) {
+        for (int s = s_lo; s < s_hi; ++s) {
+            std::vector<int>& frontier = frontier_[static_cast<size_t>(s)];
+            frontier.clear();
+            // Room for every pixel of the stripe's rows (at most ceil(h / kStripes)): no allocation after the first
+            // call, however the head's outline changes.
+            frontier.reserve(static_cast<size_t>((h + kStripes - 1) / kStripes) * static_cast<size_t>(w));
+            for (int v = all.v0 + box_rows * s / kStripes; v < all.v0 + box_rows * (s + 1) / kStripes; ++v) {
+                const uint8_t* st = state_.ptr<uint8_t>(v);
+                for (int u = all.u0; u <= all.u1; ++u) {
+                    if (st[u] == 1 && (untouched(u - 1, v) || untouched(u + 1, v) || untouched(u, v - 1) ||
+                                       untouched(u, v + 1)))
+                        frontier.push_back(v * w + u);
+                }
+            }
+        }
+    });
     queue_.clear();
     queue_.reserve(static_cast<size_t>(w) * static_cast<size_t>(h));  // no-op after the first frame
-    for (int v = roi_m.y; v < roi_m.y + roi_m.height; ++v) {
-        const uint8_t* st = state_.ptr<uint8_t>(v);
-        for (int u = roi_m.x; u < roi_m.x + roi_m.width; ++u) {
-            if (st[u]) queue_.push_back(v * w + u);
-        }
-    }
+    for (const std::vector<int>& f : frontier_) queue_.insert(queue_.end(), f.begin(), f.end());
     const float jump = params_.grow_jump_m;
+    int head_pixels = all.seeds;
     for (size_t head = 0; head < queue_.size(); ++head) {
         const int idx = queue_[head];
         const int y = idx / w, x = idx - y * w;
@@ -168,35 +180,75 @@ void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const 
             if (st) continue;
             const float nz = depth_m.ptr<float>(ny[n])[nx[n]];
             if (!(nz >= zmin && nz <= zmax) || std::fabs(nz - z) >= jump) continue;
-            st = 1;  // visited either way: a pixel outside the region is not tried again from another side
+            // Tried either way: a pixel outside the region is not tried again from another side.
             if (!region.contains(T_world_camera *
-                                 k.backProject(static_cast<float>(nx[n]), static_cast<float>(ny[n]), nz)))
+                                 k.backProject(static_cast<float>(nx[n]), static_cast<float>(ny[n]), nz))) {
+                st = 2;
                 continue;
+            }
+            st = 1;
+            ++head_pixels;
             queue_.push_back(ny[n] * w + nx[n]);
         }
     }
 
-    // 3. Mask, masked depth, box, centroid and extents (as HeadSegmenter reports them).
-    if (static_cast<int>(queue_.size()) < params_.min_pixels) {
+    // 3. Mask, masked depth, box, centroid and extents (as HeadSegmenter reports them), in parallel over stripes of
+    //    the growth's box; each stripe keeps its own sums and column counts (merged in order afterwards).
+    if (head_pixels < params_.min_pixels) {
         return out.markNotFound(depth_m, "too few head pixels confirm the tracked model");
     }
-    col_hist_.assign(static_cast<size_t>(w), 0);
+    struct Summary {
+        int umin, umax, vmin, vmax;
+        float z_lo, z_hi;
+        Eigen::Vector3d sum;
+    };
+    std::array<Summary, kStripes> summary;
     row_hist_.assign(static_cast<size_t>(h), 0);
+    parallelFor(0, kStripes, [&](int s_lo, int s_hi) {
+        for (int s = s_lo; s < s_hi; ++s) {
+            Summary acc{w, -1, h, -1, 1e9f, 0.0f, Eigen::Vector3d::Zero()};
+            std::vector<int>& cols = stripe_cols_[static_cast<size_t>(s)];
+            cols.assign(static_cast<size_t>(w), 0);
+            const int v_begin = grow_roi.y + grow_roi.height * s / kStripes;
+            const int v_end = grow_roi.y + grow_roi.height * (s + 1) / kStripes;
+            for (int v = v_begin; v < v_end; ++v) {
+                const uint8_t* st = state_.ptr<uint8_t>(v);
+                const float* zrow = depth_m.ptr<float>(v);
+                uint8_t* mask = out.mask.ptr<uint8_t>(v);
+                float* masked = out.depth_m.ptr<float>(v);
+                int in_row = 0;
+                for (int u = grow_roi.x; u < grow_roi.br().x; ++u) {
+                    if (st[u] != 1) continue;
+                    const float z = zrow[u];
+                    mask[u] = 255;
+                    masked[u] = z;
+                    acc.sum += k.backProject(static_cast<float>(u), static_cast<float>(v), z).cast<double>();
+                    acc.z_lo = std::min(acc.z_lo, z), acc.z_hi = std::max(acc.z_hi, z);
+                    acc.umin = std::min(acc.umin, u), acc.umax = std::max(acc.umax, u);
+                    ++cols[static_cast<size_t>(u)];
+                    ++in_row;
+                }
+                if (in_row == 0) continue;
+                row_hist_[static_cast<size_t>(v)] = in_row;
+                acc.vmin = std::min(acc.vmin, v), acc.vmax = v;
+            }
+            summary[static_cast<size_t>(s)] = acc;
+        }
+    });
+    col_hist_.assign(static_cast<size_t>(w), 0);
     int umin = w, umax = -1, vmin = h, vmax = -1;
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     float z_lo = 1e9f, z_hi = 0;
-    for (int idx : queue_) {
-        const int v = idx / w, u = idx - v * w;
-        const float z = depth_m.ptr<float>(v)[u];
-        out.mask.ptr<uint8_t>(v)[u] = 255;
-        out.depth_m.ptr<float>(v)[u] = z;
-        sum += k.backProject(static_cast<float>(u), static_cast<float>(v), z).cast<double>();
-        z_lo = std::min(z_lo, z), z_hi = std::max(z_hi, z);
-        umin = std::min(umin, u), umax = std::max(umax, u), vmin = std::min(vmin, v), vmax = std::max(vmax, v);
-        ++col_hist_[static_cast<size_t>(u)];
-        ++row_hist_[static_cast<size_t>(v)];
+    for (int s = 0; s < kStripes; ++s) {
+        const Summary& acc = summary[static_cast<size_t>(s)];
+        umin = std::min(umin, acc.umin), umax = std::max(umax, acc.umax);
+        vmin = std::min(vmin, acc.vmin), vmax = std::max(vmax, acc.vmax);
+        z_lo = std::min(z_lo, acc.z_lo), z_hi = std::max(z_hi, acc.z_hi);
+        sum += acc.sum;
+        const std::vector<int>& cols = stripe_cols_[static_cast<size_t>(s)];
+        for (int u = acc.umin; u <= acc.umax; ++u) col_hist_[static_cast<size_t>(u)] += cols[static_cast<size_t>(u)];
     }
-    out.pixels = static_cast<int>(queue_.size());
+    out.pixels = head_pixels;
     out.head_box_px = cv::Rect(cv::Point(umin, vmin), cv::Point(umax + 1, vmax + 1));
     out.written_px = out.head_box_px;
     out.centroid_m = (sum / out.pixels).cast<float>();
