@@ -144,14 +144,88 @@ TEST(Tsdf, IntegrationMatchesAlgorithm3VoxelByVoxel) {
     EXPECT_LT(either_way, updated / 50);  // about 2 x 2e-3 of the voxels sit within 1e-3 px of a pixel border
 }
 
-TEST(DepthFilter, FusedLevelZeroVerticesAndCountEqualThePerMapFunctions) {
+// The blocks a frame touches are those within -mu, 0, +mu of every second pixel's measurement along its ray (found
+// in parallel, allocated serially): new blocks are allocated in the order a row-major scan first names them, on any
+// core count, so two runs build the same pool.
+TEST(Tsdf, AllocatesTheBlocksAlongEverySecondPixelsRayInScanOrder) {
+    TsdfParams p;
+    p.resolution_vox = 128;
+    p.volume_size_m = 0.192f;
+    p.centre_behind_surface_m = 0.0f;
+    TsdfVolume vol(p);
+    DepthFilter filter(kCam, FilterParams{});
+    SurfacePyramid pyr;
+    pyr.allocate(kCam, 1);
+    const Eigen::Vector3f centre(0.01f, -0.02f, 0.7f);
+    const Pose poses[2] = {Pose::Identity(), turned(-0.35f, 0.2f, Eigen::Vector3f(0.2f, 0.1f, 0.05f))};
+    std::vector<Eigen::Vector3i> expected_pool;
+    for (const Pose& T_world_camera : poses) {
+        ASSERT_GT(filter.filter(sphereDepth(T_world_camera, centre, 0.09f), cv::Mat(), pyr), 1000);
+        if (!vol.placed()) {
+            ASSERT_TRUE(vol.place(pyr.levels[0]));
+        }
+        const SurfaceLevel& lv = pyr.levels[0];
+        const VoxelBlockGrid& g = vol.grid();
+        const int bps = g.blocks_per_side;
+        const float inv_block_m = 1.0f / (g.voxel_size_m * kBlockSide);
+        const Eigen::Vector3f half_voxel = Eigen::Vector3f::Constant(0.5f * g.voxel_size_m);
+        std::vector<Eigen::Vector3i> named;  // this frame's blocks, first naming order
+        for (int v = lv.roi.y; v < lv.roi.br().y; v += 2) {
+            for (int u = lv.roi.x; u < lv.roi.br().x; u += 2) {
+                const float z = lv.depth_m.at<float>(v, u);
+                if (!(z > 0.0f)) continue;
+                const Eigen::Vector3f ray = kCam.ray(static_cast<float>(u), static_cast<float>(v));
+                const float step = p.trunc_dist_m / ray.norm();
+                for (int s = -1; s <= 1; ++s) {
+                    const Eigen::Vector3f p_world = T_world_camera * (ray * (z + static_cast<float>(s) * step));
+                    const Eigen::Vector3f b = (p_world - g.origin_world + half_voxel) * inv_block_m;
+                    const Eigen::Vector3i bc(static_cast<int>(std::floor(b.x())), static_cast<int>(std::floor(b.y())),
+                                             static_cast<int>(std::floor(b.z())));
+                    if (bc.minCoeff() < 0 || bc.maxCoeff() >= bps) continue;
+                    if (std::find(named.begin(), named.end(), bc) == named.end()) named.push_back(bc);
+                }
+            }
+        }
+        for (const Eigen::Vector3i& bc : named) {
+            if (std::find(expected_pool.begin(), expected_pool.end(), bc) == expected_pool.end())
+                expected_pool.push_back(bc);
+        }
+        const uint64_t generation = vol.generation();
+        const IntegrateStats stats = vol.integrate(lv, gradientColour(), T_world_camera);
+        EXPECT_EQ(stats.blocks_touched, static_cast<int>(named.size()));
+        std::vector<Eigen::Vector3i> touched;
+        std::vector<Voxel> voxels;
+        vol.copyBlocks(generation, touched, voxels);
+        ASSERT_EQ(touched.size(), named.size());
+        for (const Eigen::Vector3i& bc : touched)
+            EXPECT_NE(std::find(named.begin(), named.end(), bc), named.end()) << bc.transpose();
+    }
+    ASSERT_EQ(static_cast<int>(expected_pool.size()), vol.grid().allocated_blocks);
+    EXPECT_GT(expected_pool.size(), 100u);
+    for (size_t i = 0; i < expected_pool.size(); ++i)
+        ASSERT_EQ(vol.grid().block_coords[i], expected_pool[i]) << "pool slot " << i;
+}
+
+TEST(DepthFilter, FusedLevelZeroVerticesCountAndRoiEqualThePerMapFunctions) {
     const cv::Mat depth = sphereDepth(Pose::Identity(), Eigen::Vector3f(0.0f, 0.0f, 0.8f), 0.1f);
     DepthFilter filter(kCam, FilterParams{});
     SurfacePyramid pyr;
     pyr.allocate(kCam, 3);
-    const int valid = filter.filter(depth, cv::Mat(), pyr);
+    // A mask that keeps the sphere's upper left quarter: the ROI (from the mask pass, over stripes of rows) is the
+    // box of the pixels kept.
+    cv::Mat mask(depth.size(), CV_8UC1, cv::Scalar(0));
+    mask(cv::Rect(0, 0, 331, 247)).setTo(255);
+    const int valid = filter.filter(depth, mask, pyr);
     EXPECT_EQ(valid, cv::countNonZero(pyr.levels[0].depth_m > 0.0f));
-    EXPECT_GT(valid, 10000);
+    EXPECT_GT(valid, 5000);
+    int u0 = depth.cols, v0 = depth.rows, u1 = -1, v1 = -1;
+    for (int v = 0; v < depth.rows; ++v) {
+        for (int u = 0; u < depth.cols; ++u) {
+            if (!(mask.at<uint8_t>(v, u) && depth.at<float>(v, u) > 0.0f)) continue;
+            u0 = std::min(u0, u), v0 = std::min(v0, v), u1 = std::max(u1, u), v1 = std::max(v1, v);
+        }
+    }
+    EXPECT_EQ(pyr.levels[0].roi, cv::Rect(cv::Point(u0, v0), cv::Point(u1 + 1, v1 + 1)));
     for (int l = 0; l < pyr.count; ++l) {
         const SurfaceLevel& lv = pyr.levels[l];
         cv::Mat vertex(lv.vertex.size(), CV_32FC3, cv::Scalar::all(0)), normal = vertex.clone();

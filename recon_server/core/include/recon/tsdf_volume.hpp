@@ -294,6 +294,7 @@ class TsdfVolume {
     std::vector<uint64_t> block_generation_;  // per pool slot: the generation that last touched it
     std::vector<uint8_t> block_flag_;         // per block: touched this frame
     std::vector<int32_t> touched_;            // pool indices of the blocks touched this frame
+    cv::Mat block_candidates_;  // CV_32SC3 per 2x2 pixels: the blocks at -mu, 0, +mu along its ray (-1: none)
     cv::Mat pixel_range_weight_;  // CV_32FC2 per pixel: distance (metres) to the measured surface along its ray,
                                   // and the Algorithm 3 weight of its measurement (0 = unusable)
     cv::Mat colour_copy_;         // a non-continuous colour image, made continuous (never for a camera's own)
