@@ -232,6 +232,49 @@ TEST_F(SphereTest, GradientEqualsCentralDifferencesOfSixTrilinearSamples) {
     EXPECT_FALSE(g.gradient(Eigen::Vector3f(64.0f, 64.0f, std::numeric_limits<float>::quiet_NaN()), unused));
 }
 
+// The ray caster refines a crossing and takes its normal from one gather of a cell and its cross (gatherCross): D
+// there must be sample()'s, bit for bit and with the same validity, and so must the gradient at any point of the
+// same cell, where the cell was gathered from another point of it.
+TEST_F(SphereTest, OneGatheredCrossGivesTheSampleAndTheGradientOfItsWholeCell) {
+    const VoxelBlockGrid& g = volume_->grid();
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f), frac(0.0f, 0.999f);
+    const float mu = volume_->params().trunc_dist_m;
+    int cells = 0, sampled = 0, with_gradient = 0;
+    for (int i = 0; i < 100000; ++i) {
+        const Eigen::Vector3f dir = Eigen::Vector3f(unit(rng), unit(rng), unit(rng)).normalized();
+        const Eigen::Vector3f p_vox = g.toVoxel(centre_ + dir * (radius_ + 1.5f * mu * unit(rng)));
+        VoxelBlockGrid::CrossCell cross;
+        if (!g.gatherCross(p_vox, cross)) {
+            Eigen::Vector3f unused;
+            ASSERT_FALSE(g.gradient(p_vox, unused));
+            continue;
+        }
+        ++cells;
+        ASSERT_TRUE(cross.contains(p_vox));
+        float d = 0.0f;
+        ASSERT_EQ(cross.cell_observed, g.sample(p_vox, d) == VoxelBlockGrid::Cell::kOk) << p_vox.transpose();
+        if (cross.cell_observed) {
+            ++sampled;
+            ASSERT_EQ(cross.tsdfAt(p_vox), d) << p_vox.transpose();
+        }
+        // Another point of the same cell.
+        const Eigen::Vector3f q_vox(static_cast<float>(cross.x0) + frac(rng), static_cast<float>(cross.y0) + frac(rng),
+                                    static_cast<float>(cross.z0) + frac(rng));
+        ASSERT_TRUE(cross.contains(q_vox));
+        Eigen::Vector3f want;
+        ASSERT_EQ(cross.cross_observed, g.gradient(q_vox, want)) << q_vox.transpose();
+        if (!cross.cross_observed) continue;
+        ++with_gradient;
+        const Eigen::Vector3f got = cross.gradientAt(q_vox);
+        ASSERT_EQ(got, want) << q_vox.transpose();
+    }
+    EXPECT_GT(sampled, 30000) << "of " << cells;
+    EXPECT_GT(with_gradient, 30000) << "of " << cells;
+    EXPECT_GT(cells - with_gradient, 1000) << "cells at the band's edge, where the cross is not all observed";
+    EXPECT_FALSE(VoxelBlockGrid::CrossCell{}.contains(Eigen::Vector3f(0.5f, -0.5f, 0.5f)));
+}
+
 TEST_F(SphereTest, MarchingCubesIsClosedGenusZeroAndOnTheSphere) {
     const Mesh mesh = extractMesh(volume_->grid(), MeshParams{});
     ASSERT_GT(mesh.n_faces(), 1000u);

@@ -28,27 +28,53 @@ bool clipToCube(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float n_max,
     return s0 < s1;
 }
 
-// The zero crossing between a sample in front of the surface (s_front, d_front > 0) and one behind it (s_back,
-// d_back <= 0): eq. 4.28, then one regula falsi step (with steps of up to mu, D is not linear over the bracket).
-float refineCrossing(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox,
-                     float s_front, float d_front, float s_back, float d_back) {
-    float s_hit = s_front + (s_back - s_front) * d_front / (d_front - d_back);  // eq. 4.28
-    float d_hit;
-    if (g.sample(o_vox + dir_vox * s_hit, d_hit) == VoxelBlockGrid::Cell::kOk) {
+// A sign change of D along a ray: a sample in front of the surface (s_front, d_front > 0) and one behind it
+// (s_back, d_back <= 0), in voxel units along the ray.
+struct Bracket {
+    float s_front, d_front, s_back, d_back;
+};
+
+// The surface point in a bracket and its unit normal: the zero crossing by eq. 4.28, then one regula falsi step
+// (with steps of up to mu, D is not linear over the bracket), and the normal as the gradient of D there (eq. 4.30).
+// The cell of the first estimate is gathered with the 24 voxels around it once: D there comes from its corners and,
+// when the refined point stays in that cell (nearly always: the step is a fraction of a voxel), the gradient from
+// the same gather; the same values as sampling the cell and then taking the gradient. False where the gradient is
+// unavailable or zero.
+bool surfaceAt(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox, const Bracket& b,
+               Eigen::Vector3f& p_vox, Eigen::Vector3f& n) {
+    float s_hit = b.s_front + (b.s_back - b.s_front) * b.d_front / (b.d_front - b.d_back);  // eq. 4.28
+    const Eigen::Vector3f p_first = o_vox + dir_vox * s_hit;
+    VoxelBlockGrid::CrossCell cross;
+    const bool gathered = g.gatherCross(p_first, cross);
+    float d_hit = 0.0f;
+    const bool have_d = gathered ? cross.cell_observed : g.sample(p_first, d_hit) == VoxelBlockGrid::Cell::kOk;
+    if (have_d) {
+        if (gathered) d_hit = cross.tsdfAt(p_first);
         if (d_hit > 0.0f) {
-            s_hit += (s_back - s_hit) * d_hit / (d_hit - d_back);
+            s_hit += (b.s_back - s_hit) * d_hit / (d_hit - b.d_back);
         } else if (d_hit < 0.0f) {
-            s_hit = s_front + (s_hit - s_front) * d_front / (d_front - d_hit);
+            s_hit = b.s_front + (s_hit - b.s_front) * b.d_front / (b.d_front - d_hit);
         }
     }
-    return s_hit;
+    p_vox = o_vox + dir_vox * s_hit;
+    if (gathered && cross.contains(p_vox)) {
+        if (!cross.cross_observed) return false;
+        n = cross.gradientAt(p_vox);
+    } else if (!g.gradient(p_vox, n)) {
+        return false;
+    }
+    const float len = n.norm();
+    if (!(len > 0.0f)) return false;
+    n /= len;
+    return true;
 }
 
 // Marches one ray (eq. 4.27) in voxel coordinates between s_begin and s_end (units: voxels along the unit ray
-// direction dir_vox); returns the interpolated zero crossing (eq. 4.28) or a negative value when there is none.
-// With have_prev, the march continues from a sample already taken (prev_s, prev_d > 0) instead.
-float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox, float s_begin,
-               float s_end, float step_vox, bool have_prev = false, float prev_s = 0.0f, float prev_d = 0.0f) {
+// direction dir_vox); false when it crosses no surface, else the bracket of the first crossing. With have_prev,
+// the march continues from a sample already taken (prev_s, prev_d > 0) instead.
+bool marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox, float s_begin,
+              float s_end, float step_vox, Bracket& out, bool have_prev = false, float prev_s = 0.0f,
+              float prev_d = 0.0f) {
     using Cell = VoxelBlockGrid::Cell;
     const float block_skip = static_cast<float>(kBlockSide) * 0.5f;
     const float free_step_per_d = g.trunc_dist_m / g.voxel_size_m;  // voxels of free space per unit of D
@@ -62,8 +88,11 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
             s += cell == Cell::kUnallocated ? block_skip : step_vox;
             continue;
         }
-        if (have_prev && prev_d > 0.0f && d <= 0.0f) return refineCrossing(g, o_vox, dir_vox, prev_s, prev_d, s, d);
-        if (have_prev && prev_d < 0.0f && d > 0.0f) return -1.0f;  // leaving a back face: not a visible surface
+        if (have_prev && prev_d > 0.0f && d <= 0.0f) {
+            out = {prev_s, prev_d, s, d};
+            return true;
+        }
+        if (have_prev && prev_d < 0.0f && d > 0.0f) return false;  // leaving a back face: not a visible surface
         prev_d = d;
         prev_s = s;
         have_prev = true;
@@ -71,7 +100,7 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
         // voxel and at most step_vox; the sign change is then bracketed within one step and refined above.
         s += d > 0.0f ? std::max(1.0f, std::min(step_vox, d * free_step_per_d)) : step_vox;
     }
-    return -1.0f;
+    return false;
 }
 
 // A ray with a measured depth: the model surface lies within noise of it (the frame was just integrated there), so
@@ -79,36 +108,30 @@ float marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
 // from there; behind it (D <= 0) it steps back by what D says until D turns positive, which brackets the crossing
 // nearest the measurement. About three samples instead of six from start_before_hint_m in front. Where D there is
 // unobserved or truncated (no surface within mu), the full march from s_begin decides.
-float marchFromHint(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox,
-                    float s_begin, float s_hint, float s_end, float step_vox) {
+bool marchFromHint(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox,
+                   float s_begin, float s_hint, float s_end, float step_vox, Bracket& out) {
     using Cell = VoxelBlockGrid::Cell;
     const float free_step_per_d = g.trunc_dist_m / g.voxel_size_m;
     float d;
     if (!(s_hint > s_begin && s_hint < s_end) || g.sample(o_vox + dir_vox * s_hint, d) != Cell::kOk || d >= 1.0f ||
         d <= -1.0f) {
-        return marchRay(g, o_vox, dir_vox, s_begin, s_end, step_vox);
+        return marchRay(g, o_vox, dir_vox, s_begin, s_end, step_vox, out);
     }
-    if (d > 0.0f) return marchRay(g, o_vox, dir_vox, s_hint, s_end, step_vox, true, s_hint, d);
+    if (d > 0.0f) return marchRay(g, o_vox, dir_vox, s_hint, s_end, step_vox, out, true, s_hint, d);
     float s_back = s_hint, d_back = d;
     for (;;) {
         const float s = s_back - std::max(1.0f, std::min(step_vox, -d_back * free_step_per_d));
-        if (s < s_begin) return marchRay(g, o_vox, dir_vox, s_begin, s_end, step_vox);
+        if (s < s_begin) return marchRay(g, o_vox, dir_vox, s_begin, s_end, step_vox, out);
         float d_front;
         if (g.sample(o_vox + dir_vox * s, d_front) != Cell::kOk)
-            return marchRay(g, o_vox, dir_vox, s_begin, s_end, step_vox);
-        if (d_front > 0.0f) return refineCrossing(g, o_vox, dir_vox, s, d_front, s_back, d_back);
+            return marchRay(g, o_vox, dir_vox, s_begin, s_end, step_vox, out);
+        if (d_front > 0.0f) {
+            out = {s, d_front, s_back, d_back};
+            return true;
+        }
         s_back = s;
         d_back = d_front;
     }
-}
-
-// The unit surface normal at p_vox (eq. 4.30); false where the gradient is unavailable or zero.
-bool surfaceNormal(const VoxelBlockGrid& g, const Eigen::Vector3f& p_vox, Eigen::Vector3f& n) {
-    if (!g.gradient(p_vox, n)) return false;
-    const float len = n.norm();
-    if (!(len > 0.0f)) return false;
-    n /= len;
-    return true;
 }
 
 // The nearest measured pixel of one hint row within `radius` of each pixel, for a left-to-right scan: amortised
@@ -215,13 +238,12 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
                 } else if (!clipToCube(o_vox, dir_vox, n_max, s0, s1)) {
                     continue;
                 }
-                const float s_hit = measured
-                                        ? marchFromHint(grid, o_vox, dir_vox, s0, z_hint * ray_len / vs, s1, step_vox)
-                                        : marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
-                if (s_hit < 0.0f) continue;
-                const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
-                Eigen::Vector3f n_world;
-                if (!surfaceNormal(grid, p_vox, n_world)) continue;   // eq. 4.30
+                Bracket bracket;
+                const bool crossed =
+                    measured ? marchFromHint(grid, o_vox, dir_vox, s0, z_hint * ray_len / vs, s1, step_vox, bracket)
+                             : marchRay(grid, o_vox, dir_vox, s0, s1, step_vox, bracket);
+                Eigen::Vector3f p_vox, n_world;
+                if (!crossed || !surfaceAt(grid, o_vox, dir_vox, bracket, p_vox, n_world)) continue;
                 const Eigen::Vector3f p_world = grid.toWorld(p_vox);  // eq. 4.29
                 vert[u] = cv::Vec3f(p_world.x(), p_world.y(), p_world.z());
                 norm[u] = cv::Vec3f(n_world.x(), n_world.y(), n_world.z());
@@ -248,11 +270,11 @@ void Raycaster::renderShaded(const VoxelBlockGrid& grid, const Intrinsics& k, co
                 const Eigen::Vector3f dir_vox = r * ray_cam.normalized();
                 float s0, s1;
                 if (!clipToCube(o_vox, dir_vox, n_max, s0, s1)) continue;
-                const float s_hit = marchRay(grid, o_vox, dir_vox, s0, s1, step_vox);
-                if (s_hit < 0.0f) continue;
-                const Eigen::Vector3f p_vox = o_vox + dir_vox * s_hit;
-                Eigen::Vector3f n;
-                if (!surfaceNormal(grid, p_vox, n)) continue;
+                Bracket bracket;
+                Eigen::Vector3f p_vox, n;
+                if (!marchRay(grid, o_vox, dir_vox, s0, s1, step_vox, bracket) ||
+                    !surfaceAt(grid, o_vox, dir_vox, bracket, p_vox, n))
+                    continue;
                 // Lambert with the light at the camera: brightness = cos(normal, ray back to the camera).
                 const float lambert = std::max(0.0f, -n.dot(dir_vox));
                 const float shade = 0.15f + 0.85f * lambert;
