@@ -2,6 +2,8 @@
 // parallel stripes) against a plain statement of what it computes: seeds where the frame confirms the ray-cast
 // model's prediction inside the head region, then Algorithm 1's depth-continuity growth from every seed within the
 // predicted box widened by the band, inside the region.
+#include "recon/model_segmenter.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -11,7 +13,6 @@
 #include <vector>
 
 #include "recon/face_pipeline.hpp"
-#include "recon/model_segmenter.hpp"
 #include "recon/reconstructor.hpp"
 #include "synth/kinect_simulator.hpp"
 #include "synth/sequence_options.hpp"
@@ -56,14 +57,16 @@ Reference referenceSegmentation(const cv::Mat& depth_m, const Intrinsics& k, con
         }
     }
     const int band_px = static_cast<int>(p.band_m * k.fx_px / static_cast<float>(z_sum / predicted));
-    const cv::Rect box = cv::Rect(cv::Point(u0 - band_px, v0 - band_px), cv::Point(u1 + band_px + 1, v1 + band_px + 1)) &
-                         cv::Rect(0, 0, depth_m.cols, depth_m.rows);
+    const cv::Rect box =
+        cv::Rect(cv::Point(u0 - band_px, v0 - band_px), cv::Point(u1 + band_px + 1, v1 + band_px + 1)) &
+        cv::Rect(0, 0, depth_m.cols, depth_m.rows);
     cv::Mat outside = cv::Mat::zeros(depth_m.size(), CV_8UC1);  // tried and outside the region
     while (!queue.empty()) {
         const cv::Point q = queue.front();
         queue.pop_front();
         const float z = depth_m.at<float>(q);
-        for (const cv::Point n : {q + cv::Point(-1, 0), q + cv::Point(1, 0), q + cv::Point(0, -1), q + cv::Point(0, 1)}) {
+        for (const cv::Point n :
+             {q + cv::Point(-1, 0), q + cv::Point(1, 0), q + cv::Point(0, -1), q + cv::Point(0, 1)}) {
             if (!box.contains(n) || r.head.at<uint8_t>(n) || outside.at<uint8_t>(n)) continue;
             const float nz = depth_m.at<float>(n);
             if (!inRange(nz) || std::fabs(nz - z) >= p.grow_jump_m) continue;
@@ -82,7 +85,8 @@ Reference referenceSegmentation(const cv::Mat& depth_m, const Intrinsics& k, con
     for (const cv::Point& q : head) {
         lo = cv::Point(std::min(lo.x, q.x), std::min(lo.y, q.y));
         hi = cv::Point(std::max(hi.x, q.x), std::max(hi.y, q.y));
-        r.centroid += k.backProject(static_cast<float>(q.x), static_cast<float>(q.y), depth_m.at<float>(q)).cast<double>();
+        r.centroid +=
+            k.backProject(static_cast<float>(q.x), static_cast<float>(q.y), depth_m.at<float>(q)).cast<double>();
     }
     r.box = cv::Rect(lo, hi + cv::Point(1, 1));
     r.centroid /= r.pixels;
@@ -111,8 +115,8 @@ TEST(ModelSegmenter, SegmentsAsThePlainFloodFillFromEverySeed) {
             if (i > 0 && i % 4 == 0 && rec.predictHead(prediction)) {
                 segmenter.segment(frame.depth_m, sim.intrinsics(), prediction, pipeline.segmenter, out);
                 ASSERT_TRUE(out.found) << name << " frame " << i << ": " << out.reason;
-                const Reference ref = referenceSegmentation(frame.depth_m, sim.intrinsics(), prediction,
-                                                            pipeline.model, pipeline.segmenter);
+                const Reference ref = referenceSegmentation(frame.depth_m, sim.intrinsics(), prediction, pipeline.model,
+                                                            pipeline.segmenter);
                 EXPECT_EQ(out.pixels, ref.pixels) << name << " frame " << i;
                 EXPECT_EQ(cv::countNonZero(out.mask != ref.head * 255), 0) << name << " frame " << i;
                 EXPECT_EQ(cv::countNonZero((out.depth_m > 0) != (ref.head > 0)), 0) << name << " frame " << i;
@@ -120,8 +124,8 @@ TEST(ModelSegmenter, SegmentsAsThePlainFloodFillFromEverySeed) {
                 EXPECT_LT((out.centroid_m.cast<double>() - ref.centroid).norm(), 1e-6) << name << " frame " << i;
                 ++compared;
             }
-            ASSERT_TRUE(rec.processFrame(frame, truth.label == static_cast<uint8_t>(synth::PixelLabel::kHead))
-                            .integrated)
+            ASSERT_TRUE(
+                rec.processFrame(frame, truth.label == static_cast<uint8_t>(synth::PixelLabel::kHead)).integrated)
                 << name << " frame " << i;
         }
         std::printf("%s: %d segmentations compared with the reference\n", name, compared);

@@ -157,8 +157,8 @@ void ModelSegmenter::segment(const cv::Mat& depth_m, const Intrinsics& k, const 
             for (int v = all.v0 + box_rows * s / kStripes; v < all.v0 + box_rows * (s + 1) / kStripes; ++v) {
                 const uint8_t* st = state_.ptr<uint8_t>(v);
                 for (int u = all.u0; u <= all.u1; ++u) {
-                    if (st[u] == 1 && (untouched(u - 1, v) || untouched(u + 1, v) || untouched(u, v - 1) ||
-                                       untouched(u, v + 1)))
+                    if (st[u] == 1 &&
+                        (untouched(u - 1, v) || untouched(u + 1, v) || untouched(u, v - 1) || untouched(u, v + 1)))
                         frontier.push_back(v * w + u);
                 }
             }

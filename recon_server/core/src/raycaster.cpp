@@ -108,8 +108,8 @@ bool marchRay(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen
 // from there; behind it (D <= 0) it steps back by what D says until D turns positive, which brackets the crossing
 // nearest the measurement. About three samples instead of six from start_before_hint_m in front. Where D there is
 // unobserved or truncated (no surface within mu), the full march from s_begin decides.
-bool marchFromHint(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox,
-                   float s_begin, float s_hint, float s_end, float step_vox, Bracket& out) {
+bool marchFromHint(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox, float s_begin,
+                   float s_hint, float s_end, float step_vox, Bracket& out) {
     using Cell = VoxelBlockGrid::Cell;
     const float free_step_per_d = g.trunc_dist_m / g.voxel_size_m;
     float d;

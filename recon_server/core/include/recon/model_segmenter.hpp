@@ -9,8 +9,8 @@
 #pragma once
 
 #include <Eigen/Core>
-#include <opencv2/core.hpp>
 #include <array>
+#include <opencv2/core.hpp>
 #include <vector>
 
 #include "recon/camera.hpp"
@@ -88,7 +88,7 @@ class ModelSegmenter {
     static constexpr int kStripes = 16;  // fixed stripes of rows: the parallel passes' reductions merge in order
     cv::Mat state_;                      // CV_8U per pixel: 0 untouched, 1 head, 2 tried and outside the region
     std::vector<int> queue_;             // growth's queue: head pixels with an untouched neighbour, then grown ones
-    std::array<std::vector<int>, kStripes> frontier_;  // per stripe: its seeds with an untouched neighbour
+    std::array<std::vector<int>, kStripes> frontier_;     // per stripe: its seeds with an untouched neighbour
     std::array<std::vector<int>, kStripes> stripe_cols_;  // per stripe: head pixels per column
     std::vector<int> col_hist_, row_hist_;
     int seeds_ = 0;

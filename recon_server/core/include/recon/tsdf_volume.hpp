@@ -93,16 +93,16 @@ struct VoxelBlockGrid {
     // a crossing from it (what sample() gives there) and, when the refined crossing stays in the cell, the
     // gradient too: one gather instead of a cell and then the 32 voxels again.
     struct CrossCell {
-        int x0 = 0, y0 = 0, z0 = 0;  // voxel coordinates; the cell's lower corner
-        float corner[8];             // D at the cell's corners (corner i as in fetchCell)
-        float diff[3][8];            // D(c + e_a) - D(c - e_a) at each corner c, per axis a
-        bool cell_observed = false;  // the 8 corners allocated and observed: sample() returns kOk in the cell
-        bool cross_observed = false; // all 32 allocated and observed: gradient() succeeds in the cell
+        int x0 = 0, y0 = 0, z0 = 0;   // voxel coordinates; the cell's lower corner
+        float corner[8];              // D at the cell's corners (corner i as in fetchCell)
+        float diff[3][8];             // D(c + e_a) - D(c - e_a) at each corner c, per axis a
+        bool cell_observed = false;   // the 8 corners allocated and observed: sample() returns kOk in the cell
+        bool cross_observed = false;  // all 32 allocated and observed: gradient() succeeds in the cell
         bool contains(const Eigen::Vector3f& p_vox) const {
             return static_cast<int>(p_vox.x()) == x0 && static_cast<int>(p_vox.y()) == y0 &&
                    static_cast<int>(p_vox.z()) == z0 && p_vox.x() >= 0.0f && p_vox.y() >= 0.0f && p_vox.z() >= 0.0f;
         }
-        float tsdfAt(const Eigen::Vector3f& p_vox) const;       // = sample() at a point of the cell
+        float tsdfAt(const Eigen::Vector3f& p_vox) const;                // = sample() at a point of the cell
         Eigen::Vector3f gradientAt(const Eigen::Vector3f& p_vox) const;  // = gradient() at a point of the cell
     };
     // False where p_vox lies outside [1, N - 3] on some axis (NaN included); gradient() is false there as well.
@@ -239,9 +239,9 @@ inline constexpr Voxel kUnobservedBlock[kBlockVoxels]{};
             const Voxel &y_lo = at(i, j - 1, l), &y_hi = at(i, j + 1, l);
             const Voxel &z_lo = at(i, j, l - 1), &z_hi = at(i, j, l + 1);
             w_cell = std::min(w_cell, c.weight);
-            w_cross = std::min(w_cross, std::min(std::min(x_lo.weight, x_hi.weight),
-                                                 std::min(std::min(y_lo.weight, y_hi.weight),
-                                                          std::min(z_lo.weight, z_hi.weight))));
+            w_cross = std::min(
+                w_cross, std::min(std::min(x_lo.weight, x_hi.weight),
+                                  std::min(std::min(y_lo.weight, y_hi.weight), std::min(z_lo.weight, z_hi.weight))));
             out.corner[corner] = c.tsdf;
             out.diff[0][corner] = x_hi.tsdf - x_lo.tsdf;
             out.diff[1][corner] = y_hi.tsdf - y_lo.tsdf;
@@ -285,7 +285,6 @@ inline bool VoxelBlockGrid::gradient(const Eigen::Vector3f& p_vox, Eigen::Vector
     grad = x.gradientAt(p_vox);
     return true;
 }
-
 
 struct IntegrateStats {
     int blocks_touched = 0;       // count; blocks integrated this frame
@@ -334,7 +333,7 @@ class TsdfVolume {
     std::vector<uint64_t> block_generation_;  // per pool slot: the generation that last touched it
     std::vector<uint8_t> block_flag_;         // per block: touched this frame
     std::vector<int32_t> touched_;            // pool indices of the blocks touched this frame
-    cv::Mat block_candidates_;  // CV_32SC3 per 2x2 pixels: the blocks at -mu, 0, +mu along its ray (-1: none)
+    cv::Mat block_candidates_;    // CV_32SC3 per 2x2 pixels: the blocks at -mu, 0, +mu along its ray (-1: none)
     cv::Mat pixel_range_weight_;  // CV_32FC2 per pixel: distance (metres) to the measured surface along its ray,
                                   // and the Algorithm 3 weight of its measurement (0 = unusable)
     cv::Mat colour_copy_;         // a non-continuous colour image, made continuous (never for a camera's own)
