@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <deque>
+#include <utility>
 #include <vector>
 
 #include "recon/face_pipeline.hpp"
@@ -42,9 +43,15 @@ Reference referenceSegmentation(const cv::Mat& depth_m, const Intrinsics& k, con
     std::deque<cv::Point> queue;
     double z_sum = 0;
     int predicted = 0, u0 = depth_m.cols, v0 = depth_m.rows, u1 = -1, v1 = -1;
-    for (int v = model.roi.y; v < model.roi.br().y; ++v) {
-        for (int u = model.roi.x; u < model.roi.br().x; ++u) {
-            const cv::Vec3f vert = model.vertex.at<cv::Vec3f>(v, u);
+    // A model cast at a coarser level (ReconParams::model_level) predicts depth pixel (u, v) by its pixel
+    // (u >> shift, v >> shift).
+    const int shift = depth_m.cols == model.k.width_px ? 0 : 1;
+    const cv::Rect roi =
+        cv::Rect(model.roi.x << shift, model.roi.y << shift, model.roi.width << shift, model.roi.height << shift) &
+        cv::Rect(0, 0, depth_m.cols, depth_m.rows);
+    for (int v = roi.y; v < roi.br().y; ++v) {
+        for (int u = roi.x; u < roi.br().x; ++u) {
+            const cv::Vec3f vert = model.vertex.at<cv::Vec3f>(v >> shift, u >> shift);
             if (std::isnan(vert[0])) continue;
             const Eigen::Vector3f p_cam = T_camera_world * Eigen::Vector3f(vert[0], vert[1], vert[2]);
             ++predicted;
@@ -94,14 +101,16 @@ Reference referenceSegmentation(const cv::Mat& depth_m, const Intrinsics& k, con
 }
 
 // Over a tracked scenario (the chin's torso below the head: growth stops at the region, not at a depth edge), the
-// segmentation of each next frame from the model is the reference's, pixel for pixel.
+// segmentation of each next frame from the model is the reference's, pixel for pixel; with the model at full and
+// at half resolution (a busy server's sessions).
 TEST(ModelSegmenter, SegmentsAsThePlainFloodFillFromEverySeed) {
-    for (const char* name : {"chin", "wide"}) {
+    for (const auto& [name, model_level] : {std::pair{"chin", 0}, std::pair{"wide", 0}, std::pair{"wide", 1}}) {
         synth::SequenceParams sp;
         ASSERT_TRUE(synth::applyScenario(name, sp).isOk());
         sp.frames = 40;
         const synth::KinectSimulator sim(synth::builtinHead(), sp);
-        const ReconParams params = ReconParams::faceDefaults();
+        ReconParams params = ReconParams::faceDefaults();
+        params.model_level = model_level;
         Reconstructor rec(sim.intrinsics(), params);
         const FacePipelineParams pipeline;
         ModelSegmenter segmenter(pipeline.model);
@@ -114,21 +123,25 @@ TEST(ModelSegmenter, SegmentsAsThePlainFloodFillFromEverySeed) {
             HeadPrediction prediction;
             if (i > 0 && i % 4 == 0 && rec.predictHead(prediction)) {
                 segmenter.segment(frame.depth_m, sim.intrinsics(), prediction, pipeline.segmenter, out);
-                ASSERT_TRUE(out.found) << name << " frame " << i << ": " << out.reason;
+                ASSERT_TRUE(out.found) << name << " level " << model_level << " frame " << i << ": " << out.reason;
                 const Reference ref = referenceSegmentation(frame.depth_m, sim.intrinsics(), prediction, pipeline.model,
                                                             pipeline.segmenter);
-                EXPECT_EQ(out.pixels, ref.pixels) << name << " frame " << i;
-                EXPECT_EQ(cv::countNonZero(out.mask != ref.head * 255), 0) << name << " frame " << i;
-                EXPECT_EQ(cv::countNonZero((out.depth_m > 0) != (ref.head > 0)), 0) << name << " frame " << i;
-                EXPECT_EQ(out.head_box_px, ref.box) << name << " frame " << i;
-                EXPECT_LT((out.centroid_m.cast<double>() - ref.centroid).norm(), 1e-6) << name << " frame " << i;
+                EXPECT_EQ(out.pixels, ref.pixels) << name << " level " << model_level << " frame " << i;
+                EXPECT_EQ(cv::countNonZero(out.mask != ref.head * 255), 0)
+                    << name << " level " << model_level << " frame " << i;
+                EXPECT_EQ(cv::countNonZero((out.depth_m > 0) != (ref.head > 0)), 0)
+                    << name << " level " << model_level << " frame " << i;
+                EXPECT_EQ(out.head_box_px, ref.box) << name << " level " << model_level << " frame " << i;
+                EXPECT_LT((out.centroid_m.cast<double>() - ref.centroid).norm(), 1e-6)
+                    << name << " level " << model_level << " frame " << i;
                 ++compared;
             }
             ASSERT_TRUE(
                 rec.processFrame(frame, truth.label == static_cast<uint8_t>(synth::PixelLabel::kHead)).integrated)
-                << name << " frame " << i;
+                << name << " level " << model_level << " frame " << i;
         }
-        std::printf("%s: %d segmentations compared with the reference\n", name, compared);
+        ASSERT_EQ(rec.modelLevel(), model_level);
+        std::printf("%s, model level %d: %d segmentations compared with the reference\n", name, model_level, compared);
         EXPECT_EQ(compared, 9);
     }
 }
