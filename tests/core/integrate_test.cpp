@@ -88,19 +88,29 @@ Expect referenceUpdate(const TsdfParams& p, const SurfaceLevel& frame, const cv:
     return Expect::kUpdated;
 }
 
-TEST(Tsdf, IntegrationMatchesAlgorithm3VoxelByVoxel) {
-    TsdfParams p;
-    p.resolution_vox = 128;
-    p.volume_size_m = 0.192f;
-    p.centre_behind_surface_m = 0.0f;
-    TsdfVolume vol(p);
-    DepthFilter filter(kCam, FilterParams{});
+// Integration into a 128^3 cube of 1.5 mm voxels around a sphere seen from two views, the second turned and shifted
+// so that the grid's axes are oblique to the camera's.
+class Tsdf : public ::testing::Test {
+ protected:
+    static TsdfParams cubeParams() {
+        TsdfParams p;
+        p.resolution_vox = 128;
+        p.volume_size_m = 0.192f;
+        p.centre_behind_surface_m = 0.0f;
+        return p;
+    }
+    void SetUp() override { pyr.allocate(kCam, 1); }
+
+    const TsdfParams p = cubeParams();
+    TsdfVolume vol{p};
+    DepthFilter filter{kCam, FilterParams{}};
     SurfacePyramid pyr;
-    pyr.allocate(kCam, 1);
-    const cv::Mat bgr = gradientColour();
-    const Eigen::Vector3f centre(0.01f, -0.02f, 0.7f);
-    // Two views, the second turned and shifted, so that the grid's axes are oblique to the camera's.
+    const Eigen::Vector3f centre{0.01f, -0.02f, 0.7f};
     const Pose poses[2] = {Pose::Identity(), turned(-0.35f, 0.2f, Eigen::Vector3f(0.2f, 0.1f, 0.05f))};
+};
+
+TEST_F(Tsdf, IntegrationMatchesAlgorithm3VoxelByVoxel) {
+    const cv::Mat bgr = gradientColour();
     int updated = 0, either_way = 0, frames = 0;
     for (const Pose& T_world_camera : poses) {
         ASSERT_GT(filter.filter(sphereDepth(T_world_camera, centre, 0.09f), cv::Mat(), pyr), 1000);
@@ -147,17 +157,7 @@ TEST(Tsdf, IntegrationMatchesAlgorithm3VoxelByVoxel) {
 // The blocks a frame touches are those within -mu, 0, +mu of every second pixel's measurement along its ray (found
 // in parallel, allocated serially): new blocks are allocated in the order a row-major scan first names them, on any
 // core count, so two runs build the same pool.
-TEST(Tsdf, AllocatesTheBlocksAlongEverySecondPixelsRayInScanOrder) {
-    TsdfParams p;
-    p.resolution_vox = 128;
-    p.volume_size_m = 0.192f;
-    p.centre_behind_surface_m = 0.0f;
-    TsdfVolume vol(p);
-    DepthFilter filter(kCam, FilterParams{});
-    SurfacePyramid pyr;
-    pyr.allocate(kCam, 1);
-    const Eigen::Vector3f centre(0.01f, -0.02f, 0.7f);
-    const Pose poses[2] = {Pose::Identity(), turned(-0.35f, 0.2f, Eigen::Vector3f(0.2f, 0.1f, 0.05f))};
+TEST_F(Tsdf, AllocatesTheBlocksAlongEverySecondPixelsRayInScanOrder) {
     std::vector<Eigen::Vector3i> expected_pool;
     for (const Pose& T_world_camera : poses) {
         ASSERT_GT(filter.filter(sphereDepth(T_world_camera, centre, 0.09f), cv::Mat(), pyr), 1000);
