@@ -2,10 +2,13 @@
 #include <sys/resource.h>
 
 #include <atomic>
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <string>
+#include <thread>
 
 #include "capture/agent.hpp"
 #include "wire/dds_options.hpp"
@@ -39,6 +42,8 @@ options:
   --preload             read the whole recording into memory first (tum:, oni:, synthetic), then stream it at
                         its rate: the agent then costs only its encoding, as on a capture PC of its own
                         (memory: about 1.5 MB per VGA frame with colour)
+  --hold-until FILE     after opening (and preloading) the source, wait until FILE exists before announcing the
+                        session: several agents then start streaming together (tests/bench/server_realtime.sh)
   --depth-codec NAME    lossless depth codec: packed-delta-zstd (default), delta-zstd, rvl-zstd, rvl, zstd,
                         raw16, png (`facescan-bench codecs` compares them on your frames)
   --tum-depth-scale S   raw depth units per metre of tum: sources (default 5000; Kinect millimetres: 1000)
@@ -68,6 +73,7 @@ bool parseInt(const std::string& text, long lo, long hi, long& out) {
 int main(int argc, char** argv) {
     using namespace facescan;
     capture::AgentOptions options;
+    std::string hold_until;  // --hold-until: announce the session once this file exists
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
         auto value = [&]() -> const char* { return i + 1 < argc ? argv[++i] : nullptr; };
@@ -80,6 +86,11 @@ int main(int argc, char** argv) {
             continue;
         } else if (arg == "--preload") {
             options.preload = true;
+            continue;
+        } else if (arg == "--hold-until") {
+            const char* v = value();
+            if (v == nullptr || *v == '\0') return usageError("--hold-until takes a file path");
+            hold_until = v;
             continue;
         }
         const char* v = value();
@@ -156,6 +167,18 @@ int main(int argc, char** argv) {
     uint64_t last_digest = 0;
     std::signal(SIGINT, onSignal);
     std::signal(SIGTERM, onSignal);
+    if (!hold_until.empty()) {
+        // Nothing is announced yet, so no server has taken the session: holding costs no frame.
+        std::printf("facescan-agent: ready; holding until %s exists\n", hold_until.c_str());
+        std::fflush(stdout);
+        std::error_code ec;
+        while (!g_stop && !std::filesystem::exists(hold_until, ec))
+            std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        if (g_stop) {
+            std::printf("facescan-agent: stopped (Ctrl-C) before streaming\n");
+            return 0;
+        }
+    }
     const Status status = (*agent)->run(
         g_stop,
         [](const std::string& event) {

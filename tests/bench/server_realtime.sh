@@ -6,6 +6,10 @@
 #   --preload: each agent reads its whole sequence into memory first (facescan-agent --preload), then streams it at
 #          30 Hz: an agent then costs only its encoding (~5 % of a core), as on a capture PC of its own. Without it
 #          every agent renders (synthetic) or decodes PNGs (TUM_DIR) on the cores the server needs.
+#          Every agent holds (--hold-until) until all have read their sequence, so that no agent still reading
+#          shares the cores with sessions already streaming. They are then released 0.5 s apart: released at
+#          once, the server claimed them together and their frames arrived in step, every session's frame at the
+#          same moment of each period, which independent cameras do not do.
 #   env:   BUILD_DIR (default ./build), FACESCAN_DATA_DIR (../shared/data: the real head scan), SNAPSHOT_HZ (1),
 #          TUM_DIR: stream this TUM folder instead of the synthetic Kinect (`facescan-bench synth --head scan --tum
 #          DIR` writes the same sequence); PRELOAD=1 is the same as --preload; SERVER_ARGS: more facescan-server
@@ -50,9 +54,19 @@ for s in $(seq 1 "$sessions"); do
     source="synthetic:frames=$frames,subject=$subject,seed=$s"
     [ -n "${TUM_DIR:-}" ] && source="tum:$TUM_DIR"
     "$agent_bin" --source "$source" --frames "$frames" --profile loopback --domain "$domain" \
-        --session "rt$s" --rate real "${preload_flag[@]}" >"$work/agent$s.log" 2>&1 &
+        --session "rt$s" --rate real "${preload_flag[@]}" --hold-until "$work/go$s" >"$work/agent$s.log" 2>&1 &
     agent_pids+=("$!")
     pids+=("$!")
+done
+# Once every agent is ready (or has exited: its log says why), release them 0.5 s apart.
+for s in $(seq 1 "$sessions"); do
+    while ! grep -q "holding until" "$work/agent$s.log" 2>/dev/null && kill -0 "${agent_pids[$((s - 1))]}" 2>/dev/null; do
+        sleep 0.1
+    done
+done
+for s in $(seq 1 "$sessions"); do
+    touch "$work/go$s"
+    [ "$s" -lt "$sessions" ] && sleep 0.5
 done
 for p in "${agent_pids[@]}"; do wait "$p" || echo "server_realtime: an agent failed (logs in $work)" >&2; done
 for s in $(seq 1 "$sessions"); do

@@ -56,9 +56,10 @@ std::vector<cv::Mat> expectedDepth(const std::string& spec) {
     return frames;
 }
 
-// Streams `spec` through the agent and checks every received depth frame against `expected`.
+// Streams `spec` through the agent and checks every received depth frame against `expected`. With hold_file, the
+// agent runs with --hold-until: it must announce nothing for a second, until the file is created.
 void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expected, uint32_t salt,
-                      const std::vector<std::string>& extra_args = {}) {
+                      const std::vector<std::string>& extra_args = {}, const fs::path& hold_file = {}) {
     ASSERT_FALSE(expected.empty());
     const uint32_t domain = privateDomain(salt);
     const std::string session = "agent-test-" + std::to_string(salt);
@@ -66,6 +67,7 @@ void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expec
         "--source",  spec,    "--profile", "loopback", "--domain",          std::to_string(domain),
         "--session", session, "--rate",    "max",      "--wait-for-server", "30"};
     args.insert(args.end(), extra_args.begin(), extra_args.end());
+    if (!hold_file.empty()) args.insert(args.end(), {"--hold-until", hold_file.string()});
     const pid_t agent = spawnAgent(args);
     ASSERT_GT(agent, 0);
 
@@ -93,6 +95,19 @@ void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expec
     ASSERT_TRUE(claim->write(wire::toMessage(owner)).isOk());
 
     std::optional<wire::CameraInfoData> camera;
+    if (!hold_file.empty()) {
+        int announced = 0;
+        const auto until = std::chrono::steady_clock::now() + 1s;
+        while (std::chrono::steady_clock::now() < until) {
+            auto n = info_reader->take([&](const facescan_wire_CameraInfo&, const dds_sample_info_t& i) {
+                announced += i.valid_data ? 1 : 0;
+            });
+            ASSERT_TRUE(n.isOk());
+            std::this_thread::sleep_for(20ms);
+        }
+        EXPECT_EQ(announced, 0) << "the agent announced its session before " << hold_file << " existed";
+        std::ofstream(hold_file) << "go\n";
+    }
     wire::DepthDecoder decoder;
     std::vector<uint32_t> seqs;
     int mismatches = 0;
@@ -168,8 +183,11 @@ TEST(AgentStream, TumFolderArrivesBitExactAndInOrder) {
                    cv::IMREAD_ANYDEPTH);
     EXPECT_EQ(first.type(), CV_16UC1);
     streamAndCompare(spec, expected, 2);
-    // --preload: the whole folder is read first, then the same frames go out in the same order.
-    streamAndCompare(spec, expected, 3, {"--preload"});
+    // --preload: the whole folder is read first, then the same frames go out in the same order; with --hold-until,
+    // only once the file exists.
+    const fs::path go = dir / "go";
+    streamAndCompare(spec, expected, 3, {"--preload"}, go);
+    EXPECT_TRUE(fs::exists(go));
     fs::remove_all(dir);
 }
 
