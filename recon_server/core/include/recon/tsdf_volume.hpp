@@ -104,6 +104,11 @@ struct VoxelBlockGrid {
         }
         float tsdfAt(const Eigen::Vector3f& p_vox) const;                // = sample() at a point of the cell
         Eigen::Vector3f gradientAt(const Eigen::Vector3f& p_vox) const;  // = gradient() at a point of the cell
+        // A point's fractions within the cell, as sample() takes them.
+        Eigen::Vector3f fractions(const Eigen::Vector3f& p_vox) const {
+            return {p_vox.x() - static_cast<float>(x0), p_vox.y() - static_cast<float>(y0),
+                    p_vox.z() - static_cast<float>(z0)};
+        }
     };
     // False where p_vox lies outside [1, N - 3] on some axis (NaN included); gradient() is false there as well.
     bool gatherCross(const Eigen::Vector3f& p_vox, CrossCell& out) const;
@@ -264,19 +269,15 @@ inline constexpr Voxel kUnobservedBlock[kBlockVoxels]{};
 }
 
 [[gnu::always_inline]] inline float VoxelBlockGrid::CrossCell::tsdfAt(const Eigen::Vector3f& p_vox) const {
-    const float fx = p_vox.x() - static_cast<float>(x0);
-    const float fy = p_vox.y() - static_cast<float>(y0);
-    const float fz = p_vox.z() - static_cast<float>(z0);
-    return trilinear(corner, fx, fy, fz);
+    const Eigen::Vector3f f = fractions(p_vox);
+    return trilinear(corner, f.x(), f.y(), f.z());
 }
 
 [[gnu::always_inline]] inline Eigen::Vector3f VoxelBlockGrid::CrossCell::gradientAt(
     const Eigen::Vector3f& p_vox) const {
-    const float fx = p_vox.x() - static_cast<float>(x0);
-    const float fy = p_vox.y() - static_cast<float>(y0);
-    const float fz = p_vox.z() - static_cast<float>(z0);
-    return Eigen::Vector3f(trilinear(diff[0], fx, fy, fz), trilinear(diff[1], fx, fy, fz),
-                           trilinear(diff[2], fx, fy, fz));
+    const Eigen::Vector3f f = fractions(p_vox);
+    return Eigen::Vector3f(trilinear(diff[0], f.x(), f.y(), f.z()), trilinear(diff[1], f.x(), f.y(), f.z()),
+                           trilinear(diff[2], f.x(), f.y(), f.z()));
 }
 
 inline bool VoxelBlockGrid::gradient(const Eigen::Vector3f& p_vox, Eigen::Vector3f& grad) const {
