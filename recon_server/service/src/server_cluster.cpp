@@ -3,6 +3,7 @@
 // is a function of the view that DDS gives (announcements with liveliness, claims with EXCLUSIVE ownership and
 // instance states); there is no protocol of our own beyond writing and reading those topics.
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <set>
 
@@ -122,7 +123,26 @@ Status Server::claimSession(const std::string& session_id, uint32_t epoch, std::
         owned_[session_id] = o;
         refused_.erase(session_id);
     }
+    buildEngine(*o);
     return Status::ok();
+}
+
+void Server::buildEngine(OwnedSession& o) {
+    const wire::ReplicaData* replica = o.restore_from ? &*o.restore_from : nullptr;
+    if (!replica && !o.camera) return;  // activate() says what is missing
+    // Copies of what the build reads, but the replica: a model's worth of blocks, which o keeps until the build is
+    // done (the future's destructor waits for it) and activate() has taken it.
+    const dds_entity_t wake = wake_.valid() ? wake_.handle() : 0;
+    try {
+        o.engine = std::async(
+            std::launch::async, [params = params_, camera = replica ? replica->camera : *o.camera, replica, wake] {
+                StatusOr<SessionEngine> engine = SessionEngine::build(params, camera, replica);
+                if (wake > 0) (void)dds_set_guardcondition(wake, true);  // activate() on the intake thread's next turn
+                return engine;
+            });
+    } catch (const std::system_error&) {
+        // No thread to be had: activate() builds it on the intake thread, as before.
+    }
 }
 
 void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
@@ -138,7 +158,9 @@ void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
             if (beaten) {
                 yield(o->id, "server '" + view->data.owner_id + "' claimed it too (epoch " +
                                  std::to_string(view->data.epoch) + ")");
-            } else if (ours && steadyNowNs() - o->claimed_ns >= settle_ns) {
+            } else if (ours && steadyNowNs() - o->claimed_ns >= settle_ns &&
+                       (!o->engine.valid() ||
+                        o->engine.wait_for(std::chrono::seconds(0)) == std::future_status::ready)) {
                 if (const Status s = activate(*o); !s.isOk()) {
                     std::fprintf(stderr, "facescan-server: cannot start session %s: %s\n", o->id.c_str(),
                                  s.toString().c_str());
@@ -161,10 +183,15 @@ Status Server::activate(OwnedSession& o) {
         if (wake_.valid()) dds_set_guardcondition(wake_.handle(), true);
     });
     session->setOwnership(params_.server_id, o.epoch);
+    SessionEngine engine;
+    if (o.engine.valid()) {
+        ASSIGN_OR_RETURN(engine, o.engine.get());
+    }
     if (o.restore_from) {
-        RETURN_IF_ERROR(session->restore(*o.restore_from, o.takeover_from_ns));
+        RETURN_IF_ERROR(session->restore(*o.restore_from, o.takeover_from_ns, std::move(engine)));
     } else {
-        RETURN_IF_ERROR(session->setCamera(*o.camera));
+        if (!o.camera) return internalError("no CameraInfo for session '" + o.id + "'");
+        RETURN_IF_ERROR(session->setCamera(*o.camera, std::move(engine)));
         if (o.takeover_from_ns != 0) session->noteTakeoverFromFirstFrame(o.failovers_before, o.takeover_from_ns);
     }
     const wire::Qos qos = wire::frameReaderQos();

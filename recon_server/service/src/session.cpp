@@ -124,9 +124,12 @@ Session::~Session() {
     }
 }
 
-Status Session::setCamera(const wire::CameraInfoData& camera) { return start(camera, nullptr, 0); }
+Status Session::setCamera(const wire::CameraInfoData& camera, SessionEngine engine) {
+    return start(camera, nullptr, 0, std::move(engine));
+}
 
-Status Session::start(const wire::CameraInfoData& camera, const wire::ReplicaData* replica, int64_t takeover_from_ns) {
+Status Session::start(const wire::CameraInfoData& camera, const wire::ReplicaData* replica, int64_t takeover_from_ns,
+                      SessionEngine engine) {
     std::unique_lock lk(mutex_);
     last_activity_ns_ = steadyNowNs();
     if (finishing_ || stats_.state == SessionState::kFinished) return Status::ok();
@@ -141,21 +144,14 @@ Status Session::start(const wire::CameraInfoData& camera, const wire::ReplicaDat
         return Status::ok();
     }
     lk.unlock();
-    // Built outside the lock: loading the cascade and reserving the volume take a moment.
-    recon::ReconParams recon_params = params_.recon;
-    recon_params.source_fps =
-        camera.rate_hz > 0.0f && camera.rate_hz <= 1000.0f ? camera.rate_hz : 0.0f;  // limits per frame
-    auto recon = std::make_shared<recon::Reconstructor>(camera.intrinsics, recon_params);
-    if (!recon->initStatus().isOk()) return recon->initStatus();
-    if (replica) RETURN_IF_ERROR(recon->restoreState(replica->state));
-    auto pipeline = recon::FacePipeline::create(params_.face, camera.intrinsics,
-                                                recon::ColourCamera::registeredTo(camera.intrinsics));
-    if (!pipeline.isOk()) return pipeline.status();
+    if (!engine.recon || !engine.pipeline) {
+        ASSIGN_OR_RETURN(engine, SessionEngine::build(params_, camera, replica));  // outside the lock: a moment
+    }
     lk.lock();
     if (camera_ || finishing_) return Status::ok();
     camera_ = camera;
-    recon_ = std::move(recon);
-    pipeline_ = std::make_unique<recon::FacePipeline>(std::move(pipeline).value());
+    recon_ = std::move(engine.recon);
+    pipeline_ = std::move(engine.pipeline);
     stats_.camera_known = true;
     stats_.every_frame = camera.every_frame;
     stats_.source = camera.source;

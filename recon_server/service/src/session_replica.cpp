@@ -1,5 +1,6 @@
-// A session's part in the cluster (issue 13): restoring from a replica, and taking replicas on the worker between
-// two frames. Knows nothing of DDS or files: the server's replication thread encodes, sends and stores them.
+// A session's part in the cluster (issue 13): building its engine (from a CameraInfo or a replica's state, on a
+// thread of the server's own), restoring from a replica, and taking replicas on the worker between two frames.
+// Knows nothing of DDS or files: the server's replication thread encodes, sends and stores them.
 #include <algorithm>
 #include <cstdio>
 #include <future>
@@ -8,9 +9,26 @@
 
 namespace facescan::service {
 
-Status Session::restore(const wire::ReplicaData& replica, int64_t takeover_from_ns) {
+StatusOr<SessionEngine> SessionEngine::build(const ServerParams& params, const wire::CameraInfoData& camera,
+                                             const wire::ReplicaData* replica) {
+    if (replica && !replica->full()) return invalidArgument("a session can only be restored from a full replica");
+    recon::ReconParams recon_params = params.recon;
+    recon_params.source_fps =
+        camera.rate_hz > 0.0f && camera.rate_hz <= 1000.0f ? camera.rate_hz : 0.0f;  // limits per frame
+    SessionEngine e;
+    e.recon = std::make_shared<recon::Reconstructor>(camera.intrinsics, recon_params);
+    if (!e.recon->initStatus().isOk()) return e.recon->initStatus();
+    if (replica) RETURN_IF_ERROR(e.recon->restoreState(replica->state));
+    auto pipeline = recon::FacePipeline::create(params.face, camera.intrinsics,
+                                                recon::ColourCamera::registeredTo(camera.intrinsics));
+    if (!pipeline.isOk()) return pipeline.status();
+    e.pipeline = std::make_unique<recon::FacePipeline>(std::move(pipeline).value());
+    return e;
+}
+
+Status Session::restore(const wire::ReplicaData& replica, int64_t takeover_from_ns, SessionEngine engine) {
     if (!replica.full()) return invalidArgument("a session can only be restored from a full replica");
-    return start(replica.camera, &replica, takeover_from_ns);
+    return start(replica.camera, &replica, takeover_from_ns, std::move(engine));
 }
 
 void Session::applyReplicaLocked(const wire::ReplicaData& r, int64_t takeover_from_ns) {

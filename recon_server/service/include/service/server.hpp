@@ -19,6 +19,7 @@
 #include <condition_variable>
 #include <deque>
 #include <filesystem>
+#include <future>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -57,6 +58,9 @@ struct OwnedSession {
     bool ahead = false;  // a recording frame after a gap arrived: the agent must resend
     int64_t last_replay_request_ns = 0;
     dds_instance_handle_t camera_writer = 0;  // the CameraInfo writer (flood control)
+    // The session's engine, built on a thread of its own from the claim on (Server::buildEngine): activate() waits
+    // for it. Last, so that its destructor, which waits for the build, runs before camera and restore_from go.
+    std::future<StatusOr<SessionEngine>> engine;
 };
 
 class Server {
@@ -124,6 +128,7 @@ class Server {
     void releaseStale();
     Status claimSession(const std::string& session_id, uint32_t epoch, std::shared_ptr<OwnedSession> owned,
                         const wire::SessionOwnerData& previous);
+    void buildEngine(OwnedSession& owned);  // starts the build of owned.engine
     Status activate(OwnedSession& owned);
     void yield(const std::string& session_id, const std::string& why);
     void loadResumable();
@@ -146,7 +151,7 @@ class Server {
     std::unique_ptr<wire::Writer<facescan_wire_MeshSnapshot>> snapshot_writer_;
     std::unique_ptr<wire::Writer<facescan_wire_ScanReply>> reply_writer_;
     wire::Entity waitset_;
-    wire::Entity wake_;  // guard condition: queue space freed, or shutdown
+    wire::Entity wake_;  // guard condition: queue space freed, an engine built, or shutdown
 
     mutable std::mutex sessions_mutex_;  // guards owned_ and refused_
     std::map<std::string, std::shared_ptr<OwnedSession>> owned_;

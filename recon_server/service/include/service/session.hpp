@@ -125,6 +125,18 @@ struct SnapshotResult {
 // Called once the session is finished (written to disk or not): ok, or why the files could not be written.
 using FinishCallback = std::function<void(const Status&, const MeshResult&)>;
 
+// What a session computes with: the reconstructor (from a replica's state when there is one) and the face pipeline.
+// Building it allocates every per-frame buffer up front and loads the detector's cascade: 25 ms on an idle 2-core
+// server, 100-130 ms with four sessions running. The server builds it on a thread of its own while the claim
+// settles (server_cluster.cpp): on the intake thread, every other session got no frame meanwhile, and skipped them.
+struct SessionEngine {
+    std::shared_ptr<recon::Reconstructor> recon;
+    std::unique_ptr<recon::FacePipeline> pipeline;
+
+    static StatusOr<SessionEngine> build(const ServerParams& params, const wire::CameraInfoData& camera,
+                                         const wire::ReplicaData* replica);
+};
+
 class Session {
  public:
     // `space_freed` is called (from the worker) whenever a full frame queue gets room again.
@@ -136,8 +148,9 @@ class Session {
     const std::string& id() const { return id_; }
 
     // --- intake thread ---
-    // The first valid CameraInfo builds the pipeline and starts the worker; later ones must match it.
-    Status setCamera(const wire::CameraInfoData& camera);
+    // The first valid CameraInfo starts the worker with `engine` (built here when empty, as for that camera);
+    // later ones must match it.
+    Status setCamera(const wire::CameraInfoData& camera, SessionEngine engine = {});
     // How many more frames the session takes now: a recording (or a session whose CameraInfo has not arrived yet)
     // has a bounded queue; live sessions and finished ones take everything (live keeps the newest).
     int roomForFrames() const;
@@ -152,7 +165,8 @@ class Session {
     // Instead of setCamera: continues from a replica (a takeover, or a restart from the data dir). `takeover_from_ns`
     // (steady clock) is the owner's last sign of life: the takeover time runs from there to the first frame
     // integrated here.
-    Status restore(const wire::ReplicaData& replica, int64_t takeover_from_ns);
+    // `engine`, when not empty, was built from this replica.
+    Status restore(const wire::ReplicaData& replica, int64_t takeover_from_ns, SessionEngine engine = {});
     // After setCamera: the session starts over from its first frame because its dead owner left no replica (the
     // agent still keeps every frame); it counts as a failover, timed like one.
     void noteTakeoverFromFirstFrame(uint32_t failovers_before, int64_t takeover_from_ns);
@@ -185,8 +199,10 @@ class Session {
         FinishCallback finish_done;
         std::function<void()> run;  // kRun: executed by the worker between frames
     };
-    // setCamera and restore: builds the pipeline (from the replica's state when there is one), starts the worker.
-    Status start(const wire::CameraInfoData& camera, const wire::ReplicaData* replica, int64_t takeover_from_ns);
+    // setCamera and restore: builds the engine unless given one (from the replica's state when there is one),
+    // starts the worker.
+    Status start(const wire::CameraInfoData& camera, const wire::ReplicaData* replica, int64_t takeover_from_ns,
+                 SessionEngine engine);
     void applyReplicaLocked(const wire::ReplicaData& replica, int64_t takeover_from_ns);
     void captureOnWorker(bool full, ReplicaCapture& out);
     void noteFirstFrameAfterTakeover(uint32_t seq, int64_t now_ns);  // mutex_ held
