@@ -12,6 +12,7 @@
 #include <atomic>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <thread>
 
 #include "recon/indexed_mesh.hpp"
@@ -113,6 +114,23 @@ std::unique_ptr<TestAgent> makeAgent(uint32_t domain, const std::string& session
     }
     return std::move(agent).value();
 }
+
+// Calls send(0), send(1), ... on a thread of its own until destroyed (an agent streaming all test long).
+class Feed {
+ public:
+    explicit Feed(std::function<void(uint32_t)> send)
+        : thread_([this, send = std::move(send)] {
+              for (uint32_t seq = 0; !stop_; ++seq) send(seq);
+          }) {}
+    ~Feed() {
+        stop_ = true;
+        thread_.join();
+    }
+
+ private:
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};
 
 bool settled(const StatusCopy& s) {
     return s.frames_received > 0 &&
@@ -329,22 +347,11 @@ TEST(ServerSession, ASessionThatFallsBehindIsReportedAndDoesNotStallAnother) {
     auto steady = makeAgent(domain, "steady", false);
     ASSERT_TRUE(flooded && steady);
     // Bad frames and head frames (which cost the full loop) as fast as the writer takes them, all test long.
-    std::atomic<bool> stop{false};
-    std::thread flood([&] {
-        for (uint32_t seq = 0; !stop; ++seq) {
-            const auto& frames = seq % 2 ? bad.frames : sequence().frames;
-            (void)flooded->sendFrame(seq, frames[seq / 2 % frames.size()]);
-            if (seq % 64 == 0) std::this_thread::sleep_for(1ms);  // leave the writer's peer a breath
-        }
+    Feed flood([&](uint32_t seq) {
+        const auto& frames = seq % 2 ? bad.frames : sequence().frames;
+        (void)flooded->sendFrame(seq, frames[seq / 2 % frames.size()]);
+        if (seq % 64 == 0) std::this_thread::sleep_for(1ms);  // leave the writer's peer a breath
     });
-    struct Stop {
-        std::atomic<bool>& stop;
-        std::thread& t;
-        ~Stop() {
-            stop = true;
-            t.join();
-        }
-    } stopper{stop, flood};
 
     // The session that cannot keep up says so, by name, first in its detail; while the face is lost (the noise
     // frames), right after the advice to the person.
@@ -415,24 +422,12 @@ TEST(ServerSession, AJoiningSessionsBuildDoesNotHoldUpTheFramesOfARunningOne) {
     ASSERT_TRUE(rig.server && rig.client);
     auto running = makeAgent(domain, "running", /*every_frame=*/false);
     ASSERT_TRUE(running);
-    std::atomic<bool> stop{false};
     std::atomic<uint32_t> sent{0};
-    std::thread feed([&] {
-        const auto& frames = sequence().frames;
-        for (uint32_t seq = 0; !stop; ++seq) {
-            (void)running->sendFrame(seq, frames[seq % frames.size()]);
-            sent = seq + 1;
-            std::this_thread::sleep_for(33ms);
-        }
+    Feed feed([&](uint32_t seq) {
+        (void)running->sendFrame(seq, sequence().frames[seq % sequence().frames.size()]);
+        sent = seq + 1;
+        std::this_thread::sleep_for(33ms);
     });
-    struct Stop {
-        std::atomic<bool>& stop;
-        std::thread& t;
-        ~Stop() {
-            stop = true;
-            t.join();
-        }
-    } stopper{stop, feed};
     const auto lost = [](const StatusCopy& s) { return s.frames_skipped + s.frames_dropped; };
     auto before = rig.client->waitForStatus(
         "running", [](const StatusCopy& s) { return s.frames_integrated >= 10; }, 30s);
