@@ -70,6 +70,8 @@ Status ReconParams::validate() const {
     if (roi_margin_px < 0) return invalidArgument("roi_margin_px must be >= 0");
     if (model_level < 0 || model_level >= filter.levels)
         return invalidArgument("model_level must be >= 0 and below filter.levels");
+    if (model_cast_every < 1 || model_cast_every > kMaxModelCastEvery)
+        return invalidArgument("model_cast_every must be in [1, 4]");
     return Status::ok();
 }
 
@@ -85,6 +87,7 @@ Reconstructor::Reconstructor(const Intrinsics& k, const ReconParams& p)
     const Intrinsics kk = k.valid() ? k : Intrinsics{};
     frame_.allocate(kk, p.filter.levels);
     model_level_ = next_model_level_ = init_status_.isOk() ? p.model_level : 0;
+    cast_every_ = init_status_.isOk() ? p.model_cast_every : 1;
     model_.allocate(kk.scaled(model_level_), std::max(1, p.filter.levels - model_level_));
     raycaster_ = Raycaster(modelRaycastParams(params_.raycast, model_level_));
     hint_m_.create(kk.height_px, kk.width_px, CV_32FC1);
@@ -226,8 +229,16 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     trajectory_.emplace_back(frame.timestamp_ns, T_world_camera_);
     const cv::Rect& roi0 = frame_.levels[0].roi;
     const int m = params_.roi_margin_px;
-    raycastModel(cv::Rect(roi0.x - m, roi0.y - m, roi0.width + 2 * m, roi0.height + 2 * m),
-                 result.occluding_pixels > 0 ? hint_m_ : frame_.levels[0].depth_m);
+    // The next frame registers against the last cast while it is recent enough (model_cast_every); the first
+    // frames, a re-acquisition (its cast was from the search's pose) and a new model level always cast.
+    const bool cast = ++frames_since_cast_ >= cast_every_ || frames_integrated_ <= 2 || result.reacquired ||
+                      next_model_level_ != model_level_;
+    if (cast) {
+        frames_since_cast_ = 0;
+        raycastModel(cv::Rect(roi0.x - m, roi0.y - m, roi0.width + 2 * m, roi0.height + 2 * m),
+                     result.occluding_pixels > 0 ? hint_m_ : frame_.levels[0].depth_m);
+    }
+    result.model_cast = cast;
     result.ms.raycast = watch.lapMs();
     result.tracking.T_world_camera = T_world_camera_;
     result.consecutive_failures = 0;
@@ -437,6 +448,11 @@ void Reconstructor::setModelLevel(int level) {
     next_model_level_ = std::clamp(level, 0, params_.filter.levels - 1);
 }
 
+void Reconstructor::setModelCastEvery(int frames) {
+    if (!init_status_.isOk()) return;
+    cast_every_ = std::clamp(frames, 1, ReconParams::kMaxModelCastEvery);
+}
+
 void Reconstructor::reset() {
     std::lock_guard<std::mutex> lock(volume_mutex_);
     volume_.reset();
@@ -445,6 +461,7 @@ void Reconstructor::reset() {
     visible_ref_px_ = 0.0f;
     verify_next_ = false;
     frames_since_search_ = 0;
+    frames_since_cast_ = 0;
     frames_integrated_ = 0;
     consecutive_failures_ = 0;
     region_ = HeadRegion{};
