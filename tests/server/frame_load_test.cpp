@@ -65,11 +65,12 @@ TEST(FrameLoad, AFrameWithinItsShareIsLeftAlone) {
     }).join();
 }
 
-// The model's resolution follows the same budget: over it while another session runs (after the first frames,
-// which detection and the model's start make slow), the session casts coarse (recon::Reconstructor::
-// setModelLevel). After a hold it goes back to full resolution if that would fit kFullModelFraction of the budget
-// (its own average, or kCoarseCostRatio times the coarse cost before it has one); alone, at once.
-TEST(FrameLoad, OverItsShareASessionCastsCoarseUntilFullResolutionWouldFit) {
+// How much a session spends on its model follows the same budget: over it while another session runs (after the
+// first frames, which detection and the model's start make slow), the session steps down the ladder: the model
+// cast after every other frame (step 1), then also at half resolution (step 2), a step at most every
+// kStepDownFrames. After a hold it goes back up one step at a time if the step above would fit kStepUpFraction
+// of the budget; alone, to full at once.
+TEST(FrameLoad, OverItsShareASessionStepsDownTheLadderAndBackUpOnceTheStepAboveWouldFit) {
     std::thread([] {
         FrameLoad other(30.0f), busy(100.0f);  // busy: a 10 ms frame period
         other.join();
@@ -77,27 +78,40 @@ TEST(FrameLoad, OverItsShareASessionCastsCoarseUntilFullResolutionWouldFit) {
         const float budget_ms = busy.budgetMs();
         const auto ns = [&](float share) { return static_cast<int64_t>(share * budget_ms * 1e6f); };
         for (int i = 0; i < FrameLoad::kWarmUpFrames; ++i) frame(busy, ns(3.0f));
-        EXPECT_FALSE(busy.coarseModel()) << "the first frames do not count";
+        EXPECT_EQ(busy.economy(), 0) << "the first frames do not count";
+        frame(busy, ns(0.8f));
+        EXPECT_EQ(busy.economy(), 1) << "over kStepDownFraction of the budget with another session running";
+        EXPECT_EQ(busy.modelCastEvery(), 2);
+        EXPECT_FALSE(busy.coarseModel());
+        for (int i = 0; i < FrameLoad::kStepDownFrames - 1; ++i) frame(busy, ns(1.3f));
+        EXPECT_EQ(busy.economy(), 1) << "a step holds kStepDownFrames before the next one down";
         frame(busy, ns(1.3f));
-        EXPECT_TRUE(busy.coarseModel()) << "over budget with another session running";
-        // Coarse frames at 0.75 of the budget: full resolution would cost ~1.3 budgets, so it stays coarse.
-        for (int i = 0; i < FrameLoad::kCoarseHoldFrames + 10; ++i) frame(busy, ns(0.75f));
+        EXPECT_EQ(busy.economy(), 2) << "still over budget";
         EXPECT_TRUE(busy.coarseModel());
-        // At 0.3 of the budget full resolution (~0.5) fits: back to it.
-        for (int i = 0; i < 15 && busy.coarseModel(); ++i) frame(busy, ns(0.3f));
-        EXPECT_FALSE(busy.coarseModel());
+        EXPECT_EQ(busy.modelCastEvery(), 2);
+        // At 0.75 of the budget, the step above (~1.3 x 0.75) would not fit: it stays, past the hold.
+        for (int i = 0; i < FrameLoad::kCoarseHoldFrames + 10; ++i) frame(busy, ns(0.75f));
+        EXPECT_EQ(busy.economy(), 2);
+        // At 0.3 of the budget it does (~0.4), although step 1's own last average (1.3 budgets) says otherwise.
+        for (int i = 0; i < 15 && busy.economy() == 2; ++i) frame(busy, ns(0.3f));
+        EXPECT_EQ(busy.economy(), 1);
+        int n = 0;
+        while (busy.economy() == 1 && n < 2 * FrameLoad::kCoarseHoldFrames) frame(busy, ns(0.3f)), ++n;
+        EXPECT_EQ(busy.economy(), 0) << "one step at a time, each after its hold";
+        EXPECT_GE(n, FrameLoad::kCoarseHoldFrames - 1);
+        EXPECT_LE(n, FrameLoad::kCoarseHoldFrames + 1);
         frame(busy, ns(1.3f));
-        EXPECT_TRUE(busy.coarseModel()) << "full resolution's own average is over budget again";
-        other.leave();  // alone: the whole machine, full resolution, even for a frame full resolution would not fit
+        EXPECT_EQ(busy.economy(), 1) << "over budget again";
+        other.leave();  // alone: the whole machine, full, even for a frame full would not fit
         frame(busy, ns(10.0f));
-        EXPECT_FALSE(busy.coarseModel());
+        EXPECT_EQ(busy.economy(), 0);
         busy.leave();
     }).join();
 }
 
 // Within budget by its own measure but skipping frames (other processes and the server's own threads take CPU
-// the budget does not see): coarse too. A probe of full resolution that skips again holds coarse twice as long.
-TEST(FrameLoad, ASessionThatSkipsFramesCastsCoarseAndProbesFullResolutionLessOften) {
+// the budget does not see): down the ladder too. A probe of the step above that skips again holds twice as long.
+TEST(FrameLoad, ASessionThatSkipsFramesStepsDownAndProbesLessOften) {
     std::thread([] {
         FrameLoad other(30.0f), busy(100.0f);
         other.join();
@@ -105,24 +119,28 @@ TEST(FrameLoad, ASessionThatSkipsFramesCastsCoarseAndProbesFullResolutionLessOft
         const float budget_ms = busy.budgetMs();
         const auto ns = [&](float share) { return static_cast<int64_t>(share * budget_ms * 1e6f); };
         for (int i = 0; i < FrameLoad::kWarmUpFrames + 3; ++i) frame(busy, ns(0.4f));
-        EXPECT_FALSE(busy.coarseModel());
+        EXPECT_EQ(busy.economy(), 0);
         busy.noteSkipped(0.2f);
         frame(busy, ns(0.4f));
-        EXPECT_TRUE(busy.coarseModel()) << "skipping a fifth of its frames";
+        EXPECT_EQ(busy.economy(), 1) << "skipping a fifth of its frames";
+        for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(0.4f));
+        EXPECT_EQ(busy.economy(), 2) << "still skipping after kStepDownFrames";
         busy.noteSkipped(0.0f);
-        const auto framesUntilFull = [&] {
+        const auto framesUntil = [&](int step) {
             int n = 0;
-            while (busy.coarseModel() && n < 10 * FrameLoad::kCoarseHoldFrames) frame(busy, ns(0.2f)), ++n;
+            while (busy.economy() != step && n < 10 * FrameLoad::kCoarseHoldFrames) frame(busy, ns(0.2f)), ++n;
             return n;
         };
-        const int first_hold = framesUntilFull();
+        const int first_hold = framesUntil(1);
         EXPECT_GE(first_hold, FrameLoad::kCoarseHoldFrames - 1);
         EXPECT_LE(first_hold, FrameLoad::kCoarseHoldFrames + 1);
-        busy.noteSkipped(0.2f);  // the probe skips again at once
+        busy.noteSkipped(0.2f);  // the probe skips again at once: back after its second frame
         frame(busy, ns(0.4f));
-        ASSERT_TRUE(busy.coarseModel());
+        EXPECT_EQ(busy.economy(), 1);
+        frame(busy, ns(0.4f));
+        ASSERT_EQ(busy.economy(), 2);
         busy.noteSkipped(0.0f);
-        EXPECT_GE(framesUntilFull(), 2 * FrameLoad::kCoarseHoldFrames - 1) << "a failed probe doubles the hold";
+        EXPECT_GE(framesUntil(1), 2 * FrameLoad::kCoarseHoldFrames - 1) << "a failed probe doubles the hold";
         other.leave();
         busy.leave();
     }).join();

@@ -51,7 +51,7 @@ void FrameLoad::join() {
 void FrameLoad::leave() {
     if (!joined_) return;
     throttle(false);
-    coarse_model_ = false;
+    economy_ = 0;
     recon::setParallelAccounting(false);
     g_running_workers.fetch_sub(1, std::memory_order_relaxed);
     joined_ = false;
@@ -78,31 +78,41 @@ void FrameLoad::endFrame() {
 void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
     // The first frames (detection, the model's start: tens of ms) say nothing about the steady cost.
     if (++frames_ <= kWarmUpFrames) return;
-    float& level_cost = coarse_model_ ? coarse_cost_ms_ : full_cost_ms_;
-    int& level_frames = coarse_model_ ? coarse_frames_ : full_frames_;
-    level_cost = level_frames++ == 0 ? frame_ms : level_cost + kEmaAlpha * (frame_ms - level_cost);
+    float& cost = step_cost_ms_[economy_];
+    cost = step_frames_[economy_]++ == 0 ? frame_ms : cost + kEmaAlpha * (frame_ms - cost);
     if (budget_ms > last_budget_ms_ * 1.1f) hold_frames_ = kCoarseHoldFrames;  // a session left: probe sooner
     last_budget_ms_ = budget_ms;
     ++frames_at_level_;
-    if (!coarse_model_) {
-        // Over budget, or skipping frames (the budget cannot see what other processes and the server's own
-        // threads take), while another session runs. Soon after a probe of full resolution: hold twice as long.
-        if (alone || !(full_cost_ms_ > budget_ms || skipped_recent_ > kCoarseSkipFraction)) return;
-        if (probing_ && frames_at_level_ < kProbeFrames)
-            hold_frames_ = std::min(2 * hold_frames_, kMaxCoarseHoldFrames);
-        coarse_model_ = true;
-        probing_ = false;
+    const auto step = [&](int to, bool probe) {
+        economy_ = to;
+        step_frames_[to] = 0;  // its average starts afresh: the last one may be from a busier minute
+        probing_ = probe;
         frames_at_level_ = 0;
+    };
+    if (alone) {  // nobody to protect: the whole machine, every cast at full resolution
+        if (economy_ > 0) step(0, false);
         return;
     }
-    // Back to full resolution (a probe) after the hold, when it would fit: its own recent cost when it has one,
-    // else the coarse cost scaled by the measured ratio. Alone: at once.
-    const float full_ms = full_frames_ >= kWarmUpFrames ? full_cost_ms_ : coarse_cost_ms_ * kCoarseCostRatio;
-    if (alone || (frames_at_level_ >= hold_frames_ && full_ms < kFullModelFraction * budget_ms)) {
-        coarse_model_ = false;
-        probing_ = !alone;
-        frames_at_level_ = 0;
+    // Down: over budget by this step's own average, or skipping frames (the budget cannot see what other processes
+    // and the server's own threads take). Below full, only after kStepDownFrames at this step: its average and the
+    // skip share need that long to show what the step did. A probe that fails steps back after two frames (one
+    // with a cast, one without) and doubles the hold.
+    const bool over = cost > kStepDownFraction * budget_ms || skipped_recent_ > kCoarseSkipFraction;
+    const bool settled = economy_ == 0 || frames_at_level_ >= (probing_ ? 2 : kStepDownFrames);
+    if (economy_ + 1 < kEconomySteps && over && settled) {
+        if (probing_ && frames_at_level_ < kProbeFrames)
+            hold_frames_ = std::min(2 * hold_frames_, kMaxCoarseHoldFrames);
+        step(economy_ + 1, false);
+        return;
     }
+    if (economy_ == 0 || frames_at_level_ < hold_frames_) return;
+    // Up one step (a probe) after the hold, when it would fit: the lower of that step's last average and this
+    // step's cost scaled by the measured ratio (an average from a busier minute must not bar the way up for good;
+    // a probe that fails doubles the hold instead).
+    const int up = economy_ - 1;
+    const float scaled_ms = cost * kStepCostRatio;
+    const float up_ms = step_frames_[up] >= kWarmUpFrames ? std::min(step_cost_ms_[up], scaled_ms) : scaled_ms;
+    if (up_ms < kStepUpFraction * budget_ms) step(up, true);
 }
 
 void FrameLoad::throttle(bool on) {
@@ -114,17 +124,23 @@ void FrameLoad::throttle(bool on) {
     (void)setpriority(PRIO_PROCESS, static_cast<id_t>(tid_), base_nice_ + (on ? kThrottledNice : 0));
 }
 
-void applyModelLevel(const FrameLoad& load, int base_level, const std::string& session_id,
-                     recon::Reconstructor& reconstructor) {
+void applyEconomy(const FrameLoad& load, int base_level, int base_every, const std::string& session_id,
+                  recon::Reconstructor& reconstructor) {
     const int level = std::max(base_level, load.coarseModel() ? 1 : 0);
-    if (level == reconstructor.requestedModelLevel()) return;
-    std::fprintf(stderr, "facescan-server: session %s: model cast at %s (%.1f ms of CPU a frame, budget %.1f ms)\n",
+    const int every = std::max(base_every, load.modelCastEvery());
+    if (level == reconstructor.requestedModelLevel() && every == reconstructor.modelCastEvery()) return;
+    std::fprintf(stderr,
+                 "facescan-server: session %s: model cast at %s after %s (%.1f ms of CPU a frame, budget %.1f ms)\n",
                  session_id.c_str(),
                  level == 0   ? "full resolution"
                  : level == 1 ? "half resolution"
                               : "a coarser level",
+                 every == 1   ? "every frame"
+                 : every == 2 ? "every other frame"
+                              : "fewer frames",
                  load.costMs(), load.budgetMs());
     reconstructor.setModelLevel(level);
+    reconstructor.setModelCastEvery(every);
 }
 
 }  // namespace facescan::service

@@ -330,7 +330,7 @@ void Session::workerLoop() {
         processFrame(working_);
         load_->endFrame();
         recon_->setSearchEvery(load_->searchEvery());  // a lost session over budget searches less often
-        applyModelLevel(*load_, params_.recon.model_level, id_, *recon_);
+        applyEconomy(*load_, params_.recon.model_level, params_.recon.model_cast_every, id_, *recon_);
         noteLoad();
         copySnapshotIfAsked();
         lk.lock();

@@ -9,9 +9,11 @@
 // lower OS priority (kThrottledNice above its own), so on a contended machine the scheduler prefers the sessions within
 // budget, while on an idle one it still runs at full speed. It is released below kReleaseFraction of the budget.
 // A live session that is throttled or skips frames is reported "behind" (session.cpp).
-// The same test picks the model's resolution (coarseModel: recon::Reconstructor::setModelLevel): a session over
-// budget while others run casts its model at half resolution, which costs a third less CPU a frame, rather than
-// skip frames; it goes back to full resolution once its frames would fit the budget at full-resolution cost.
+// The same test picks how much the session spends on its model (economy(), applied by applyEconomy): a session
+// over budget while others run steps down a ladder rather than skip frames. Step 1 casts the model after every
+// other frame (recon::Reconstructor::setModelCastEvery: a frame's serial CPU 10.3 -> 8.0 ms, accuracy kept);
+// step 2 also casts it at half resolution (setModelLevel: 6.1 ms, ATE up by about 0.5 mm on the scenarios). It
+// goes back up one step at a time once the step above would fit the budget.
 #pragma once
 
 #include <cstdint>
@@ -31,19 +33,26 @@ class FrameLoad {
     // A throttled session that lost tracking runs its hypothesis search (tens of ms) on one frame in this many
     // (recon::Reconstructor::setSearchEvery); the frames between try the cheap plain fit only.
     static constexpr int kThrottledSearchEvery = 4;
-    // The model's resolution, after the first kWarmUpFrames: coarse when full resolution's average cost is over
-    // budget or the session skips more than kCoarseSkipFraction of its frames (noteSkipped), while others run.
-    // After kCoarseHoldFrames it probes full resolution again if that would fit kFullModelFraction of the budget
-    // (its own average, or the coarse one times kCoarseCostRatio: measured 1.7, i.e. 16.9 against 10.0 ms a frame
-    // with 4 sessions on 2 cores). A probe that goes coarse again within kProbeFrames doubles the hold, up to
+    // The economy step, after the first kWarmUpFrames: one step down when the step's average cost is over
+    // kStepDownFraction of the budget or the session skips more than kCoarseSkipFraction of its frames
+    // (noteSkipped), while others run; a step is kept kStepDownFrames before the next one down (the skip share
+    // lags). After kCoarseHoldFrames at a step it probes the step above if that would fit kStepUpFraction of the
+    // budget (the lower of that step's last average and this one's times kStepCostRatio: measured 10.3 / 8.0 and
+    // 8.0 / 6.1 ms, both ~1.3). A probe that steps down again within kProbeFrames doubles the hold, up to
     // kMaxCoarseHoldFrames; a session leaving resets it.
+    static constexpr int kEconomySteps = 3;  // 0: the model cast after every frame; 1: every other; 2: and coarse
     static constexpr int kWarmUpFrames = 5;
+    static constexpr int kStepDownFrames = 10;
     static constexpr float kCoarseSkipFraction = 0.05f;
     static constexpr int kCoarseHoldFrames = 150;  // 5 s at 30 Hz
     static constexpr int kProbeFrames = 90;
     static constexpr int kMaxCoarseHoldFrames = 2400;
-    static constexpr float kCoarseCostRatio = 1.7f;
-    static constexpr float kFullModelFraction = 0.9f;
+    static constexpr float kStepCostRatio = 1.3f;
+    // A session's frames queue behind the others' long before its cost reaches its whole share (the budget: every
+    // core busy), so it steps down at kStepDownFraction of it, and up only where the step above would stay under
+    // kStepUpFraction (hysteresis).
+    static constexpr float kStepDownFraction = 0.7f;
+    static constexpr float kStepUpFraction = 0.6f;
 
     // source_rate_hz: the frame rate the session's source delivers (CameraInfo).
     explicit FrameLoad(float source_rate_hz);
@@ -62,7 +71,9 @@ class FrameLoad {
 
     bool throttled() const { return throttled_; }
     int searchEvery() const { return throttled_ ? kThrottledSearchEvery : 1; }
-    bool coarseModel() const { return coarse_model_; }
+    int economy() const { return economy_; }                      // 0 .. kEconomySteps - 1
+    bool coarseModel() const { return economy_ >= 2; }            // the model cast at half resolution
+    int modelCastEvery() const { return economy_ >= 1 ? 2 : 1; }  // the model cast after one frame in this many
     // The session's recent share of skipped frames (live sessions keep only the newest frame), after each frame.
     void noteSkipped(float recent_fraction) { skipped_recent_ = recent_fraction; }
     float costMs() const { return cost_ms_; }  // CPU a frame, recent average
@@ -76,14 +87,14 @@ class FrameLoad {
     const float period_ms_;
     bool joined_ = false;
     bool throttled_ = false;
-    bool coarse_model_ = false;
-    int frames_ = 0;                                     // frames measured
-    float full_cost_ms_ = 0.0f, coarse_cost_ms_ = 0.0f;  // average CPU a frame at each model resolution
-    int full_frames_ = 0, coarse_frames_ = 0;
+    int economy_ = 0;
+    int frames_ = 0;                          // frames measured
+    float step_cost_ms_[kEconomySteps] = {};  // average CPU a frame at each economy step
+    int step_frames_[kEconomySteps] = {};     // frames measured at each step
     float skipped_recent_ = 0.0f;
-    int frames_at_level_ = 0;              // since the last change of resolution
-    bool probing_ = false;                 // at full resolution again after a coarse hold
-    int hold_frames_ = kCoarseHoldFrames;  // how long the coarse level holds before a probe
+    int frames_at_level_ = 0;              // since the last change of step
+    bool probing_ = false;                 // a step up after a hold, not yet proven
+    int hold_frames_ = kCoarseHoldFrames;  // how long a step below full holds before a probe
     float last_budget_ms_ = 0.0f;
     bool first_ = true;
     float cost_ms_ = 0;
@@ -92,9 +103,9 @@ class FrameLoad {
     int base_nice_ = 0;  // the thread's nice value when it joined
 };
 
-// The model level for the session's next cast: base_level, or at least 1 (half resolution) while the load says
-// coarse. A change is logged with the session's CPU a frame and budget.
-void applyModelLevel(const FrameLoad& load, int base_level, const std::string& session_id,
-                     recon::Reconstructor& reconstructor);
+// The model level and cast interval for the session's next frames: the session's own (base_level, base_every),
+// or cheaper as the load's economy step says. A change is logged with the session's CPU a frame and budget.
+void applyEconomy(const FrameLoad& load, int base_level, int base_every, const std::string& session_id,
+                  recon::Reconstructor& reconstructor);
 
 }  // namespace facescan::service
