@@ -90,16 +90,16 @@ TEST(FrameLoad, OverItsShareASessionStepsDownTheLadderAndBackUpOnceTheStepAboveW
         EXPECT_TRUE(busy.coarseModel());
         EXPECT_EQ(busy.modelCastEvery(), 2);
         // At 0.75 of the budget, the step above (~1.3 x 0.75) would not fit: it stays, past the hold.
-        for (int i = 0; i < FrameLoad::kCoarseHoldFrames + 10; ++i) frame(busy, ns(0.75f));
+        for (int i = 0; i < FrameLoad::kStepHoldFrames + 10; ++i) frame(busy, ns(0.75f));
         EXPECT_EQ(busy.economy(), 2);
         // At 0.3 of the budget it does (~0.4), although step 1's own last average (1.3 budgets) says otherwise.
         for (int i = 0; i < 15 && busy.economy() == 2; ++i) frame(busy, ns(0.3f));
         EXPECT_EQ(busy.economy(), 1);
         int n = 0;
-        while (busy.economy() == 1 && n < 2 * FrameLoad::kCoarseHoldFrames) frame(busy, ns(0.3f)), ++n;
+        while (busy.economy() == 1 && n < 2 * FrameLoad::kStepHoldFrames) frame(busy, ns(0.3f)), ++n;
         EXPECT_EQ(busy.economy(), 0) << "one step at a time, each after its hold";
-        EXPECT_GE(n, FrameLoad::kCoarseHoldFrames - 1);
-        EXPECT_LE(n, FrameLoad::kCoarseHoldFrames + 1);
+        EXPECT_GE(n, FrameLoad::kStepHoldFrames - 1);
+        EXPECT_LE(n, FrameLoad::kStepHoldFrames + 1);
         frame(busy, ns(1.3f));
         EXPECT_EQ(busy.economy(), 1) << "over budget again";
         other.leave();  // alone: the whole machine, full, even for a frame full would not fit
@@ -128,19 +128,19 @@ TEST(FrameLoad, ASessionThatSkipsFramesStepsDownAndProbesLessOften) {
         busy.noteSkipped(0.0f);
         const auto framesUntil = [&](int step) {
             int n = 0;
-            while (busy.economy() != step && n < 10 * FrameLoad::kCoarseHoldFrames) frame(busy, ns(0.2f)), ++n;
+            while (busy.economy() != step && n < 10 * FrameLoad::kStepHoldFrames) frame(busy, ns(0.2f)), ++n;
             return n;
         };
         const int first_hold = framesUntil(1);
-        EXPECT_GE(first_hold, FrameLoad::kCoarseHoldFrames - 1);
-        EXPECT_LE(first_hold, FrameLoad::kCoarseHoldFrames + 1);
+        EXPECT_GE(first_hold, FrameLoad::kStepHoldFrames - 1);
+        EXPECT_LE(first_hold, FrameLoad::kStepHoldFrames + 1);
         busy.noteSkipped(0.2f);  // the probe skips again at once: back after its second frame
         frame(busy, ns(0.4f));
         EXPECT_EQ(busy.economy(), 1);
         frame(busy, ns(0.4f));
         ASSERT_EQ(busy.economy(), 2);
         busy.noteSkipped(0.0f);
-        EXPECT_GE(framesUntil(1), 2 * FrameLoad::kCoarseHoldFrames - 1) << "a failed probe doubles the hold";
+        EXPECT_GE(framesUntil(1), 2 * FrameLoad::kStepHoldFrames - 1) << "a failed probe doubles the hold";
         other.leave();
         busy.leave();
     }).join();

@@ -71,7 +71,7 @@ Status ReconParams::validate() const {
     if (model_level < 0 || model_level >= filter.levels)
         return invalidArgument("model_level must be >= 0 and below filter.levels");
     if (model_cast_every < 1 || model_cast_every > kMaxModelCastEvery)
-        return invalidArgument("model_cast_every must be in [1, 4]");
+        return invalidArgument("model_cast_every must be in [1, " + std::to_string(kMaxModelCastEvery) + "]");
     return Status::ok();
 }
 

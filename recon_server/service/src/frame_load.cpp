@@ -80,14 +80,14 @@ void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
     if (++frames_ <= kWarmUpFrames) return;
     float& cost = step_cost_ms_[economy_];
     cost = step_frames_[economy_]++ == 0 ? frame_ms : cost + kEmaAlpha * (frame_ms - cost);
-    if (budget_ms > last_budget_ms_ * 1.1f) hold_frames_ = kCoarseHoldFrames;  // a session left: probe sooner
+    if (budget_ms > last_budget_ms_ * 1.1f) hold_frames_ = kStepHoldFrames;  // a session left: probe sooner
     last_budget_ms_ = budget_ms;
-    ++frames_at_level_;
+    ++frames_at_step_;
     const auto step = [&](int to, bool probe) {
         economy_ = to;
         step_frames_[to] = 0;  // its average starts afresh: the last one may be from a busier minute
         probing_ = probe;
-        frames_at_level_ = 0;
+        frames_at_step_ = 0;
     };
     if (alone) {  // nobody to protect: the whole machine, every cast at full resolution
         if (economy_ > 0) step(0, false);
@@ -97,15 +97,14 @@ void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
     // and the server's own threads take). Below full, only after kStepDownFrames at this step: its average and the
     // skip share need that long to show what the step did. A probe that fails steps back after two frames (one
     // with a cast, one without) and doubles the hold.
-    const bool over = cost > kStepDownFraction * budget_ms || skipped_recent_ > kCoarseSkipFraction;
-    const bool settled = economy_ == 0 || frames_at_level_ >= (probing_ ? 2 : kStepDownFrames);
+    const bool over = cost > kStepDownFraction * budget_ms || skipped_recent_ > kStepDownSkipFraction;
+    const bool settled = economy_ == 0 || frames_at_step_ >= (probing_ ? 2 : kStepDownFrames);
     if (economy_ + 1 < kEconomySteps && over && settled) {
-        if (probing_ && frames_at_level_ < kProbeFrames)
-            hold_frames_ = std::min(2 * hold_frames_, kMaxCoarseHoldFrames);
+        if (probing_ && frames_at_step_ < kProbeFrames) hold_frames_ = std::min(2 * hold_frames_, kMaxStepHoldFrames);
         step(economy_ + 1, false);
         return;
     }
-    if (economy_ == 0 || frames_at_level_ < hold_frames_) return;
+    if (economy_ == 0 || frames_at_step_ < hold_frames_) return;
     // Up one step (a probe) after the hold, when it would fit: the lower of that step's last average and this
     // step's cost scaled by the measured ratio (an average from a busier minute must not bar the way up for good;
     // a probe that fails doubles the hold instead).

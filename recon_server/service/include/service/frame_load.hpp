@@ -34,19 +34,19 @@ class FrameLoad {
     // (recon::Reconstructor::setSearchEvery); the frames between try the cheap plain fit only.
     static constexpr int kThrottledSearchEvery = 4;
     // The economy step, after the first kWarmUpFrames: one step down when the step's average cost is over
-    // kStepDownFraction of the budget or the session skips more than kCoarseSkipFraction of its frames
+    // kStepDownFraction of the budget or the session skips more than kStepDownSkipFraction of its frames
     // (noteSkipped), while others run; a step is kept kStepDownFrames before the next one down (the skip share
-    // lags). After kCoarseHoldFrames at a step it probes the step above if that would fit kStepUpFraction of the
+    // lags). After kStepHoldFrames at a step it probes the step above if that would fit kStepUpFraction of the
     // budget (the lower of that step's last average and this one's times kStepCostRatio: measured 10.3 / 8.0 and
     // 8.0 / 6.1 ms, both ~1.3). A probe that steps down again within kProbeFrames doubles the hold, up to
-    // kMaxCoarseHoldFrames; a session leaving resets it.
+    // kMaxStepHoldFrames; a session leaving resets it.
     static constexpr int kEconomySteps = 3;  // 0: the model cast after every frame; 1: every other; 2: and coarse
     static constexpr int kWarmUpFrames = 5;
     static constexpr int kStepDownFrames = 10;
-    static constexpr float kCoarseSkipFraction = 0.05f;
-    static constexpr int kCoarseHoldFrames = 150;  // 5 s at 30 Hz
+    static constexpr float kStepDownSkipFraction = 0.05f;
+    static constexpr int kStepHoldFrames = 150;  // 5 s at 30 Hz
     static constexpr int kProbeFrames = 90;
-    static constexpr int kMaxCoarseHoldFrames = 2400;
+    static constexpr int kMaxStepHoldFrames = 2400;
     static constexpr float kStepCostRatio = 1.3f;
     // A session's frames queue behind the others' long before its cost reaches its whole share (the budget: every
     // core busy), so it steps down at kStepDownFraction of it, and up only where the step above would stay under
@@ -92,9 +92,9 @@ class FrameLoad {
     float step_cost_ms_[kEconomySteps] = {};  // average CPU a frame at each economy step
     int step_frames_[kEconomySteps] = {};     // frames measured at each step
     float skipped_recent_ = 0.0f;
-    int frames_at_level_ = 0;              // since the last change of step
-    bool probing_ = false;                 // a step up after a hold, not yet proven
-    int hold_frames_ = kCoarseHoldFrames;  // how long a step below full holds before a probe
+    int frames_at_step_ = 0;             // since the last change of step
+    bool probing_ = false;               // a step up after a hold, not yet proven
+    int hold_frames_ = kStepHoldFrames;  // how long a step below full holds before a probe
     float last_budget_ms_ = 0.0f;
     bool first_ = true;
     float cost_ms_ = 0;
