@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <set>
 #include <thread>
 
 #include "recon/indexed_mesh.hpp"
@@ -132,6 +133,17 @@ class Feed {
     std::thread thread_;
 };
 
+// The names of this process's threads (Linux: /proc/self/task/*/comm).
+std::set<std::string> threadNames() {
+    std::set<std::string> names;
+    for (const auto& task : std::filesystem::directory_iterator("/proc/self/task")) {
+        std::string name = readFile(task.path() / "comm");
+        if (!name.empty() && name.back() == '\n') name.pop_back();
+        names.insert(name);
+    }
+    return names;
+}
+
 bool settled(const StatusCopy& s) {
     return s.frames_received > 0 &&
            s.frames_integrated + s.frames_rejected + s.frames_skipped + s.frames_dropped >= s.frames_received;
@@ -155,6 +167,12 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
                                               << ", skipped " << status->frames_skipped << ", fps " << status->fps;
     EXPECT_EQ(status->frames_dropped, 0u);
     EXPECT_GT(status->latency_p95_ms, 0.0f);
+    // top -H says which thread serves what: the session's worker carries its id (cut to the kernel's 15
+    // characters), and the server's own threads their job.
+    const std::set<std::string> names = threadNames();
+    for (const char* name : {"fs-s live-1", "fs-intake", "fs-command", "fs-snapshot", "fs-status"}) {
+        EXPECT_EQ(names.count(name), 1u) << "no thread named '" << name << "'";
+    }
 
     auto snapshot = rig.client->waitForSnapshot("live-1", 5s);
     ASSERT_TRUE(snapshot) << "no MeshSnapshot";

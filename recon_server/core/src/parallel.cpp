@@ -237,6 +237,7 @@ Slot* Pool::findOpenLocked(int from) {
 }
 
 void Pool::workerLoop(int id) {
+    nameThisThread("fs-pool");
     std::unique_lock lock(mu_);
     bool polled = false;  // since the last job: poll once, then sleep
     for (;;) {
@@ -340,6 +341,12 @@ void parallelForErased(int begin, int end, ChunkFn fn, void* body) {
 }  // namespace detail
 
 int parallelThreadCount() { return plannedThreads(); }
+
+void nameThisThread(const char* name) {
+    char truncated[16] = {};  // the kernel keeps 15 characters and refuses a longer name outright
+    for (size_t i = 0; i < sizeof(truncated) - 1 && name[i] != '\0'; ++i) truncated[i] = name[i];
+    (void)pthread_setname_np(pthread_self(), truncated);
+}
 
 void setParallelSerial(bool serial) { t_serial = serial; }
 bool parallelSerial() { return t_serial; }

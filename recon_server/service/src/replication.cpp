@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "recon/parallel.hpp"
 #include "service/server.hpp"
 #include "service/session_store.hpp"
 
@@ -64,6 +65,7 @@ void Replicator::poll() {
 }
 
 void Replicator::loop() {
+    recon::nameThisThread("fs-replicate");
     const auto interval_ns = static_cast<int64_t>(params_.replica_interval_s * 1e9);
     int64_t stats_due_ns = steadyNowNs() + kStatsEveryNs;
     ReplicationStats last;

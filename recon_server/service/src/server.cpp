@@ -10,6 +10,7 @@
 #include <future>
 #include <thread>
 
+#include "recon/parallel.hpp"
 #include "service/replication.hpp"
 #include "service/session_store.hpp"
 
@@ -197,6 +198,7 @@ std::vector<std::shared_ptr<OwnedSession>> Server::ownedSessions() const {
 }
 
 void Server::intakeLoop() {
+    recon::nameThisThread("fs-intake");
     bool duplicate_logged = false;
     while (!stopping_) {
         dds_attach_t triggered[16];
@@ -327,6 +329,7 @@ void Server::takeFramesOf(OwnedSession& o) {
 }
 
 void Server::commandLoop() {
+    recon::nameThisThread("fs-command");
     for (;;) {
         Command c;
         {
@@ -470,6 +473,7 @@ bool Server::waitForTick(std::chrono::steady_clock::time_point& next, std::chron
 }
 
 void Server::snapshotLoop() {
+    recon::nameThisThread("fs-snapshot");
     // Snapshots are a nicety; frames are not: let the scheduler prefer the workers on a busy machine.
     (void)setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
     const auto period = params_.snapshot_hz > 0 ? std::chrono::duration<double>(1.0 / params_.snapshot_hz)
@@ -491,6 +495,7 @@ void Server::snapshotLoop() {
 }
 
 void Server::statusLoop() {
+    recon::nameThisThread("fs-status");
     const auto period = std::chrono::duration<double>(1.0 / params_.status_hz);
     const int64_t idle_ns = static_cast<int64_t>(params_.idle_timeout_s * 1e9);
     std::map<std::string, bool> final_sent;  // finished sessions: their FINISHED status went out once

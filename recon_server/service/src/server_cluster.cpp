@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <set>
 
+#include "recon/parallel.hpp"
 #include "service/replica_log.hpp"
 #include "service/replication.hpp"
 #include "service/server.hpp"
@@ -136,6 +137,7 @@ void Server::buildEngine(OwnedSession& o) {
     try {
         o.engine = std::async(
             std::launch::async, [params = params_, camera = replica ? replica->camera : *o.camera, replica, wake] {
+                recon::nameThisThread("fs-engine");
                 StatusOr<SessionEngine> engine = SessionEngine::build(params, camera, replica);
                 if (wake > 0) (void)dds_set_guardcondition(wake, true);  // activate() on the intake thread's next turn
                 return engine;

@@ -6,6 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "recon/marching_cubes.hpp"
+#include "recon/parallel.hpp"
 #include "service/session_store.hpp"
 #include "wire/mesh_codec.hpp"
 
@@ -270,6 +271,7 @@ void Session::requestFinish(const std::string& why, FinishCallback done) {
 }
 
 void Session::workerLoop() {
+    recon::nameThisThread(("fs-s " + id_).c_str());  // "fs-s rt1": top -H shows which session a busy core serves
     load_->join();
     struct Leave {
         FrameLoad& load;

@@ -35,6 +35,11 @@ bool parallelSerial();
 void setParallelAccounting(bool on);
 int64_t parallelPoolCpuNs();  // since accounting was first turned on for the calling thread
 
+// Names the calling thread for top -H, ps -L and perf (Linux: at most 15 characters are kept). The pool's workers
+// are "fs-pool"; the server names its session workers after their session, so a thread that burns a core says
+// whose it is.
+void nameThisThread(const char* name);
+
 // Threads that run chunks of one parallelFor: the pool's workers plus the caller (1 on a single core).
 int parallelThreadCount();
 
