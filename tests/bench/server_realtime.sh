@@ -15,7 +15,8 @@
 #          DIR` writes the same sequence); PRELOAD=1 is the same as --preload; SERVER_ARGS: more facescan-server
 #          flags (e.g. "--set model_level=1").
 #   Ends with a table: per session, frames integrated of those sent, skipped (live mode keeps the newest frame),
-#   capture-to-pose latency p50/p95, and the snapshot thread's cost in % of a core.
+#   capture-to-pose latency p50/p95, and the wall-clock ms of its last snapshot; then the server's CPU while
+#   the agents streamed, in cores, by job (its threads are named: fs-s SESSION, fs-pool, fs-replicate, ...).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
@@ -64,11 +65,25 @@ for s in $(seq 1 "$sessions"); do
         sleep 0.1
     done
 done
+# The server's CPU by thread while the agents stream: every thread's utime + stime (/proc/PID/task/TID/stat, after
+# the name in parentheses, which may hold spaces) twice a second, one awk a sample. Threads are named by job
+# (fs-s SESSION, fs-pool, fs-replicate, fs-snapshot, ...; DDS's own are recv*, tev, gc, ...).
+sample_threads() {
+    awk -v t="$(date +%s.%N)" 'FNR == 1 { line = $0; name = line; sub(/^[0-9]+ \(/, "", name); sub(/\) [A-Z] .*/, "", name);
+        rest = line; sub(/.*\) /, "", rest); split(rest, f, " "); split(FILENAME, path, "/");
+        print t, path[5], f[12] + f[13], name }' /proc/"$server_pid"/task/*/stat 2>/dev/null >>"$work/threads.txt" || true
+}
+sample_threads
+(while kill -0 "$server_pid" 2>/dev/null && [ ! -f "$work/streamed" ]; do sample_threads; sleep 0.5; done) &
+sampler_pid=$!
 for s in $(seq 1 "$sessions"); do
     touch "$work/go$s"
     [ "$s" -lt "$sessions" ] && sleep 0.5
 done
 for p in "${agent_pids[@]}"; do wait "$p" || echo "server_realtime: an agent failed (logs in $work)" >&2; done
+touch "$work/streamed"
+wait "$sampler_pid" 2>/dev/null || true
+sample_threads
 for s in $(seq 1 "$sessions"); do
     for _ in $(seq 1 100); do [ -f "$work/data/rt$s/summary.json" ] && break; sleep 0.2; done
 done
@@ -90,17 +105,48 @@ for s in $(seq 1 "$sessions"); do
 done
 # One number out of a summary line: field KEY of the line that starts with "SECTION".
 field() { grep -E "^  \"$2\"" "$1" | sed -E "s/.*\"$3\": ([0-9.e+-]+).*/\1/"; }
-printf '%-8s %12s %9s %9s %9s %12s\n' session integrated skipped p50_ms p95_ms snapshot_cpu
+printf '%-8s %12s %9s %9s %9s %14s\n' session integrated skipped p50_ms p95_ms last_snapshot
 for s in $(seq 1 "$sessions"); do
     f="$work/data/rt$s/summary.json"
     [ -f "$f" ] || continue
     received=$(field "$f" frames received)
     skipped=$(field "$f" frames skipped)
-    # The snapshot thread's cost in % of a core, from the LAST snapshot's copy + mesh + encode ms (the summary keeps
-    # no mean) times snapshots a second: one snapshot's wall-clock cost, not an average over the session.
-    snapshot_cpu=$(awk -v c="$(field "$f" snapshot copy_ms)" -v m="$(field "$f" snapshot mesh_ms)" \
-        -v e="$(field "$f" snapshot encode_ms)" -v hz="${SNAPSHOT_HZ:-1}" 'BEGIN { printf "%.1f", (c + m + e) * hz / 10 }')
-    printf '%-8s %5s of %-4s %5s %2s %9.1f %9.1f %10s %%\n' "rt$s" "$(field "$f" frames integrated)" "$frames" \
+    # The last snapshot's copy + mesh + encode, wall clock (so under load it includes waiting for a core); what
+    # snapshots cost in CPU is in the breakdown below.
+    last_snapshot=$(awk -v c="$(field "$f" snapshot copy_ms)" -v m="$(field "$f" snapshot mesh_ms)" \
+        -v e="$(field "$f" snapshot encode_ms)" 'BEGIN { printf "%.0f", c + m + e }')
+    printf '%-8s %5s of %-4s %5s %2s %9.1f %9.1f %11s ms\n' "rt$s" "$(field "$f" frames integrated)" "$frames" \
         "$skipped" "($(( received > 0 ? 100 * skipped / received : 0 ))%)" "$(field "$f" latency_ms p50)" \
-        "$(field "$f" latency_ms p95)" "$snapshot_cpu"
+        "$(field "$f" latency_ms p95)" "$last_snapshot"
 done
+# Where the server's CPU went while the agents streamed (from the first release to the last agent's end), in
+# cores: each thread's last sample minus its first (a thread that ended between two samples loses at most 0.5 s).
+integrated_total=$(cat "$work"/data/rt*/summary.json 2>/dev/null | grep -E '^  "frames"' |
+    sed -E 's/.*"integrated": ([0-9]+).*/\1/' | awk '{ s += $1 } END { print s + 0 }')
+awk -v hz="$(getconf CLK_TCK)" -v frames="$integrated_total" -v sessions="$sessions" '
+    { if (!($2 in first)) { first[$2] = $3; t_first[$2] = $1 } last[$2] = $3; name[$2] = $4 " " $5 " " $6;
+      if (t0 == "" || $1 < t0) t0 = $1; if ($1 > t1) t1 = $1 }
+    END {
+        if (t1 <= t0) exit;
+        for (tid in last) {
+            n = name[tid]; sub(/ +$/, "", n);
+            if (n ~ /^fs-s /) g = "sessions"
+            else if (n == "fs-pool") g = "sessions (pool)"
+            else if (n == "fs-replicate") g = "replication"
+            else if (n == "fs-snapshot") g = "snapshots"
+            else if (n == "fs-engine") g = "engine builds"
+            else g = "intake, commands, DDS"
+            cpu = (last[tid] - (t_first[tid] == t0 ? first[tid] : 0)) / hz
+            used[g] += cpu; total += cpu
+        }
+        span = t1 - t0;
+        printf "server CPU while streaming (%.1f s): %.2f cores", span, total / span;
+        if (frames > 0) printf ", %.1f ms per integrated frame", 1000 * total / frames;
+        printf "\n";
+        n_groups = split("sessions|sessions (pool)|replication|snapshots|engine builds|intake, commands, DDS", order, "|")
+        for (i = 1; i <= n_groups; ++i) {
+            g = order[i]
+            if (g in used) printf "  %-24s %5.2f cores (%4.1f %%)\n", g, used[g] / span, 100 * used[g] / total
+        }
+        if ("snapshots" in used) printf "snapshots: %.1f %% of a core per session\n", 100 * used["snapshots"] / span / sessions
+    }' "$work/threads.txt"
