@@ -73,6 +73,65 @@ TEST(DepthFilter, InvalidStaysInvalidAndPlaneStaysPlane) {
     EXPECT_FLOAT_EQ(pyr.levels[2].depth_m.at<float>(60, 80), 0.8f);
 }
 
+// Every filtered pixel is eq. 4.4 over its window: Gaussian weights in pixel distance (eq. 4.5) and in depth
+// difference (eq. 4.6, cut at 3 sigma as the filter documents), invalid neighbours left out, the window clipped to
+// the head's box. Computed here in double with exact exponentials, on a noisy sphere with holes, so that both the
+// filter's path for pixels whose window lies inside the box and its clipped path at the box's edges are checked.
+TEST(DepthFilter, EveryPixelIsEquation4_4OverItsWindow) {
+    const FilterParams params;
+    cv::Mat depth = sphereDepth(Pose::Identity(), Eigen::Vector3f(0.02f, -0.01f, 0.75f), 0.09f);
+    std::mt19937 rng(7);
+    std::normal_distribution<float> noise(0.0f, 0.002f);
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    for (int v = 0; v < depth.rows; ++v) {
+        for (int u = 0; u < depth.cols; ++u) {
+            float& z = depth.at<float>(v, u);
+            if (z <= 0.0f) continue;
+            z = unit(rng) < 0.1f ? 0.0f : z + noise(rng);    // dropouts and axial noise
+            if (z > 0.0f && u > 330 && v > 250) z += 0.08f;  // a step within 3 sigma: the weights stay > 0
+        }
+    }
+    DepthFilter f(kCam, params);
+    SurfacePyramid pyr;
+    pyr.allocate(kCam, 1);
+    ASSERT_GT(f.filter(depth, cv::Mat(), pyr), 10000);
+    const cv::Rect roi = pyr.levels[0].roi;
+    const int r = params.radius_px;
+    const double s2 = 2.0 * params.sigma_space_px * params.sigma_space_px;
+    const double d2 = 2.0 * params.sigma_depth_m * params.sigma_depth_m;
+    int checked = 0, interior = 0;
+    double worst_m = 0.0;
+    for (int v = roi.y; v < roi.y + roi.height; ++v) {
+        for (int u = roi.x; u < roi.x + roi.width; ++u) {
+            const double zc = depth.at<float>(v, u);
+            const float out = pyr.levels[0].depth_m.at<float>(v, u);
+            if (!(zc > 0.0)) {
+                EXPECT_EQ(out, 0.0f) << u << "," << v;
+                continue;
+            }
+            double sum_w = 0.0, sum_wz = 0.0;
+            for (int dv = -r; dv <= r; ++dv) {
+                for (int du = -r; du <= r; ++du) {
+                    if (!roi.contains(cv::Point(u + du, v + dv))) continue;
+                    const double z = depth.at<float>(v + dv, u + du);
+                    if (!(z > 0.0) || std::fabs(z - zc) > 3.0 * params.sigma_depth_m) continue;
+                    const double w = std::exp(-(du * du + dv * dv) / s2) * std::exp(-(z - zc) * (z - zc) / d2);
+                    sum_w += w;
+                    sum_wz += w * z;
+                }
+            }
+            worst_m = std::max(worst_m, std::fabs(out - sum_wz / sum_w));
+            ++checked;
+            interior += roi.contains(cv::Point(u - r, v - r)) && roi.contains(cv::Point(u + r, v + r));
+        }
+    }
+    EXPECT_GT(interior, 10000);
+    EXPECT_GT(checked - interior, 100);  // pixels at the box's edges, with clipped windows
+    // The filter tabulates the range weight in steps of 0.3 mm of depth difference: across the 80 mm step that
+    // moves a weight by up to 0.5 %, 0.02 mm of depth here. A wrong window or weight moves it by millimetres.
+    EXPECT_LT(worst_m, 5e-5) << "worst difference from eq. 4.4 over " << checked << " pixels";
+}
+
 TEST(Tsdf, PlaneGivesTruncatedDistanceAlongTheRay) {
     TsdfParams p = smallVolume();
     TsdfVolume vol(p);

@@ -44,6 +44,29 @@ cv::Vec3f vertexAt(const Intrinsics& k, int u, int v, float z) {
     return cv::Vec3f(p.x(), p.y(), p.z());
 }
 
+// Eq. 4.4 at one pixel whose whole (2R+1)^2 window lies inside the ROI (most of the head): the window's size is a
+// constant, so the compiler unrolls the taps and computes their table indices several at a time; the general
+// loop below, with bounds clipped per pixel, did neither. The taps are summed in the same order as there, so the
+// result is the same to the bit. `space` is the window's eq. 4.5 weights, row-major; `range` eq. 4.6's table.
+template <int R>
+float bilateralInterior(const cv::Mat& masked, int u, int v, float zc, const float* space, const float* range,
+                        float inv_step, int beyond) {
+    constexpr int kSide = 2 * R + 1;
+    float sum_w = 0.0f, sum_wz = 0.0f;
+    for (int dv = -R; dv <= R; ++dv) {
+        const float* row = masked.ptr<float>(v + dv) + u;
+        const float* space_row = space + (dv + R) * kSide + R;
+        for (int du = -R; du <= R; ++du) {
+            const float z = row[du];
+            const int idx = std::min(static_cast<int>(std::fabs(z - zc) * inv_step + 0.5f), beyond);
+            const float wgt = z > 0.0f ? space_row[du] * range[idx] : 0.0f;
+            sum_w += wgt;
+            sum_wz += wgt * z;
+        }
+    }
+    return sum_wz / sum_w;  // sum_w >= 1 (the centre pixel)
+}
+
 }  // namespace
 
 Status FilterParams::validate() const {
@@ -163,6 +186,13 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
                     continue;
                 }
                 const int du_lo = std::max(-radius, roi.x - u), du_hi = std::min(radius, roi.x + roi.width - 1 - u);
+                if (radius == 2 && dv_lo == -2 && dv_hi == 2 && du_lo == -2 && du_hi == 2) {  // the default 5x5
+                    dst[u] = bilateralInterior<2>(masked_, u, v, zc, space_weight_.data(), range_lut_.data(), inv_step,
+                                                  kBeyond);
+                    vertex[u] = vertexAt(l0.k, u, v, dst[u]);
+                    ++valid_here;
+                    continue;
+                }
                 float sum_w = 0.0f, sum_wz = 0.0f;
                 for (int dv = dv_lo; dv <= dv_hi; ++dv) {
                     const float* row = masked_.ptr<float>(v + dv) + u;
