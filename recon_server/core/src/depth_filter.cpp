@@ -44,19 +44,20 @@ cv::Vec3f vertexAt(const Intrinsics& k, int u, int v, float z) {
     return cv::Vec3f(p.x(), p.y(), p.z());
 }
 
-// Eq. 4.4 at one pixel whose whole (2R+1)^2 window lies inside the ROI (most of the head): the window's size is a
-// constant, so the compiler unrolls the taps and computes their table indices several at a time; the general
-// loop below, with bounds clipped per pixel, did neither. The taps are summed in the same order as there, so the
-// result is the same to the bit. `space` is the window's eq. 4.5 weights, row-major; `range` eq. 4.6's table.
-template <int R>
-float bilateralInterior(const cv::Mat& masked, int u, int v, float zc, const float* space, const float* range,
-                        float inv_step, int beyond) {
-    constexpr int kSide = 2 * R + 1;
+// Eq. 4.4 at one pixel over the window rows [dv_lo, dv_hi] and columns [du_lo, du_hi] (offsets from the pixel,
+// already clipped to the ROI): invalid neighbours (depth 0) and those past the range table's end weigh 0, so no
+// tap branches. `space` points at the window's centre weight of eq. 4.5 (rows `side` apart), `range` is eq. 4.6's
+// table. Always inlined: a call with constant bounds (a pixel whose whole window lies inside the ROI, most of the
+// head) is unrolled with its table indices computed several at a time, which per-pixel bounds prevented; the taps
+// are summed in the same order either way, so the result is the same to the bit.
+[[gnu::always_inline]] inline float bilateralAt(const cv::Mat& masked, int u, int v, float zc, const float* space,
+                                                int side, const float* range, float inv_step, int beyond, int dv_lo,
+                                                int dv_hi, int du_lo, int du_hi) {
     float sum_w = 0.0f, sum_wz = 0.0f;
-    for (int dv = -R; dv <= R; ++dv) {
+    for (int dv = dv_lo; dv <= dv_hi; ++dv) {
         const float* row = masked.ptr<float>(v + dv) + u;
-        const float* space_row = space + (dv + R) * kSide + R;
-        for (int du = -R; du <= R; ++du) {
+        const float* space_row = space + dv * side;
+        for (int du = du_lo; du <= du_hi; ++du) {
             const float z = row[du];
             const int idx = std::min(static_cast<int>(std::fabs(z - zc) * inv_step + 0.5f), beyond);
             const float wgt = z > 0.0f ? space_row[du] * range[idx] : 0.0f;
@@ -186,26 +187,14 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
                     continue;
                 }
                 const int du_lo = std::max(-radius, roi.x - u), du_hi = std::min(radius, roi.x + roi.width - 1 - u);
-                if (radius == 2 && dv_lo == -2 && dv_hi == 2 && du_lo == -2 && du_hi == 2) {  // the default 5x5
-                    dst[u] = bilateralInterior<2>(masked_, u, v, zc, space_weight_.data(), range_lut_.data(), inv_step,
-                                                  kBeyond);
-                    vertex[u] = vertexAt(l0.k, u, v, dst[u]);
-                    ++valid_here;
-                    continue;
+                const float* space = &space_weight_[static_cast<size_t>(radius * side + radius)];  // the centre
+                if (radius == 2 && dv_lo == -2 && dv_hi == 2 && du_lo == -2 && du_hi == 2) {       // the default, whole
+                    dst[u] =
+                        bilateralAt(masked_, u, v, zc, space, 5, range_lut_.data(), inv_step, kBeyond, -2, 2, -2, 2);
+                } else {
+                    dst[u] = bilateralAt(masked_, u, v, zc, space, side, range_lut_.data(), inv_step, kBeyond, dv_lo,
+                                         dv_hi, du_lo, du_hi);
                 }
-                float sum_w = 0.0f, sum_wz = 0.0f;
-                for (int dv = dv_lo; dv <= dv_hi; ++dv) {
-                    const float* row = masked_.ptr<float>(v + dv) + u;
-                    const float* space = &space_weight_[static_cast<size_t>((dv + radius) * side + radius)];
-                    for (int du = du_lo; du <= du_hi; ++du) {
-                        const float z = row[du];
-                        const int idx = std::min(static_cast<int>(std::fabs(z - zc) * inv_step + 0.5f), kBeyond);
-                        const float wgt = z > 0.0f ? space[du] * range_lut_[static_cast<size_t>(idx)] : 0.0f;
-                        sum_w += wgt;
-                        sum_wz += wgt * z;
-                    }
-                }
-                dst[u] = sum_wz / sum_w;  // sum_w >= 1 (the centre pixel)
                 vertex[u] = vertexAt(l0.k, u, v, dst[u]);
                 ++valid_here;
             }
