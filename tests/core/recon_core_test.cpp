@@ -105,10 +105,15 @@ TEST(DepthFilter, EveryPixelIsEquation4_4OverItsWindow) {
         for (int u = roi.x; u < roi.x + roi.width; ++u) {
             const double zc = depth.at<float>(v, u);
             const float out = pyr.levels[0].depth_m.at<float>(v, u);
+            const cv::Vec3f vertex = pyr.levels[0].vertex.at<cv::Vec3f>(v, u);
             if (!(zc > 0.0)) {
                 EXPECT_EQ(out, 0.0f) << u << "," << v;
+                EXPECT_TRUE(std::isnan(vertex[0])) << u << "," << v;
                 continue;
             }
+            // Eq. 4.9 of the filtered depth: the vertex map comes out of the same pass, pixel by pixel.
+            const Eigen::Vector3f p = kCam.backProject(static_cast<float>(u), static_cast<float>(v), out);
+            EXPECT_EQ(vertex, cv::Vec3f(p.x(), p.y(), p.z())) << u << "," << v;
             double sum_w = 0.0, sum_wz = 0.0;
             for (int dv = -r; dv <= r; ++dv) {
                 for (int du = -r; du <= r; ++du) {
