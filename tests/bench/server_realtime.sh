@@ -14,6 +14,10 @@
 #          TUM_DIR: stream this TUM folder instead of the synthetic Kinect (`facescan-bench synth --head scan --tum
 #          DIR` writes the same sequence); PRELOAD=1 is the same as --preload; SERVER_ARGS: more facescan-server
 #          flags (e.g. "--set model_level=1").
+#          CALIBRATE=0 skips the host check below.
+#   Starts with a host check: the serial frame loop of `facescan-bench recon` (100 synthetic frames, one core)
+#   in ms a frame. The sessions' figures scale with it, and a shared host's speed varies by 2x from day to day:
+#   compare runs, and builds, only at a similar figure.
 #   Ends with a table: per session, frames integrated of those sent, skipped (live mode keeps the newest frame),
 #   capture-to-pose latency p50/p95, and the wall-clock ms of its last snapshot; then the server's CPU while
 #   the agents streamed, in cores, by job (its threads are named: fs-s SESSION, fs-pool, fs-replicate, ...).
@@ -34,6 +38,19 @@ agent_bin=$BUILD_DIR/capture_agent/core/facescan-agent
 for bin in "$server_bin" "$agent_bin"; do
     [ -x "$bin" ] || { echo "server_realtime: $bin missing: cmake --build $BUILD_DIR --target facescan-server facescan-agent" >&2; exit 1; }
 done
+
+# Before the server starts, so nothing of the bench's own shares the cores with it.
+bench_bin=$BUILD_DIR/tests/bench/facescan-bench
+host_check="skipped (CALIBRATE=0)"
+if [ "${CALIBRATE:-1}" != 0 ]; then
+    if [ -x "$bench_bin" ]; then
+        fps=$("$bench_bin" recon --frames 100 --mask pipeline --serial --json 2>/dev/null | tail -1 |
+            sed -nE 's/.*"fps": ?([0-9.]+).*/\1/p' || true)
+        host_check=$(awk -v f="${fps:-0}" 'BEGIN { if (f > 0) printf "%.1f ms a frame", 1000 / f; else print "nothing: it failed (run it alone to see why)" }')
+    else
+        host_check="skipped ($bench_bin not built: cmake --build $BUILD_DIR --target facescan-bench)"
+    fi
+fi
 
 source "$root/deploy/claim-domain.sh"
 claim_private_domain || { echo "server_realtime: no free DDS domain in 100..219" >&2; exit 1; }
@@ -94,6 +111,7 @@ what=${TUM_DIR:+tum:$TUM_DIR}
 what=${what:-synthetic Kinect}
 [ "$preload" = 1 ] && what="$what, preloaded by the agents"
 echo "server_realtime: $sessions session(s) x $frames frames at 30 Hz from $what, domain $domain, load $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "host check: the serial frame loop (facescan-bench recon --serial --frames 100) took $host_check"
 for s in $(seq 1 "$sessions"); do
     f="$work/data/rt$s/summary.json"
     if [ -f "$f" ]; then
