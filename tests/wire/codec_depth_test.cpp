@@ -261,6 +261,89 @@ TEST(PackedDeltaCodec, TokensAreRanksOfUsedValues) {
               StatusCode::kDataLoss);
 }
 
+// The token format as wire/packed_delta_codec.hpp states it, one token at a time: the oracle for the decoder, which
+// takes runs of 8 one-byte tokens at once. The same outcome, message included, for every stream.
+Status referencePackedDecode(const std::vector<uint8_t>& t, int width, int height, std::vector<uint16_t>& pixels) {
+    if (t.size() < packed::kValueMapBytes) {
+        return dataLoss("packed depth tokens truncated in the value map (" + std::to_string(t.size()) + " bytes)");
+    }
+    std::vector<uint16_t> value_of;
+    for (uint32_t v = 0; v < 65536; ++v) {
+        if (t[v / 8] & (1u << (v % 8))) value_of.push_back(static_cast<uint16_t>(v));
+    }
+    if (value_of.empty()) return dataLoss("packed depth value map is empty");
+    size_t at = packed::kValueMapBytes;
+    uint16_t above = 0;
+    for (int r = 0; r < height; ++r) {
+        uint16_t pred = above;
+        for (int c = 0; c < width; ++c) {
+            if (at >= t.size()) {
+                return dataLoss("packed depth tokens end at pixel " + std::to_string(size_t(r) * width + c));
+            }
+            uint32_t z = t[at++];
+            if (z == 0xff) {
+                if (t.size() - at < 2) return dataLoss("packed depth tokens end inside an escaped token");
+                z = t[at] | t[at + 1] << 8;
+                at += 2;
+            }
+            const auto delta = static_cast<uint16_t>((z >> 1) ^ (0u - (z & 1)));
+            const auto rank = static_cast<uint16_t>(pred + delta);
+            if (rank >= value_of.size()) {
+                return dataLoss("packed depth rank " + std::to_string(rank) + " outside the value map's " +
+                                std::to_string(value_of.size()) + " values");
+            }
+            pixels[size_t(r) * width + c] = value_of[rank];
+            pred = rank;
+            if (c == 0) above = rank;
+        }
+    }
+    if (at != t.size()) {
+        return dataLoss("packed depth tokens have " + std::to_string(t.size() - at) + " bytes left over");
+    }
+    return Status::ok();
+}
+
+TEST(PackedDeltaCodec, DecoderAgreesWithTheFormatOnEveryStream) {
+    // Rows of 1..40 pixels (runs of 8 and their remainders), deltas past one byte (escapes inside and between
+    // runs), then the stream as encoded, with bytes overwritten (ranks past the map, stray escapes), cut short, or
+    // with a byte too many.
+    std::mt19937 rng(16);
+    std::vector<uint16_t> rank_of(65536), value_of(65536);
+    int decoded = 0, refused = 0;
+    for (int trial = 0; trial < 4000; ++trial) {
+        const int w = 1 + static_cast<int>(rng() % 40), h = 1 + static_cast<int>(rng() % 5);
+        const uint32_t spread = 1 + rng() % 3000;
+        std::vector<uint16_t> px(size_t(w) * h);
+        for (auto& v : px) v = rng() % 10 == 0 ? 0 : static_cast<uint16_t>(500 + rng() % spread);
+        std::vector<uint8_t> tokens(packed::maxTokenBytes(px.size()));
+        tokens.resize(packed::encode(px.data(), w, h, rank_of.data(), tokens.data()));
+        const size_t body = tokens.size() - packed::kValueMapBytes;
+        switch (trial % 4) {
+            case 1:
+                for (int i = 0; i < 3; ++i) tokens[packed::kValueMapBytes + rng() % body] = static_cast<uint8_t>(rng());
+                break;
+            case 2: tokens.resize(packed::kValueMapBytes + rng() % (body + 1)); break;
+            case 3: tokens.push_back(static_cast<uint8_t>(rng())); break;
+            default: break;
+        }
+        std::vector<uint16_t> want(px.size()), got(px.size());
+        const Status expected = referencePackedDecode(tokens, w, h, want);
+        const Status status = packed::decode(tokens.data(), tokens.size(), w, h, value_of.data(), got.data());
+        ASSERT_EQ(status.toString(), expected.toString()) << "trial " << trial << ", " << w << "x" << h;
+        if (!status.isOk()) {
+            ++refused;
+            continue;
+        }
+        ++decoded;
+        ASSERT_EQ(got, want) << "trial " << trial;
+        if (trial % 4 == 0) {
+            ASSERT_EQ(got, px) << "trial " << trial;  // untouched: the frame itself
+        }
+    }
+    EXPECT_GT(decoded, 1000);
+    EXPECT_GT(refused, 1000);
+}
+
 TEST(PackedDeltaCodec, BeatsPlainDeltasOnDisparityQuantisedDepth) {
     // The reason the codec exists: Kinect depth uses a sparse subset of millimetre values. On the Kinect-like
     // pattern the packed codec must be smaller than plain deltas (measured on real frames: 8.8:1 vs 6.8:1).
