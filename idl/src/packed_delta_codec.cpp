@@ -13,7 +13,7 @@ constexpr uint8_t kEscape = 0xff;
 inline uint16_t zigzag(uint16_t d) { return static_cast<uint16_t>((d << 1) ^ static_cast<uint16_t>(-(d >> 15))); }
 inline uint16_t unzigzag(uint16_t z) { return static_cast<uint16_t>((z >> 1) ^ static_cast<uint16_t>(-(z & 1))); }
 
-// GCC vector extensions: SIMD on any target without intrinsics.
+// GCC/clang vector extensions: SIMD on any target without intrinsics.
 using Bytes8 = uint8_t __attribute__((vector_size(8)));
 using U16x8 = uint16_t __attribute__((vector_size(16)));
 using I16x8 = int16_t __attribute__((vector_size(16)));
