@@ -43,9 +43,12 @@ void expectSameVoxels(const ReconState& a, const ReconState& b) {
     }
 }
 
-TEST(ReconState, DeltasMergedOnAStandbyEqualTheFullStateAndARestoredScanContinuesLikeTheOriginal) {
+// fuse_every > 1 (a loaded server's last economy step): the trajectory holds every tracked frame, so it outgrows
+// the fused-frame count, and a delta's trajectory_begin with it.
+void replicateAndRestore(int fuse_every) {
     const Scene scene(40);
-    const ReconParams params = smallVolume();
+    ReconParams params = smallVolume();
+    params.fuse_every = fuse_every;
     Reconstructor owner(scene.sim.intrinsics(), params);
     ASSERT_TRUE(owner.initStatus().isOk());
     ReconState standby, delta;
@@ -86,7 +89,17 @@ TEST(ReconState, DeltasMergedOnAStandbyEqualTheFullStateAndARestoredScanContinue
         worst_m = std::max(worst_m, d.translation().norm());
     }
     EXPECT_LT(worst_m, 0.0005f) << "the restored scan drifted from the original";
+    if (fuse_every > 1) {
+        EXPECT_EQ(owner.trajectory().size(), 40u) << "every frame tracked";
+        EXPECT_LE(owner.framesIntegrated(), 40 / fuse_every + 2) << "one tracked frame in fuse_every fused";
+    }
 }
+
+TEST(ReconState, DeltasMergedOnAStandbyEqualTheFullStateAndARestoredScanContinuesLikeTheOriginal) {
+    replicateAndRestore(1);
+}
+
+TEST(ReconState, AScanThatFusesEveryOtherFrameReplicatesAndRestoresToo) { replicateAndRestore(2); }
 
 // The server hands last round's capture back in to reuse its buffers: a delta captured into a state that held a
 // full one equals the same delta captured into a fresh state (no block or pose of the full one left over).

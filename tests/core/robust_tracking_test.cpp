@@ -62,8 +62,8 @@ ScenarioRun runScenario(const synth::SequenceParams& sp, const ReconParams& para
         ScanStep step;
         scanFrame(pipeline, rec, frame, step);
         run.truth.emplace_back(T_c0_head * truth.T_camera_head.inverse());
-        run.estimate.push_back(step.frame.integrated ? std::optional<Pose>(step.frame.tracking.T_world_camera)
-                                                     : std::nullopt);
+        run.estimate.push_back(step.frame.tracked ? std::optional<Pose>(step.frame.tracking.T_world_camera)
+                                                  : std::nullopt);
         run.head_pixels.push_back(truth.head_pixels);
         run.head_found += step.head.found;
         run.invalid_input += step.frame.tracking.status == TrackingStatus::kInvalidInput;
@@ -129,9 +129,40 @@ TEST(Robustness, CastingTheModelAfterEveryOtherFrameTracksTheWideTurnAsWell) {
                 every.figures.max_pose_err_mm, other.figures.max_pose_err_mm);
 }
 
+// ReconParams::fuse_every 2 (a loaded server's last economy step): every other tracked frame is fused, and the
+// model is cast after the fused ones only. On the wide turn every frame is still tracked from the model, the
+// frames fused and cast alternate (the first two always fused), a frame left out costs no integration, and no pose
+// is further from the truth than with every frame fused, give or take a millimetre; nor the mesh from the head.
+TEST(Robustness, FusingEveryOtherFrameTracksTheWideTurnAsWell) {
+    synth::SequenceParams sp = scenario("wide");
+    sp.frames = 60;
+    sp.seed = 23;
+    const ScenarioRun every = runScenario(sp);
+    ReconParams params = ReconParams::faceDefaults();
+    params.fuse_every = 2;
+    const ScenarioRun other = runScenario(sp, params);
+    expectEveryFrameTrackedFromTheModel(other, sp.frames);
+    int fused = 0;
+    for (int i = 0; i < sp.frames; ++i) {
+        const FrameResult& r = other.steps[static_cast<size_t>(i)].frame;
+        ASSERT_TRUE(r.tracked) << i << ": " << r.reason;
+        EXPECT_EQ(r.integrated, i < 2 || i % 2 == 1) << "frame " << i;
+        EXPECT_EQ(r.model_cast, r.integrated) << "frame " << i << ": cast after each fused frame, and only then";
+        if (!r.integrated) {
+            EXPECT_EQ(r.ms.integrate, 0.0f) << "frame " << i;
+        }
+        fused += r.integrated;
+    }
+    EXPECT_EQ(fused, sp.frames / 2 + 1);
+    EXPECT_LT(other.figures.max_pose_err_mm, every.figures.max_pose_err_mm + 1.0f);
+    std::printf("wide turn, worst pose error: %.2f mm fusing every frame, %.2f mm every other\n",
+                every.figures.max_pose_err_mm, other.figures.max_pose_err_mm);
+}
+
 // A loaded server switches a live session's model level (Reconstructor::setModelLevel): full resolution, half
-// from frame 20, full again from frame 40; and how often it casts (setModelCastEvery): after every other frame from
-// frame 30 to 49. Every frame stays tracked from the model, and each switch applies at the next cast.
+// from frame 20, full again from frame 40; how often it casts (setModelCastEvery): after every other frame from
+// frame 30 to 49; and how often it fuses (setFuseEvery): every other frame from frame 52. Every frame stays tracked
+// from the model, and each switch applies at the next cast.
 TEST(Robustness, SwitchingTheModelLevelMidScanKeepsTracking) {
     synth::SequenceParams sp = scenario("gentle");
     sp.frames = 60;
@@ -149,14 +180,18 @@ TEST(Robustness, SwitchingTheModelLevelMidScanKeepsTracking) {
         if (i == 40) rec.setModelLevel(0);
         if (i == 30) rec.setModelCastEvery(2);
         if (i == 50) rec.setModelCastEvery(1);
+        if (i == 52) rec.setFuseEvery(2);
         EXPECT_EQ(rec.modelLevel(), i <= 20 || i > 40 ? 0 : 1) << "frame " << i << ": the level of the last cast";
         sim.render(i, frame, &truth);
         ScanStep step;
         scanFrame(pipeline, rec, frame, step);
-        ASSERT_TRUE(step.frame.integrated) << i << ": " << step.frame.reason;
+        ASSERT_TRUE(step.frame.tracked) << i << ": " << step.frame.reason;
         // From frame 30 the model is cast after every other frame: not after 30, 32, ..., 38. The change of level
-        // at 40 casts at once, then again every other frame: not after 41, 43, ..., 49. From 50, every frame.
-        const bool skipped = (i >= 30 && i < 40 && i % 2 == 0) || (i > 40 && i < 50 && i % 2 == 1);
+        // at 40 casts at once, then again every other frame: not after 41, 43, ..., 49. From 50, every fused frame;
+        // from 52 every other frame is fused (53, 55, ...), and only fused frames are cast after.
+        const bool fused = i < 52 || i % 2 == 1;
+        EXPECT_EQ(step.frame.integrated, fused) << "frame " << i;
+        const bool skipped = (i >= 30 && i < 40 && i % 2 == 0) || (i > 40 && i < 50 && i % 2 == 1) || !fused;
         EXPECT_EQ(step.frame.model_cast, !skipped) << "frame " << i;
         from_model += step.head.from_model;
         const Pose err = (T_c0_head * truth.T_camera_head.inverse()).inverse() * step.frame.tracking.T_world_camera;
@@ -164,6 +199,8 @@ TEST(Robustness, SwitchingTheModelLevelMidScanKeepsTracking) {
     }
     EXPECT_GE(from_model, sp.frames - 10) << "the segmenter follows the model at either level";
     EXPECT_LT(worst_mm, 10.0f) << "no wrong pose across the switches";
+    EXPECT_EQ(rec.trajectory().size(), static_cast<size_t>(sp.frames)) << "every tracked frame has its pose";
+    EXPECT_EQ(rec.framesIntegrated(), 56);
 }
 
 TEST(Robustness, WideFastTurnsAboveATorsoAreTracked) {
@@ -389,9 +426,10 @@ TEST(ScanStep, AFrameWithoutAHeadIsNoHeadAndTheAdviceSaysWhatToDo) {
     // Found but not fusable (a turned head after a loss is verified first): hold still.
     step.head.found = true;
     step.head.centroid_m = Eigen::Vector3f(0, 0, 0.7f);
-    step.frame.integrated = false;
+    step.frame.integrated = step.frame.tracked = false;
     EXPECT_STREQ(adviceFor(step, rec), "face lost: hold still");
-    step.frame.integrated = true;
+    // Tracked but not fused (ReconParams::fuse_every) is no loss: the advice is about distance again.
+    step.frame.tracked = true;
     step.head.centroid_m.z() = 1.3f;
     EXPECT_STREQ(adviceFor(step, rec), "move closer");
     step.head.centroid_m.z() = 0.45f;

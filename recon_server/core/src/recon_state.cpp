@@ -44,9 +44,9 @@ Status ReconState::validate() const {
     }
     if (full && (trajectory_begin != 0 || since_generation != 0))
         return invalidArgument("state: full state with a base");
-    if (!full && (trajectory_begin > static_cast<size_t>(frames_integrated) || since_generation > generation)) {
-        return invalidArgument("state: delta bounds are not consistent");
-    }
+    // A delta's trajectory_begin is not bounded by frames_integrated: the trajectory holds every tracked frame,
+    // fused or not (ReconParams::fuse_every). mergeState checks that it joins its base.
+    if (!full && since_generation > generation) return invalidArgument("state: delta bounds are not consistent");
     const int bps = resolution_vox / kBlockSide;
     std::vector<uint8_t> seen(static_cast<size_t>(bps) * bps * bps, 0);
     for (const Eigen::Vector3i& c : blocks.coords) {

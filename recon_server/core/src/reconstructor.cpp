@@ -72,6 +72,8 @@ Status ReconParams::validate() const {
         return invalidArgument("model_level must be >= 0 and below filter.levels");
     if (model_cast_every < 1 || model_cast_every > kMaxModelCastEvery)
         return invalidArgument("model_cast_every must be in [1, " + std::to_string(kMaxModelCastEvery) + "]");
+    if (fuse_every < 1 || fuse_every > kMaxFuseEvery)
+        return invalidArgument("fuse_every must be in [1, " + std::to_string(kMaxFuseEvery) + "]");
     return Status::ok();
 }
 
@@ -88,6 +90,7 @@ Reconstructor::Reconstructor(const Intrinsics& k, const ReconParams& p)
     frame_.allocate(kk, p.filter.levels);
     model_level_ = next_model_level_ = init_status_.isOk() ? p.model_level : 0;
     cast_every_ = init_status_.isOk() ? p.model_cast_every : 1;
+    fuse_every_ = init_status_.isOk() ? p.fuse_every : 1;
     model_.allocate(kk.scaled(model_level_), std::max(1, p.filter.levels - model_level_));
     raycaster_ = Raycaster(modelRaycastParams(params_.raycast, model_level_));
     hint_m_.create(kk.height_px, kk.width_px, CV_32FC1);
@@ -126,6 +129,8 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         return result;
     }
     Stopwatch watch;
+    // A frame after a rejected or held one is fused whatever fuse_every says: the model catches up at once.
+    const bool after_gap = consecutive_failures_ > 0 || verify_next_;
     auto reject = [&](TrackingStatus status, const char* why) {
         result.tracking.status = status;
         result.tracking.T_world_camera = T_world_camera_;
@@ -148,6 +153,7 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         reset();
         result.restarted = true;
     }
+    bool fuse = true;
     if (!have_model_) {
         // The first frame defines the reference orientation (thesis 4.1): world = this camera.
         if (!volume_.placed() && !volume_.place(frame_.levels[0]))
@@ -204,17 +210,27 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         visible_ref_px_ += kVisibleRefRate * (static_cast<float>(visible) - visible_ref_px_);
         verify_next_ = false;
         T_world_camera_ = estimate;
+        // ReconParams::fuse_every: one tracked frame in N is fused (the first two, and any after a gap, always).
+        fuse = frames_integrated_ < 2 || after_gap || result.reacquired || result.verified ||
+               ++frames_since_fuse_ >= fuse_every_;
         // Robust integration, part 2: at the fitted pose, what lies in front of the confident model by more than
         // the truncation band (a hand near the face) is left out of this frame's fusion. The next cast looks for
         // the model behind such pixels (their hint is the model's depth), so the comparison holds for as long as
         // the occluder stays.
-        if (params_.robust_integration) {
+        if (params_.robust_integration && fuse) {
             const float band = params_.occluder_band_m > 0.0f ? params_.occluder_band_m : params_.tsdf.trunc_dist_m;
             result.occluding_pixels += rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_,
                                                             volume_.grid(), band, params_.confident_weight, &hint_m_);
         }
         result.ms.icp = watch.lapMs();
     }
+    result.tracked = true;
+    consecutive_failures_ = 0;
+    trajectory_.emplace_back(frame.timestamp_ns, T_world_camera_);
+    result.tracking.T_world_camera = T_world_camera_;
+    result.consecutive_failures = 0;
+    if (!fuse) return result;  // tracked only: the model and its last cast stay as they are
+    frames_since_fuse_ = 0;
 
     // Volumetric integration (thesis 4.2.1) and ray casting for the next registration (4.2.2).
     {
@@ -225,8 +241,6 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     result.integrated = true;
     ++frames_integrated_;
     have_model_ = true;
-    consecutive_failures_ = 0;
-    trajectory_.emplace_back(frame.timestamp_ns, T_world_camera_);
     const cv::Rect& roi0 = frame_.levels[0].roi;
     const int m = params_.roi_margin_px;
     // The next frame registers against the last cast while it is recent enough (model_cast_every); the first
@@ -240,8 +254,6 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     }
     result.model_cast = cast;
     result.ms.raycast = watch.lapMs();
-    result.tracking.T_world_camera = T_world_camera_;
-    result.consecutive_failures = 0;
     return result;
 }
 
@@ -453,6 +465,11 @@ void Reconstructor::setModelCastEvery(int frames) {
     cast_every_ = std::clamp(frames, 1, ReconParams::kMaxModelCastEvery);
 }
 
+void Reconstructor::setFuseEvery(int frames) {
+    if (!init_status_.isOk()) return;
+    fuse_every_ = std::clamp(frames, 1, ReconParams::kMaxFuseEvery);
+}
+
 void Reconstructor::reset() {
     std::lock_guard<std::mutex> lock(volume_mutex_);
     volume_.reset();
@@ -462,6 +479,7 @@ void Reconstructor::reset() {
     verify_next_ = false;
     frames_since_search_ = 0;
     frames_since_cast_ = 0;
+    frames_since_fuse_ = 0;
     frames_integrated_ = 0;
     consecutive_failures_ = 0;
     region_ = HeadRegion{};

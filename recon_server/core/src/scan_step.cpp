@@ -40,7 +40,7 @@ const char* adviceFor(const ScanStep& step, const Reconstructor& reconstructor, 
         return turned ? "face lost: turn back toward the camera" : "face lost: come back in front of the camera";
     }
     const float z = step.head.centroid_m.z();
-    if (!step.frame.integrated) {
+    if (!step.frame.tracked) {  // a frame tracked but not fused (fuse_every) is no loss
         if (!scanning) return z > p.far_m ? "move closer" : "face the camera";
         return turned ? "face lost: turn back toward the camera" : "face lost: hold still";
     }

@@ -55,6 +55,15 @@ struct ReconParams {
     // and a change of model level. Must be in [1, kMaxModelCastEvery].
     int model_cast_every = 1;
     static constexpr int kMaxModelCastEvery = 4;
+    // A tracked frame is fused (thesis 4.2.1, Algorithm 3) when it is one in fuse_every (1 = every tracked frame,
+    // as in the thesis); the frames between are registered (their pose is known and in the trajectory) but leave
+    // the model alone, and so are not ray cast after either (model_cast_every counts fused frames). Integration is
+    // a loaded server's largest stage once the model is cast coarse and every other frame; fusing every other
+    // frame of a 30 Hz stream halves it and still averages each surface over many views (issue 16 note). The first
+    // two frames and every frame after a rejected or held one (a re-acquisition, a verified fit) are always fused.
+    // Must be in [1, kMaxFuseEvery].
+    int fuse_every = 1;
+    static constexpr int kMaxFuseEvery = 4;
     // Robust integration: a measurement more than occluder_band_m (0 = the truncation distance mu) in front of a
     // model surface whose weight is at least confident_weight is not fused; one more than occluder_prefilter_m in
     // front of it at the predicted pose is removed before registration too.
@@ -93,7 +102,8 @@ struct StageTimesMs {
 
 struct FrameResult {
     TrackingResult tracking;
-    bool integrated = false;       // the frame was fused into the model
+    bool integrated = false;       // the frame was tracked and fused into the model
+    bool tracked = false;          // the pose was fitted: integrated, or tracked only (ReconParams::fuse_every)
     bool reacquiring = false;      // tracking was lost for max_failures_before_reacquire frames: callers should
                                    // re-detect the head; the frame is registered against the model from the last
                                    // good pose with centroid pre-alignment (eq. 4.11), never by starting over
@@ -133,7 +143,8 @@ class Reconstructor {
 
     int framesIntegrated() const { return frames_integrated_; }
     Pose lastPose() const { return T_world_camera_; }  // T_world_camera of the last tracked frame
-    // Timestamp (ns) and T_world_camera of every integrated frame; world = the first frame's camera.
+    // Timestamp (ns) and T_world_camera of every tracked frame (fused or not: ReconParams::fuse_every); world =
+    // the first frame's camera.
     const std::vector<std::pair<int64_t, Pose>>& trajectory() const { return trajectory_; }
 
     // Thread-safe against processFrame (another thread may call these while frames flow): copies only the
@@ -179,6 +190,10 @@ class Reconstructor {
     // model_cast_every; clamped to its valid range): a loaded server casts less often before it casts coarser.
     void setModelCastEvery(int frames);
     int modelCastEvery() const { return cast_every_; }
+    // One tracked frame in `frames` is fused from the next frame on (ReconParams::fuse_every; clamped to its
+    // valid range): a loaded server's last economy step.
+    void setFuseEvery(int frames);
+    int fuseEvery() const { return fuse_every_; }
     int requestedModelLevel() const { return next_model_level_; }  // of the next cast
     // Verifies a pose for the current frame as re-acquisition does (for tests and diagnostics): run after a
     // processFrame of that frame, which leaves the filtered frame in place.
@@ -225,6 +240,8 @@ class Reconstructor {
     bool have_model_ = false;
     int cast_every_ = 1;         // ReconParams::model_cast_every, then setModelCastEvery
     int frames_since_cast_ = 0;  // integrated frames since the model was last cast
+    int fuse_every_ = 1;         // ReconParams::fuse_every, then setFuseEvery
+    int frames_since_fuse_ = 0;  // tracked frames since the last fused one
     int frames_integrated_ = 0;
     int consecutive_failures_ = 0;
     HeadRegion region_;            // fixed at the first frame (part of the scan's state, like the volume and the pose)
