@@ -190,6 +190,10 @@ int runStatus(const CliOptions& options) {
     std::printf("mode        %s\n", s.every_frame ? "recording (every frame processed)" : "live (newest frame)");
     std::printf("frames      %u received, %u integrated, %u rejected, %u skipped, %u dropped\n", s.frames_received,
                 s.frames_integrated, s.frames_rejected, s.frames_skipped, s.frames_dropped);
+    if (s.frames_tracked_only > 0) {
+        std::printf("            %u more tracked but not fused (the server was loaded: it fused every other frame)\n",
+                    s.frames_tracked_only);
+    }
     std::printf("speed       %.1f fps, latency p95 %.1f ms\n", s.fps, s.latency_p95_ms);
     std::printf(
         "stages ms   detect %.2f  segment %.2f  filter %.2f  icp %.2f  integrate %.2f  raycast %.2f  "

@@ -44,12 +44,12 @@ std::string statusJson(const SessionStatus& s, bool with_alive, const Ownership*
                   "\"frames_dropped\":%u,\"every_frame\":%s,\"fps\":%.2f,\"ms\":{\"detect\":%.3f,\"segment\":%.3f,"
                   "\"filter\":%.3f,\"icp\":%.3f,\"integrate\":%.3f,\"raycast\":%.3f,\"mesh\":%.3f},"
                   "\"latency_p95_ms\":%.2f,\"snapshot_seq\":%u,\"epoch\":%u,\"owner_alive\":%s,\"failovers\":%u,"
-                  "\"last_takeover_ms\":%.1f,\"behind\":%s",
+                  "\"last_takeover_ms\":%.1f,\"behind\":%s,\"frames_tracked_only\":%u",
                   s.frames_received, s.frames_integrated, s.frames_rejected, s.frames_skipped, s.frames_dropped,
                   s.every_frame ? "true" : "false", finite(s.fps), finite(s.ms_detect), finite(s.ms_segment),
                   finite(s.ms_filter), finite(s.ms_icp), finite(s.ms_integrate), finite(s.ms_raycast),
                   finite(s.ms_mesh), finite(s.latency_p95_ms), s.snapshot_seq, o.epoch, o.alive ? "true" : "false",
-                  s.failovers, finite(s.last_takeover_ms), s.behind ? "true" : "false");
+                  s.failovers, finite(s.last_takeover_ms), s.behind ? "true" : "false", s.frames_tracked_only);
     return "{\"session\":" + jsonString(s.session_id) + ",\"server\":" + jsonString(s.server_id) +
            ",\"owner\":" + jsonString(o.owner) + ",\"standby\":" + jsonString(o.standby) +
            ",\"state\":" + jsonString(scanStateName(s.state)) + ",\"detail\":" + jsonString(s.detail) + "," + numbers +

@@ -49,6 +49,9 @@ std::vector<std::string> panelLines(const WatchView& view) {
                            groupThousands(s.frames_integrated).c_str(), groupThousands(s.frames_received).c_str(),
                            s.frames_rejected, s.frames_skipped, s.frames_dropped, s.fps,
                            s.every_frame ? "  [recording: every frame]" : ""));
+    if (s.frames_tracked_only > 0) {
+        lines.back() += format("  + %s tracked only", groupThousands(s.frames_tracked_only).c_str());
+    }
     std::string mesh =
         format("mesh       %s triangles, %s", groupThousands(view.snapshot_triangles).c_str(), ageText(view).c_str());
     if (view.snapshots_saved > 0) mesh += format("  (%d saved)", view.snapshots_saved);

@@ -194,7 +194,8 @@ function showSessions() {
   $('state').textContent = s.alive ? s.state : `${s.state} (server gone)`;
   $('state').className = `state ${s.state}`;
   $('detail').textContent = s.detail;
-  $('integrated').textContent = s.frames_integrated.toLocaleString();
+  $('integrated').textContent = s.frames_integrated.toLocaleString() +
+    (s.frames_tracked_only ? ` (+${s.frames_tracked_only.toLocaleString()} tracked only)` : '');
   $('received').textContent = s.frames_received.toLocaleString();
   $('rejected').textContent = s.frames_rejected.toLocaleString();
   $('dropped').textContent = (s.frames_dropped + s.frames_skipped).toLocaleString() + (s.frames_skipped ? ' (skipped to stay live)' : '');

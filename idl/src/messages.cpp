@@ -51,6 +51,7 @@ facescan_wire_ScanStatus toMessage(const ScanStatusData& status) {
     m.failovers = status.failovers;
     m.last_takeover_ms = status.last_takeover_ms;
     m.behind = status.behind;
+    m.frames_tracked_only = status.frames_tracked_only;
     return m;
 }
 
@@ -84,6 +85,7 @@ ScanStatusData fromMessage(const facescan_wire_ScanStatus& m) {
     s.failovers = m.failovers;
     s.last_takeover_ms = m.last_takeover_ms;
     s.behind = m.behind;
+    s.frames_tracked_only = m.frames_tracked_only;
     return s;
 }
 

@@ -112,7 +112,7 @@ bool getCamera(ByteReader& r, CameraInfoData& c) {
 
 void putCounters(ByteWriter& w, const SessionCounters& c) {
     for (const uint32_t v : {c.frames_received, c.frames_integrated, c.frames_rejected, c.frames_skipped,
-                             c.frames_dropped, c.snapshot_seq, c.failovers}) {
+                             c.frames_dropped, c.snapshot_seq, c.failovers, c.frames_tracked_only}) {
         w.put<uint32_t>(v);
     }
     w.put<float>(c.last_takeover_ms);
@@ -123,7 +123,7 @@ void putCounters(ByteWriter& w, const SessionCounters& c) {
 
 bool getCounters(ByteReader& r, SessionCounters& c) {
     for (uint32_t* v : {&c.frames_received, &c.frames_integrated, &c.frames_rejected, &c.frames_skipped,
-                        &c.frames_dropped, &c.snapshot_seq, &c.failovers}) {
+                        &c.frames_dropped, &c.snapshot_seq, &c.failovers, &c.frames_tracked_only}) {
         if (!r.get(*v)) return false;
     }
     return r.get(c.last_takeover_ms) && r.get(c.frames_processed) && r.get(c.duration_s) && r.get(c.frames_digest) &&

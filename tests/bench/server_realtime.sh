@@ -19,7 +19,9 @@
 #   in ms a frame. The sessions' figures scale with it, and a shared host's speed varies by 2x from day to day:
 #   compare runs, and builds, only at a similar figure.
 #   Ends with a table: per session, frames integrated of those sent, skipped (live mode keeps the newest frame),
-#   capture-to-pose latency p50/p95, and the wall-clock ms of its last snapshot; then the server's CPU while
+#   capture-to-pose latency p50/p95, the wall-clock ms of its last snapshot, and the frames tracked but not fused
+#   (a loaded server's last economy step fuses every other frame; those are not skipped: each has its pose, and
+#   counts in the latency); then the server's CPU while
 #   the agents streamed, in cores, by job (its threads are named: fs-s SESSION, fs-pool, fs-replicate, ...).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -122,8 +124,8 @@ for s in $(seq 1 "$sessions"); do
     fi
 done
 # One number out of a summary line: field KEY of the line that starts with "SECTION".
-field() { grep -E "^  \"$2\"" "$1" | sed -E "s/.*\"$3\": ([0-9.e+-]+).*/\1/"; }
-printf '%-8s %12s %9s %9s %9s %14s\n' session integrated skipped p50_ms p95_ms last_snapshot
+field() { grep -E "^  \"$2\"" "$1" | sed -nE "s/.*\"$3\": ([0-9.e+-]+).*/\1/p"; }
+printf '%-8s %12s %9s %9s %9s %14s %13s\n' session integrated skipped p50_ms p95_ms last_snapshot tracked_only
 for s in $(seq 1 "$sessions"); do
     f="$work/data/rt$s/summary.json"
     [ -f "$f" ] || continue
@@ -133,14 +135,26 @@ for s in $(seq 1 "$sessions"); do
     # snapshots cost in CPU is in the breakdown below.
     last_snapshot=$(awk -v c="$(field "$f" snapshot copy_ms)" -v m="$(field "$f" snapshot mesh_ms)" \
         -v e="$(field "$f" snapshot encode_ms)" 'BEGIN { printf "%.0f", c + m + e }')
-    printf '%-8s %5s of %-4s %5s %2s %9.1f %9.1f %11s ms\n' "rt$s" "$(field "$f" frames integrated)" "$frames" \
+    tracked_only=$(field "$f" frames tracked_only)
+    printf '%-8s %5s of %-4s %5s %2s %9.1f %9.1f %11s ms %13s\n' "rt$s" "$(field "$f" frames integrated)" "$frames" \
         "$skipped" "($(( received > 0 ? 100 * skipped / received : 0 ))%)" "$(field "$f" latency_ms p50)" \
-        "$(field "$f" latency_ms p95)" "$last_snapshot"
+        "$(field "$f" latency_ms p95)" "$last_snapshot" "${tracked_only:-0}"
 done
+# The economy ladder (recon_server/service/frame_load.hpp) as the server logged it.
+if [ -f "$work/server.log" ]; then
+    fusing=$( (grep -E ': model cast at .*, every other tracked frame fused' "$work/server.log" || true) |
+        sed -E 's/.*session ([^:]+):.*/\1/' | sort -u | tr '\n' ' ')
+    echo "economy: $(grep -c ': model cast at ' "$work/server.log" || true) step changes; fused every other frame at" \
+        "some point: ${fusing:-none}"
+fi
 # Where the server's CPU went while the agents streamed (from the first release to the last agent's end), in
 # cores: each thread's last sample minus its first (a thread that ended between two samples loses at most 0.5 s).
+# Per tracked frame: integrated (fused) and tracked only.
 integrated_total=$(cat "$work"/data/rt*/summary.json 2>/dev/null | grep -E '^  "frames"' |
     sed -E 's/.*"integrated": ([0-9]+).*/\1/' | awk '{ s += $1 } END { print s + 0 }')
+tracked_only_total=$(cat "$work"/data/rt*/summary.json 2>/dev/null | grep -E '^  "frames"' |
+    sed -nE 's/.*"tracked_only": ([0-9]+).*/\1/p' | awk '{ s += $1 } END { print s + 0 }')
+integrated_total=$((integrated_total + tracked_only_total))
 awk -v hz="$(getconf CLK_TCK)" -v frames="$integrated_total" -v sessions="$sessions" '
     { if (!($2 in first)) { first[$2] = $3; t_first[$2] = $1 } last[$2] = $3; name[$2] = $4 " " $5 " " $6;
       if (t0 == "" || $1 < t0) t0 = $1; if ($1 > t1) t1 = $1 }
@@ -159,7 +173,7 @@ awk -v hz="$(getconf CLK_TCK)" -v frames="$integrated_total" -v sessions="$sessi
         }
         span = t1 - t0;
         printf "server CPU while streaming (%.1f s): %.2f cores", span, total / span;
-        if (frames > 0) printf ", %.1f ms per integrated frame", 1000 * total / frames;
+        if (frames > 0) printf ", %.1f ms per tracked frame", 1000 * total / frames;
         printf "\n";
         n_groups = split("sessions|sessions (pool)|replication|snapshots|engine builds|intake, commands, DDS", order, "|")
         for (i = 1; i <= n_groups; ++i) {

@@ -22,6 +22,7 @@ inline wire::ReplicaData sampleReplica(int blocks, bool full, const std::string&
     r.camera.source = "synthetic:test";
     r.counters.frames_received = 77;
     r.counters.frames_integrated = 70;
+    r.counters.frames_tracked_only = 6;
     r.counters.frames_digest = 0x1234567890abcdefull;
     recon::ReconState& s = r.state;
     s.resolution_vox = 256;

@@ -12,6 +12,7 @@
 
 #include "cpu_burn.hpp"
 #include "recon/parallel.hpp"
+#include "recon/reconstructor.hpp"
 
 namespace facescan::service {
 namespace {
@@ -67,9 +68,9 @@ TEST(FrameLoad, AFrameWithinItsShareIsLeftAlone) {
 
 // How much a session spends on its model follows the same budget: over it while another session runs (after the
 // first frames, which detection and the model's start make slow), the session steps down the ladder: the model
-// cast after every other frame (step 1), then also at half resolution (step 2), a step at most every
-// kStepDownFrames. After a hold it goes back up one step at a time if the step above would fit kStepUpFraction
-// of the budget; alone, to full at once.
+// cast after every other frame (step 1), then also at half resolution (step 2), then also fusing every other frame
+// with a cast after each fused one (step 3), a step at most every kStepDownFrames. After a hold it goes back up one
+// step at a time if the step above would fit kStepUpFraction of the budget; alone, to full at once.
 TEST(FrameLoad, OverItsShareASessionStepsDownTheLadderAndBackUpOnceTheStepAboveWouldFit) {
     std::thread([] {
         FrameLoad other(30.0f), busy(100.0f);  // busy: a 10 ms frame period
@@ -89,13 +90,38 @@ TEST(FrameLoad, OverItsShareASessionStepsDownTheLadderAndBackUpOnceTheStepAboveW
         EXPECT_EQ(busy.economy(), 2) << "still over budget";
         EXPECT_TRUE(busy.coarseModel());
         EXPECT_EQ(busy.modelCastEvery(), 2);
+        EXPECT_EQ(busy.fuseEvery(), 1);
+        for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(1.3f));
+        EXPECT_EQ(busy.economy(), 3) << "still over budget: every other frame fused";
+        EXPECT_TRUE(busy.coarseModel());
+        EXPECT_EQ(busy.fuseEvery(), 2);
+        EXPECT_EQ(busy.modelCastEvery(), 1) << "cast after each fused frame: every other tracked one, as at step 2";
+        {
+            // What the session's reconstructor is told (applyEconomy); a session's own settings are a floor.
+            recon::ReconParams base = recon::ReconParams::faceDefaults();
+            recon::Reconstructor rec(recon::Intrinsics::kinectV1(), base);
+            applyEconomy(busy, base, "s", rec);
+            EXPECT_EQ(rec.requestedModelLevel(), 1);
+            EXPECT_EQ(rec.modelCastEvery(), 1);
+            EXPECT_EQ(rec.fuseEvery(), 2);
+            base.model_cast_every = 3;
+            base.fuse_every = 4;
+            applyEconomy(busy, base, "s", rec);
+            EXPECT_EQ(rec.modelCastEvery(), 3);
+            EXPECT_EQ(rec.fuseEvery(), 4);
+        }
+        for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(1.3f));
+        EXPECT_EQ(busy.economy(), 3) << "the last step";
         // At 0.75 of the budget, the step above (~1.3 x 0.75) would not fit: it stays, past the hold.
         for (int i = 0; i < FrameLoad::kStepHoldFrames + 10; ++i) frame(busy, ns(0.75f));
+        EXPECT_EQ(busy.economy(), 3);
+        // At 0.3 of the budget it does (~0.4), although step 2's own last average (1.3 budgets) says otherwise.
+        for (int i = 0; i < 15 && busy.economy() == 3; ++i) frame(busy, ns(0.3f));
         EXPECT_EQ(busy.economy(), 2);
-        // At 0.3 of the budget it does (~0.4), although step 1's own last average (1.3 budgets) says otherwise.
-        for (int i = 0; i < 15 && busy.economy() == 2; ++i) frame(busy, ns(0.3f));
-        EXPECT_EQ(busy.economy(), 1);
         int n = 0;
+        while (busy.economy() == 2 && n < 2 * FrameLoad::kStepHoldFrames) frame(busy, ns(0.3f)), ++n;
+        EXPECT_EQ(busy.economy(), 1);
+        n = 0;
         while (busy.economy() == 1 && n < 2 * FrameLoad::kStepHoldFrames) frame(busy, ns(0.3f)), ++n;
         EXPECT_EQ(busy.economy(), 0) << "one step at a time, each after its hold";
         EXPECT_GE(n, FrameLoad::kStepHoldFrames - 1);

@@ -146,7 +146,8 @@ std::set<std::string> threadNames() {
 
 bool settled(const StatusCopy& s) {
     return s.frames_received > 0 &&
-           s.frames_integrated + s.frames_rejected + s.frames_skipped + s.frames_dropped >= s.frames_received;
+           s.frames_integrated + s.frames_tracked_only + s.frames_rejected + s.frames_skipped + s.frames_dropped >=
+               s.frames_received;
 }
 
 TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) {
@@ -190,7 +191,9 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
     EXPECT_EQ(traj->server_id, "test-server");
     EXPECT_EQ(traj->kind, static_cast<uint32_t>(facescan_wire_CMD_GET_TRAJECTORY));
     const std::string tum(traj->payload.begin(), traj->payload.end());
-    EXPECT_EQ(static_cast<uint32_t>(std::count(tum.begin(), tum.end(), '\n')), status->frames_integrated);
+    EXPECT_EQ(static_cast<uint32_t>(std::count(tum.begin(), tum.end(), '\n')),
+              status->frames_integrated + status->frames_tracked_only)
+        << "a pose for every tracked frame, fused or not";
 
     auto mesh = rig.client->command("live-1", facescan_wire_CMD_GET_MESH);
     ASSERT_TRUE(mesh.isOk() && mesh->ok) << (mesh.isOk() ? mesh->error : mesh.status().toString());
@@ -272,6 +275,34 @@ TEST(ServerSession, EveryFrameRecordingProcessesAllFramesAndFinishesAtEndOfStrea
     EXPECT_GE(status->frames_integrated, 30u) << "the damaged frames must not harm the session: " << status->detail;
     expectSessionWritten(params.data_dir / "rec-1", /*with_mesh=*/true);
     EXPECT_NE(readFile(params.data_dir / "rec-1" / "summary.json").find("\"mode\": \"every_frame\""),
+              std::string::npos);
+}
+
+// A server told to fuse every other tracked frame (--set fuse_every=2, what the load's last economy step does):
+// every frame is still tracked and posed, the status and the summary count the ones left out of the model apart
+// from the fused ones, and the trajectory has a pose for each tracked frame.
+TEST(ServerSession, ASessionThatFusesEveryOtherFramePosesAndCountsEveryTrackedFrame) {
+    const uint32_t domain = privateDomain(20);
+    ServerParams params = testParams(domain, "fuse2");
+    params.recon.fuse_every = 2;
+    Rig rig = makeRig(params);
+    ASSERT_TRUE(rig.server && rig.client);
+    auto agent = makeAgent(domain, "fuse-1", /*every_frame=*/true);
+    ASSERT_TRUE(agent);
+    constexpr uint32_t kFrames = 30;
+    ASSERT_TRUE(agent->stream(sequence(), kFrames, 30.0f, /*end_of_stream=*/true).isOk());
+    auto status = rig.client->waitForStatus(
+        "fuse-1", [](const StatusCopy& s) { return s.state == facescan_wire_STATE_FINISHED; }, 30s);
+    ASSERT_TRUE(status) << "the recording never finished";
+    EXPECT_EQ(status->frames_integrated + status->frames_tracked_only + status->frames_rejected, kFrames);
+    EXPECT_GE(status->frames_tracked_only, 10u) << status->detail;
+    EXPECT_LE(status->frames_tracked_only, status->frames_integrated) << "the first frames are always fused";
+    expectSessionWritten(params.data_dir / "fuse-1", /*with_mesh=*/true);
+    const std::string tum = readFile(params.data_dir / "fuse-1" / "trajectory.txt");
+    EXPECT_EQ(static_cast<uint32_t>(std::count(tum.begin(), tum.end(), '\n')),
+              status->frames_integrated + status->frames_tracked_only);
+    EXPECT_NE(readFile(params.data_dir / "fuse-1" / "summary.json")
+                  .find("\"tracked_only\": " + std::to_string(status->frames_tracked_only) + "}"),
               std::string::npos);
 }
 

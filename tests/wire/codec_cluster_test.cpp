@@ -26,6 +26,7 @@ TEST(ReplicaCodec, RoundTripsFullAndDeltaStatesExactly) {
         EXPECT_EQ(back.full(), full);
         EXPECT_EQ(back.next_seq, 77u);
         EXPECT_EQ(back.counters.frames_digest, r.counters.frames_digest);
+        EXPECT_EQ(back.counters.frames_tracked_only, 6u);
         EXPECT_EQ(back.camera.source, "synthetic:test");
         ASSERT_EQ(back.state.blocks.voxels.size(), r.state.blocks.voxels.size());
         EXPECT_EQ(0, std::memcmp(back.state.blocks.voxels.data(), r.state.blocks.voxels.data(),
@@ -74,7 +75,7 @@ TEST(ReplicaCodec, TruncatedCorruptAndForeignBytesAreRefusedWithAReason) {
     EXPECT_EQ(refused, static_cast<int>((bytes.size() - kReplicaHeaderBytes + 96) / 97));
     // Another format version.
     std::vector<uint8_t> future = bytes;
-    future[4] = 2;
+    future[4] = static_cast<uint8_t>(kReplicaFormatVersion + 1);
     const Status v = decodeReplica(future.data(), future.size(), out);
     EXPECT_EQ(v.code(), StatusCode::kUnimplemented);
     EXPECT_NE(v.message().find("not compatible"), std::string::npos) << v.message();

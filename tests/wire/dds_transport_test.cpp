@@ -204,6 +204,7 @@ TEST(WireMessages, ScanStatusRoundTripsAndAnUnknownStateReadsAsWaiting) {
     d.snapshot_seq = 9;
     d.updated_ns = 123456789012345;
     d.behind = true;
+    d.frames_tracked_only = 11;
     const ScanStatusData back = fromMessage(toMessage(d));
     EXPECT_EQ(back.session_id, "s-1");
     EXPECT_EQ(back.server_id, "box");
@@ -222,6 +223,7 @@ TEST(WireMessages, ScanStatusRoundTripsAndAnUnknownStateReadsAsWaiting) {
     EXPECT_EQ(back.snapshot_seq, 9u);
     EXPECT_EQ(back.updated_ns, 123456789012345);
     EXPECT_TRUE(back.behind);
+    EXPECT_EQ(back.frames_tracked_only, 11u);
 
     facescan_wire_ScanStatus m = toMessage(d);
     m.state = static_cast<facescan_wire_ScanState>(99);  // a state from a newer server

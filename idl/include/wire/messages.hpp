@@ -37,7 +37,7 @@ facescan_wire_CameraInfo toMessage(const CameraInfoData& info);
 StatusOr<CameraInfoData> fromMessage(const facescan_wire_CameraInfo& msg);
 
 // ScanStatus as a C++ value: the server fills it, the client and tests read it. One conversion each way, so the
-// message's 23 fields are listed in exactly one place (messages.cpp).
+// message's 24 fields are listed in exactly one place (messages.cpp).
 struct ScanStatusData {
     std::string session_id;
     std::string server_id;
@@ -60,6 +60,7 @@ struct ScanStatusData {
     uint32_t failovers = 0;
     float last_takeover_ms = 0;
     bool behind = false;  // live session not keeping up: throttled or skipping frames (detail says how much)
+    uint32_t frames_tracked_only = 0;  // tracked (pose known) but not fused: a loaded server's last economy step
 };
 // The message points at `status`'s strings: keep it alive until the sample is written.
 facescan_wire_ScanStatus toMessage(const ScanStatusData& status);

@@ -21,7 +21,7 @@
 
 namespace facescan::wire {
 
-inline constexpr uint16_t kReplicaFormatVersion = 1;
+inline constexpr uint16_t kReplicaFormatVersion = 2;  // 2: SessionCounters::frames_tracked_only
 inline constexpr size_t kReplicaHeaderBytes = 24;
 inline constexpr size_t kMaxReplicaBodyBytes = size_t{512} << 20;  // 512 MiB: far above a face volume
 
@@ -34,6 +34,7 @@ struct SessionCounters {
     uint32_t frames_dropped = 0;
     uint32_t snapshot_seq = 0;
     uint32_t failovers = 0;
+    uint32_t frames_tracked_only = 0;  // tracked but not fused (recon::ReconParams::fuse_every)
     float last_takeover_ms = 0;
     uint64_t frames_processed = 0;
     double duration_s = 0;       // seconds of processing so far

@@ -123,23 +123,27 @@ void FrameLoad::throttle(bool on) {
     (void)setpriority(PRIO_PROCESS, static_cast<id_t>(tid_), base_nice_ + (on ? kThrottledNice : 0));
 }
 
-void applyEconomy(const FrameLoad& load, int base_level, int base_every, const std::string& session_id,
+void applyEconomy(const FrameLoad& load, const recon::ReconParams& base, const std::string& session_id,
                   recon::Reconstructor& reconstructor) {
-    const int level = std::max(base_level, load.coarseModel() ? 1 : 0);
-    const int every = std::max(base_every, load.modelCastEvery());
-    if (level == reconstructor.requestedModelLevel() && every == reconstructor.modelCastEvery()) return;
+    const int level = std::max(base.model_level, load.coarseModel() ? 1 : 0);
+    const int every = std::max(base.model_cast_every, load.modelCastEvery());
+    const int fuse = std::max(base.fuse_every, load.fuseEvery());
+    if (level == reconstructor.requestedModelLevel() && every == reconstructor.modelCastEvery() &&
+        fuse == reconstructor.fuseEvery()) {
+        return;
+    }
+    const auto often = [](int n) { return n == 1 ? "every" : n == 2 ? "every other" : "fewer than every other"; };
     std::fprintf(stderr,
-                 "facescan-server: session %s: model cast at %s after %s (%.1f ms of CPU a frame, budget %.1f ms)\n",
+                 "facescan-server: session %s: model cast at %s after %s fused frame, %s tracked frame fused (%.1f ms "
+                 "of CPU a frame, budget %.1f ms)\n",
                  session_id.c_str(),
                  level == 0   ? "full resolution"
                  : level == 1 ? "half resolution"
                               : "a coarser level",
-                 every == 1   ? "every frame"
-                 : every == 2 ? "every other frame"
-                              : "fewer frames",
-                 load.costMs(), load.budgetMs());
+                 often(every), often(fuse), load.costMs(), load.budgetMs());
     reconstructor.setModelLevel(level);
     reconstructor.setModelCastEvery(every);
+    reconstructor.setFuseEvery(fuse);
 }
 
 }  // namespace facescan::service

@@ -423,6 +423,7 @@ void Server::publishStatus(const SessionStats& s) {
     d.frames_rejected = s.frames_rejected;
     d.frames_skipped = s.frames_skipped;
     d.frames_dropped = s.frames_dropped;
+    d.frames_tracked_only = s.frames_tracked_only;
     d.every_frame = s.every_frame;
     d.fps = s.fps;
     d.ms_detect = s.ms.detect;

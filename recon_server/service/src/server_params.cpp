@@ -113,6 +113,7 @@ const std::map<std::string, Setter>& setters() {
         INT("roi_margin_px", p.recon.roi_margin_px),
         INT("model_level", p.recon.model_level),
         INT("model_cast_every", p.recon.model_cast_every),
+        INT("fuse_every", p.recon.fuse_every),
         // Detection and segmentation (recon::FacePipelineParams).
         BOOL("face.depth_only_fallback", p.face.depth_only_fallback),
         INT("face.redetect_every_frames", p.face.redetect_every_frames),

@@ -332,7 +332,7 @@ void Session::workerLoop() {
         processFrame(working_);
         load_->endFrame();
         recon_->setSearchEvery(load_->searchEvery());  // a lost session over budget searches less often
-        applyEconomy(*load_, params_.recon.model_level, params_.recon.model_cast_every, id_, *recon_);
+        applyEconomy(*load_, params_.recon, id_, *recon_);
         noteLoad();
         copySnapshotIfAsked();
         lk.lock();
@@ -380,8 +380,9 @@ void Session::processFrame(PendingFrame& pending) {
         stats_.detail = detail("no face: " + head.reason);
         return;
     }
-    if (r.integrated) {
-        ++stats_.frames_integrated;
+    if (r.tracked) {
+        // A frame tracked but not fused (the load's last economy step) has its pose and latency like any other.
+        ++(r.integrated ? stats_.frames_integrated : stats_.frames_tracked_only);
         stats_.state = SessionState::kScanning;
         stats_.detail = detail(head.depth_only ? "face found (depth only)" : "face found");
         if (r.restarted) trajectory_.clear();  // a model of one frame restarted: world = this frame's camera

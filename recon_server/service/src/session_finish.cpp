@@ -148,7 +148,8 @@ std::string Session::summaryJson(const SessionStats& s, const MeshResult& m) con
     j += "  \"frames\": {\"received\": " + std::to_string(s.frames_received) +
          ", \"integrated\": " + std::to_string(s.frames_integrated) +
          ", \"rejected\": " + std::to_string(s.frames_rejected) + ", \"skipped\": " + std::to_string(s.frames_skipped) +
-         ", \"dropped\": " + std::to_string(s.frames_dropped) + "},\n";
+         ", \"dropped\": " + std::to_string(s.frames_dropped) +
+         ", \"tracked_only\": " + std::to_string(s.frames_tracked_only) + "},\n";
     j += "  \"fps\": " + num(s.fps) + ",\n";
     j += "  \"duration_s\": " + num(s.duration_s) + ",\n";
     j += "  \"latency_ms\": {\"p50\": " + num(s.latency_p50_ms) + ", \"p95\": " + num(s.latency_p95_ms) + "},\n";

@@ -38,6 +38,7 @@ void Session::applyReplicaLocked(const wire::ReplicaData& r, int64_t takeover_fr
     stats_.frames_rejected = c.frames_rejected;
     stats_.frames_skipped = c.frames_skipped;
     stats_.frames_dropped = c.frames_dropped;
+    stats_.frames_tracked_only = c.frames_tracked_only;
     stats_.snapshot_seq = c.snapshot_seq;
     stats_.failovers = c.failovers + 1;
     stats_.last_takeover_ms = c.last_takeover_ms;
@@ -99,6 +100,7 @@ void Session::captureOnWorker(bool full, ReplicaCapture& out) {
     c.frames_rejected = stats_.frames_rejected;
     c.frames_skipped = stats_.frames_skipped;
     c.frames_dropped = stats_.frames_dropped;
+    c.frames_tracked_only = stats_.frames_tracked_only;
     c.snapshot_seq = stats_.snapshot_seq;
     c.failovers = stats_.failovers;
     c.last_takeover_ms = stats_.last_takeover_ms;

@@ -12,8 +12,11 @@
 // The same test picks how much the session spends on its model (economy(), applied by applyEconomy): a session
 // over budget while others run steps down a ladder rather than skip frames. Step 1 casts the model after every
 // other frame (recon::Reconstructor::setModelCastEvery: a frame's serial CPU 10.3 -> 8.0 ms, accuracy kept);
-// step 2 also casts it at half resolution (setModelLevel: 6.1 ms, ATE up by about 0.5 mm on the scenarios). It
-// goes back up one step at a time once the step above would fit the budget.
+// step 2 also casts it at half resolution (setModelLevel: 6.1 ms, ATE up by about 0.5 mm on the scenarios); step 3
+// also fuses only every other tracked frame (setFuseEvery; the model is then cast after each fused frame, so as
+// often as at step 2): integration is the largest stage left at step 2 (4.5 of 11.2 ms a frame on a slow host),
+// and the scenarios' mean distance to the true head moves by at most 0.01 mm (issue 16 note). Every frame is still
+// tracked. It goes back up one step at a time once the step above would fit the budget.
 #pragma once
 
 #include <cstdint>
@@ -21,7 +24,8 @@
 
 namespace facescan::recon {
 class Reconstructor;
-}
+struct ReconParams;
+}  // namespace facescan::recon
 
 namespace facescan::service {
 
@@ -37,10 +41,11 @@ class FrameLoad {
     // kStepDownFraction of the budget or the session skips more than kStepDownSkipFraction of its frames
     // (noteSkipped), while others run; a step is kept kStepDownFrames before the next one down (the skip share
     // lags). After kStepHoldFrames at a step it probes the step above if that would fit kStepUpFraction of the
-    // budget (the lower of that step's last average and this one's times kStepCostRatio: measured 10.3 / 8.0 and
-    // 8.0 / 6.1 ms, both ~1.3). A probe that steps down again within kProbeFrames doubles the hold, up to
-    // kMaxStepHoldFrames; a session leaving resets it.
-    static constexpr int kEconomySteps = 3;  // 0: the model cast after every frame; 1: every other; 2: and coarse
+    // budget (the lower of that step's last average and this one's times kStepCostRatio: measured 10.3 / 8.0,
+    // 8.0 / 6.1 and, for step 3, about 1.3 as well: see the issue 16 note). A probe that steps down again within
+    // kProbeFrames doubles the hold, up to kMaxStepHoldFrames; a session leaving resets it. 0: the model cast after
+    // every frame; 1: after every other; 2: and coarse; 3: and every other frame fused
+    static constexpr int kEconomySteps = 4;
     static constexpr int kWarmUpFrames = 5;
     static constexpr int kStepDownFrames = 10;
     static constexpr float kStepDownSkipFraction = 0.05f;
@@ -71,9 +76,12 @@ class FrameLoad {
 
     bool throttled() const { return throttled_; }
     int searchEvery() const { return throttled_ ? kThrottledSearchEvery : 1; }
-    int economy() const { return economy_; }                      // 0 .. kEconomySteps - 1
-    bool coarseModel() const { return economy_ >= 2; }            // the model cast at half resolution
-    int modelCastEvery() const { return economy_ >= 1 ? 2 : 1; }  // the model cast after one frame in this many
+    int economy() const { return economy_; }            // 0 .. kEconomySteps - 1
+    bool coarseModel() const { return economy_ >= 2; }  // the model cast at half resolution
+    // The model cast after one fused frame in this many: every other at steps 1 and 2; at step 3, after each fused
+    // frame, which is every other tracked one.
+    int modelCastEvery() const { return economy_ == 1 || economy_ == 2 ? 2 : 1; }
+    int fuseEvery() const { return economy_ >= 3 ? 2 : 1; }  // one tracked frame in this many fused
     // The session's recent share of skipped frames (live sessions keep only the newest frame), after each frame.
     void noteSkipped(float recent_fraction) { skipped_recent_ = recent_fraction; }
     float costMs() const { return cost_ms_; }  // CPU a frame, recent average
@@ -103,9 +111,10 @@ class FrameLoad {
     int base_nice_ = 0;  // the thread's nice value when it joined
 };
 
-// The model level and cast interval for the session's next frames: the session's own (base_level, base_every),
-// or cheaper as the load's economy step says. A change is logged with the session's CPU a frame and budget.
-void applyEconomy(const FrameLoad& load, int base_level, int base_every, const std::string& session_id,
+// The model level, cast interval and fusion interval for the session's next frames: the session's own
+// (recon::ReconParams model_level, model_cast_every, fuse_every), or cheaper as the load's economy step says. A
+// change is logged with the session's CPU a frame and budget.
+void applyEconomy(const FrameLoad& load, const recon::ReconParams& base, const std::string& session_id,
                   recon::Reconstructor& reconstructor);
 
 }  // namespace facescan::service

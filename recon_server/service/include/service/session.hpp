@@ -59,10 +59,11 @@ struct SessionStats {
     uint32_t frames_rejected = 0;
     uint32_t frames_skipped = 0;
     uint32_t frames_dropped = 0;
-    float fps = 0;                // frames processed per second, last ~2 s (status) or whole session (summary)
-    recon::StageTimesMs ms;       // recent average per stage (status); ms.mesh = snapshot mesh + encode
-    recon::StageTimesMs ms_mean;  // session mean per stage
-    float latency_p50_ms = 0;     // capture (agent clock) to pose known, last 512 tracked frames
+    uint32_t frames_tracked_only = 0;  // tracked but not fused: the load's last economy step (frame_load.hpp)
+    float fps = 0;                     // frames processed per second, last ~2 s (status) or whole session (summary)
+    recon::StageTimesMs ms;            // recent average per stage (status); ms.mesh = snapshot mesh + encode
+    recon::StageTimesMs ms_mean;       // session mean per stage
+    float latency_p50_ms = 0;          // capture (agent clock) to pose known, last 512 tracked frames
     float latency_p95_ms = 0;
     float snapshot_copy_ms = 0;    // last snapshot: volume copy (by the worker between frames, see SnapshotCopy)
     float snapshot_mesh_ms = 0;    // last snapshot: coarse marching cubes
