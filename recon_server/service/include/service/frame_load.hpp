@@ -42,7 +42,7 @@ class FrameLoad {
     // (noteSkipped), while others run; a step is kept kStepDownFrames before the next one down (the skip share
     // lags). After kStepHoldFrames at a step it probes the step above if that would fit kStepUpFraction of the
     // budget (the lower of that step's last average and this one's times kStepCostRatio: measured 10.3 / 8.0,
-    // 8.0 / 6.1 and, for step 3, about 1.3 as well: see the issue 16 note). A probe that steps down again within
+    // 8.0 / 6.1, and 1.25-1.48 for step 2 over step 3: see the issue 16 note). A probe that steps down again within
     // kProbeFrames doubles the hold, up to kMaxStepHoldFrames; a session leaving resets it. 0: the model cast after
     // every frame; 1: after every other; 2: and coarse; 3: and every other frame fused
     static constexpr int kEconomySteps = 4;
