@@ -66,6 +66,7 @@ std::string logLine(const WatchView& view) {
         format("[%6.1f s] %s %s  integrated %u/%u  rejected %u  fps %.1f  triangles %s  %s", view.elapsed_s,
                s.session_id.c_str(), scanStateName(s.state), s.frames_integrated, s.frames_received, s.frames_rejected,
                s.fps, groupThousands(view.snapshot_triangles).c_str(), ageText(view).c_str());
+    if (s.frames_tracked_only > 0) line += format("  tracked only %u", s.frames_tracked_only);
     if (!s.alive) line += "  (server gone)";
     if (!s.detail.empty()) line += "  (" + s.detail + ")";
     return line;

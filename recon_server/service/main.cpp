@@ -63,8 +63,10 @@ int main(int argc, char** argv) {
                  (*server)->openSessions());
     (*server)->shutdown();
     for (const auto& s : (*server)->sessions()) {
-        std::fprintf(stderr, "  %s: %s, %u frames integrated (%s)\n", s.session_id.c_str(),
-                     service::sessionStateName(s.state), s.frames_integrated, s.detail.c_str());
+        const std::string tracked_only =
+            s.frames_tracked_only > 0 ? ", " + std::to_string(s.frames_tracked_only) + " more tracked only" : "";
+        std::fprintf(stderr, "  %s: %s, %u frames integrated%s (%s)\n", s.session_id.c_str(),
+                     service::sessionStateName(s.state), s.frames_integrated, tracked_only.c_str(), s.detail.c_str());
     }
     return 0;
 }

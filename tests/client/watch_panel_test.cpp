@@ -54,6 +54,18 @@ TEST(WatchPanel, LogLineIsOneLineWithTheSameFigures) {
     }
 }
 
+// Issue 16: frames a loaded server tracked but did not fuse are shown apart from the integrated ones, and only
+// when there are any.
+TEST(WatchPanel, ShowsFramesTrackedButNotFusedApart) {
+    WatchView view = scanningView();
+    EXPECT_FALSE(contains(panelLines(view)[1], "tracked only"));
+    EXPECT_FALSE(contains(logLine(view), "tracked only"));
+    view.status.frames_tracked_only = 1234;
+    EXPECT_TRUE(contains(panelLines(view)[1], "142 integrated / 151 received"));
+    EXPECT_TRUE(contains(panelLines(view)[1], "+ 1,234 tracked only"));
+    EXPECT_TRUE(contains(logLine(view), "tracked only 1234"));
+}
+
 // Issue 18: the server puts what the person should do first in the detail; panel and log line show it whole.
 TEST(WatchPanel, ShowsWhatThePersonShouldDo) {
     WatchView view = scanningView();
