@@ -149,13 +149,14 @@ if [ -f "$work/server.log" ]; then
 fi
 # Where the server's CPU went while the agents streamed (from the first release to the last agent's end), in
 # cores: each thread's last sample minus its first (a thread that ended between two samples loses at most 0.5 s).
-# Per tracked frame: integrated (fused) and tracked only.
-integrated_total=$(cat "$work"/data/rt*/summary.json 2>/dev/null | grep -E '^  "frames"' |
-    sed -E 's/.*"integrated": ([0-9]+).*/\1/' | awk '{ s += $1 } END { print s + 0 }')
-tracked_only_total=$(cat "$work"/data/rt*/summary.json 2>/dev/null | grep -E '^  "frames"' |
-    sed -nE 's/.*"tracked_only": ([0-9]+).*/\1/p' | awk '{ s += $1 } END { print s + 0 }')
-integrated_total=$((integrated_total + tracked_only_total))
-awk -v hz="$(getconf CLK_TCK)" -v frames="$integrated_total" -v sessions="$sessions" '
+# Per tracked frame: integrated (fused) and tracked only (a server without that field counts 0).
+tracked_total=0
+for f in "$work"/data/rt*/summary.json; do
+    [ -f "$f" ] || continue
+    tracked_only=$(field "$f" frames tracked_only)
+    tracked_total=$((tracked_total + $(field "$f" frames integrated) + ${tracked_only:-0}))
+done
+awk -v hz="$(getconf CLK_TCK)" -v frames="$tracked_total" -v sessions="$sessions" '
     { if (!($2 in first)) { first[$2] = $3; t_first[$2] = $1 } last[$2] = $3; name[$2] = $4 " " $5 " " $6;
       if (t0 == "" || $1 < t0) t0 = $1; if ($1 > t1) t1 = $1 }
     END {

@@ -210,9 +210,9 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         visible_ref_px_ += kVisibleRefRate * (static_cast<float>(visible) - visible_ref_px_);
         verify_next_ = false;
         T_world_camera_ = estimate;
-        // ReconParams::fuse_every: one tracked frame in N is fused (the first two, and any after a gap, always).
-        fuse = frames_integrated_ < 2 || after_gap || result.reacquired || result.verified ||
-               ++frames_since_fuse_ >= fuse_every_;
+        // ReconParams::fuse_every: one tracked frame in N is fused; always the first two, any after a gap (a
+        // re-acquisition only follows one) and any fit verified because frames were skipped.
+        fuse = frames_integrated_ < 2 || after_gap || result.verified || ++frames_since_fuse_ >= fuse_every_;
         // Robust integration, part 2: at the fitted pose, what lies in front of the confident model by more than
         // the truncation band (a hand near the face) is left out of this frame's fusion. The next cast looks for
         // the model behind such pixels (their hint is the model's depth), so the comparison holds for as long as
