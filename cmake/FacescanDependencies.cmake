@@ -47,6 +47,10 @@ pkg_check_modules(Zstd QUIET IMPORTED_TARGET libzstd)
 facescan_require(Zstd_FOUND "zstd" "libzstd-dev")
 pkg_check_modules(TurboJpeg QUIET IMPORTED_TARGET libturbojpeg)
 facescan_require(TurboJpeg_FOUND "libjpeg-turbo (TurboJPEG API)" "libturbojpeg0-dev")
+# The same library's libjpeg API: the server decodes only the head's region of a colour frame, which TurboJPEG
+# 2.1 cannot (its cropping region is 3.0's).
+pkg_check_modules(Jpeg QUIET IMPORTED_TARGET libjpeg)
+facescan_require(Jpeg_FOUND "libjpeg-turbo (libjpeg API)" "libjpeg62-turbo-dev")
 
 find_package(Threads REQUIRED)
 

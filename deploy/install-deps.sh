@@ -21,7 +21,7 @@ PACKAGES=(
     libopencv-dev opencv-data libeigen3-dev cyclonedds-dev cyclonedds-tools libdraco-dev libopenmesh-dev
     libopenni2-dev
     # codecs and nearest-neighbour search
-    libzstd-dev libturbojpeg0-dev libnanoflann-dev
+    libzstd-dev libturbojpeg0-dev libjpeg62-turbo-dev libnanoflann-dev
     # DDS Security: identity checks (OpenSSL), the site script (openssl); the plugins come with cyclonedds-dev
     libssl-dev openssl
     # the client: GLB export (glTF 2.0) and the web viewer's HTTP/WebSocket server

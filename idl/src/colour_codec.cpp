@@ -1,8 +1,13 @@
-// JPEG colour through the TurboJPEG API of libjpeg-turbo 2.1 (Debian 12).
+// JPEG colour through libjpeg-turbo 2.1 (Debian 12): encoded with its TurboJPEG API, decoded with its libjpeg API.
 #include "wire/colour_codec.hpp"
 
+// jpeglib.h needs size_t and FILE declared first.
+#include <jpeglib.h>
 #include <turbojpeg.h>
 
+#include <algorithm>
+#include <csetjmp>
+#include <cstdio>
 #include <string>
 #include <utility>
 
@@ -66,49 +71,183 @@ Status ColourJpegEncoder::encode(const cv::Mat& bgr, std::vector<uint8_t>& out) 
     return Status::ok();
 }
 
-ColourJpegDecoder::ColourJpegDecoder() : handle_(tjInitDecompress()) {}
-ColourJpegDecoder::~ColourJpegDecoder() {
-    if (handle_) tjDestroy(static_cast<tjhandle>(handle_));
+// libjpeg reports errors through error_exit, which must not return: the callbacks longjmp back into run() below,
+// whose frame between setjmp and the jump holds no C++ object with a destructor.
+struct ColourJpegDecoder::Impl {
+    jpeg_decompress_struct cinfo{};
+    jpeg_error_mgr errors{};
+    jpeg_progress_mgr progress{};
+    std::jmp_buf jump{};
+    char message[JMSG_LENGTH_MAX] = {};
+    bool live = false;
+
+    static Impl& of(j_common_ptr c) { return *static_cast<Impl*>(c->client_data); }
+    static void onError(j_common_ptr c) {
+        (*c->err->format_message)(c, of(c).message);
+        std::longjmp(of(c).jump, 1);
+    }
+    // Warnings (level -1) are corrupt or truncated data: for network bytes that is data loss (TurboJPEG's
+    // TJFLAG_STOPONWARNING), not an image padded with grey. Trace messages (level >= 0) are ignored.
+    static void onMessage(j_common_ptr c, int level) {
+        if (level < 0) onError(c);
+    }
+    static void onProgress(j_common_ptr c) {
+        if (auto* d = reinterpret_cast<j_decompress_ptr>(c); d->input_scan_number > kMaxScans) {
+            std::snprintf(of(c).message, sizeof of(c).message, "progressive JPEG with more than %d scans", kMaxScans);
+            std::longjmp(of(c).jump, 1);
+        }
+    }
+    static constexpr int kMaxScans = 500;  // as TurboJPEG's TJFLAG_LIMITSCANS: a tiny file cannot spin for seconds
+
+    Impl() { create(); }
+    ~Impl() { destroy(); }
+    Impl(const Impl&) = delete;
+    Impl& operator=(const Impl&) = delete;
+    void create() {
+        cinfo.err = jpeg_std_error(&errors);
+        errors.error_exit = onError;
+        errors.emit_message = onMessage;
+        cinfo.client_data = this;
+        if (setjmp(jump)) return;  // out of memory: live stays false
+        jpeg_create_decompress(&cinfo);
+        cinfo.client_data = this;  // jpeg_create_decompress clears the struct but for err and client_data
+        progress.progress_monitor = onProgress;
+        cinfo.progress = &progress;
+        live = true;
+    }
+    void destroy() {
+        if (live) jpeg_destroy_decompress(&cinfo);
+        live = false;
+    }
+};
+
+namespace {
+
+enum class Stage { kHeader, kWrongSize, kPixels };
+
+// Rows [y0, y1) and columns [x0, x1) into dst (row stride `step`); header_only stops after the header.
+// Returns true, or false with the stage that failed (the message in d.message). Plain data only in this frame.
+bool runLibjpeg(ColourJpegDecoder::Impl& d, const uint8_t* data, size_t size, int expected_width, int expected_height,
+                bool header_only, int x0, int x1, int y0, int y1, uint8_t* dst, size_t step, Stage& failed, int& width,
+                int& height) {
+    j_decompress_ptr c = &d.cinfo;
+    failed = Stage::kHeader;
+    if (setjmp(d.jump)) {
+        jpeg_abort_decompress(c);
+        return false;
+    }
+    jpeg_mem_src(c, data, static_cast<unsigned long>(size));
+    (void)jpeg_read_header(c, TRUE);  // TRUE: a tables-only file is an error, so the header is the image's
+    width = static_cast<int>(c->image_width);
+    height = static_cast<int>(c->image_height);
+    if (width != expected_width || height != expected_height) {
+        jpeg_abort_decompress(c);
+        failed = Stage::kWrongSize;
+        return false;
+    }
+    if (header_only) {
+        jpeg_abort_decompress(c);
+        return true;
+    }
+    failed = Stage::kPixels;
+    c->out_color_space = JCS_EXT_BGR;
+    c->dct_method = JDCT_IFAST;  // as the encoder's TJFLAG_FASTDCT: invisible at quality 90, and faster
+    jpeg_start_decompress(c);
+    auto left = static_cast<JDIMENSION>(x0);
+    auto cols = static_cast<JDIMENSION>(x1 - x0);
+    if (cols < c->output_width) jpeg_crop_scanline(c, &left, &cols);  // widened to whole blocks
+    if (y0 > 0) (void)jpeg_skip_scanlines(c, static_cast<JDIMENSION>(y0));
+    constexpr int kBatch = 16;  // up to two MCU rows a call
+    JSAMPROW rows[kBatch];
+    while (static_cast<int>(c->output_scanline) < y1) {
+        const int first = static_cast<int>(c->output_scanline);
+        const int n = std::min(kBatch, y1 - first);
+        for (int i = 0; i < n; ++i)
+            rows[i] = dst + static_cast<size_t>(first + i) * step + 3 * static_cast<size_t>(left);
+        if (jpeg_read_scanlines(c, rows, static_cast<JDIMENSION>(n)) == 0) {
+            std::snprintf(d.message, sizeof d.message, "the decoder made no progress at row %d", first);
+            jpeg_abort_decompress(c);
+            return false;
+        }
+    }
+    // The whole image is checked to its end (as TurboJPEG does); a region stops after its last row.
+    if (y1 == height) {
+        (void)jpeg_finish_decompress(c);
+    } else {
+        jpeg_abort_decompress(c);
+    }
+    return true;
 }
-ColourJpegDecoder::ColourJpegDecoder(ColourJpegDecoder&& other) noexcept
-    : handle_(std::exchange(other.handle_, nullptr)) {}
-ColourJpegDecoder& ColourJpegDecoder::operator=(ColourJpegDecoder&& other) noexcept {
-    std::swap(handle_, other.handle_);
-    return *this;
-}
+
+}  // namespace
+
+ColourJpegDecoder::ColourJpegDecoder() : impl_(std::make_unique<Impl>()) {}
+ColourJpegDecoder::~ColourJpegDecoder() = default;
+ColourJpegDecoder::ColourJpegDecoder(ColourJpegDecoder&&) noexcept = default;
+ColourJpegDecoder& ColourJpegDecoder::operator=(ColourJpegDecoder&&) noexcept = default;
 
 Status ColourJpegDecoder::decode(const uint8_t* data, size_t size, int expected_width, int expected_height,
                                  cv::Mat& bgr) {
+    return run(data, size, expected_width, expected_height, nullptr, &bgr);
+}
+
+Status ColourJpegDecoder::decodeRegion(const uint8_t* data, size_t size, int expected_width, int expected_height,
+                                       const cv::Rect& roi_px, cv::Mat& bgr) {
+    return run(data, size, expected_width, expected_height, &roi_px, &bgr);
+}
+
+Status ColourJpegDecoder::checkHeader(const uint8_t* data, size_t size, int expected_width, int expected_height) {
+    return run(data, size, expected_width, expected_height, nullptr, nullptr);
+}
+
+Status ColourJpegDecoder::run(const uint8_t* data, size_t size, int expected_width, int expected_height,
+                              const cv::Rect* roi_px, cv::Mat* bgr) {
     RETURN_IF_ERROR(checkDims(expected_width, expected_height, "expected colour size"));
-    if (handle_ == nullptr) return resourceExhausted("tjInitDecompress failed");
+    if (!impl_) impl_ = std::make_unique<Impl>();  // moved from
+    if (!impl_->live) impl_->create();
+    if (!impl_->live) return resourceExhausted("libjpeg: cannot create a decompressor");
     if (data == nullptr || size < 4) return dataLoss("JPEG payload truncated (" + std::to_string(size) + " bytes)");
-    auto* handle = static_cast<tjhandle>(handle_);
+    const cv::Rect whole(0, 0, expected_width, expected_height);
+    cv::Rect region = roi_px ? (*roi_px & whole) : whole;
+    // Columns are cropped to whole blocks, and the chroma upsampling at a crop's edge has no neighbour to blend
+    // with: one 16-pixel block more each side keeps the region's own pixels the whole image's (measured: without
+    // it, the edge columns of a 4:2:0 frame differed by up to 8 levels).
+    constexpr int kColumnMarginPx = 16;
+    if (!region.empty() && region != whole) {
+        const int x0 = std::max(0, region.x - kColumnMarginPx);
+        const int x1 = std::min(expected_width, region.x + region.width + kColumnMarginPx);
+        region = cv::Rect(x0, region.y, x1 - x0, region.height);
+    }
+    uint8_t* dst = nullptr;
+    size_t step = 0;
+    if (bgr) {
+        if (bgr->rows != expected_height || bgr->cols != expected_width || bgr->type() != CV_8UC3) {
+            // The header first: a lying size is refused before anything is allocated.
+            RETURN_IF_ERROR(checkHeader(data, size, expected_width, expected_height));
+            bgr->create(expected_height, expected_width, CV_8UC3);
+        }
+        if (region.empty()) return Status::ok();
+        dst = bgr->data;
+        step = bgr->step[0];
+    }
+    Stage failed = Stage::kHeader;
     int w = 0;
     int h = 0;
-    int subsamp = 0;
-    int colourspace = 0;
-    // libjpeg-turbo 2.1 leaves a handle unusable after some header errors (a later valid JPEG then fails with the
-    // same "Bogus DQT index"): after any failure the handle is replaced, so one bad frame cannot poison the next.
-    auto fail = [this](const std::string& what) {
-        const std::string message = what + tjError(handle_);
-        tjDestroy(static_cast<tjhandle>(handle_));
-        handle_ = tjInitDecompress();
-        return dataLoss(message);
-    };
-    if (tjDecompressHeader3(handle, data, size, &w, &h, &subsamp, &colourspace) != 0) {
-        return fail("JPEG header corrupt: ");
+    if (runLibjpeg(*impl_, data, size, expected_width, expected_height, bgr == nullptr, region.x,
+                   region.x + region.width, region.y, region.y + region.height, dst, step, failed, w, h)) {
+        return Status::ok();
     }
-    if (w != expected_width || h != expected_height) {
+    if (failed == Stage::kWrongSize) {
         return dataLoss("JPEG is " + sizeText(w, h) + ", camera says " + sizeText(expected_width, expected_height));
     }
-    if (bgr.rows != h || bgr.cols != w || bgr.type() != CV_8UC3) bgr = cv::Mat(h, w, CV_8UC3);
-    // STOPONWARNING: libjpeg treats truncated / corrupt entropy data as a warning and pads with grey; for network
-    // bytes that is data loss. LIMITSCANS: caps progressive scans (a tiny file can otherwise take seconds).
-    const int flags = TJFLAG_STOPONWARNING | TJFLAG_LIMITSCANS | TJFLAG_FASTDCT;
-    if (tjDecompress2(handle, data, size, bgr.data, w, static_cast<int>(bgr.step[0]), h, TJPF_BGR, flags) != 0) {
-        return fail("JPEG data corrupt or truncated: ");
-    }
-    return Status::ok();
+    const std::string message =
+        (failed == Stage::kHeader ? "JPEG header corrupt: " : "JPEG data corrupt or truncated: ") +
+        std::string(impl_->message);
+    // libjpeg keeps tables from one image to the next (abbreviated streams): after a failure start afresh, so a
+    // hostile frame cannot leave tables that the next one uses.
+    impl_->destroy();
+    impl_->create();
+    return dataLoss(message);
 }
 
 Status encodeColourJpeg(const cv::Mat& bgr, int quality, std::vector<uint8_t>& out) {

@@ -160,8 +160,10 @@ facescan_wire_RgbdFrame toMessage(const std::string& session_id, const EncodedFr
     return msg;
 }
 
-Status FrameDecoder::decode(const facescan_wire_RgbdFrame& msg, const CameraInfoData& camera, bool want_colour,
+Status FrameDecoder::decode(const facescan_wire_RgbdFrame& msg, const CameraInfoData& camera, ColourDecode colour,
                             recon::RgbdFrame& out) {
+    out.colour_on_demand = nullptr;
+    on_demand_.release();
     if (msg.depth._length > 0 && msg.depth._buffer == nullptr) return dataLoss("depth payload has no bytes");
     ASSIGN_OR_RETURN(const DepthCodecId codec, depthCodecFromTag(static_cast<uint32_t>(msg.depth_codec)));
     const int w = camera.intrinsics.width_px;
@@ -170,19 +172,41 @@ Status FrameDecoder::decode(const facescan_wire_RgbdFrame& msg, const CameraInfo
     recon::depthRawToMetres(depth_raw_, camera.depth_units_m, out.depth_m);
     // Trajectories are stamped with the source's time so they line up with a recording's ground truth.
     out.timestamp_ns = msg.source_time_ns;
+    out.colour_bgr.release();
     const bool has_colour = msg.colour_codec == facescan_wire_COLOUR_JPEG && msg.colour._length > 0;
-    if (!want_colour || !has_colour) {
-        out.colour_bgr.release();
-        return Status::ok();
-    }
+    if (colour == ColourDecode::kNone || !has_colour) return Status::ok();
     if (msg.colour._buffer == nullptr) return dataLoss("colour payload has no bytes");
     // Colour that is not registered to depth cannot be used per depth pixel, and CameraInfo carries no
     // extrinsics to register it (recon::ColourCamera could); it is dropped and the depth-only paths take over.
-    if (!camera.colour_registered) {
-        out.colour_bgr.release();
-        return Status::ok();
+    if (!camera.colour_registered) return Status::ok();
+    if (colour == ColourDecode::kEager) {
+        return on_demand_.decoder().decode(msg.colour._buffer, msg.colour._length, w, h, out.colour_bgr);
     }
-    return colour_.decode(msg.colour._buffer, msg.colour._length, w, h, out.colour_bgr);
+    // A payload of the wrong size or no JPEG at all is refused with the frame, as an eager decode would; damage
+    // in its entropy data shows only where a stage reads it (colourStatus()).
+    RETURN_IF_ERROR(on_demand_.decoder().checkHeader(msg.colour._buffer, msg.colour._length, w, h));
+    on_demand_.reset(msg.colour._buffer, msg.colour._length, w, h);
+    out.colour_on_demand = &on_demand_;
+    return Status::ok();
+}
+
+void FrameDecoder::OnDemandJpeg::reset(const uint8_t* jpeg, size_t size, int width_px, int height_px) {
+    jpeg_ = jpeg;
+    size_ = size;
+    width_px_ = width_px;
+    height_px_ = height_px;
+    decoded_ = cv::Rect();
+    status_ = Status::ok();
+}
+
+const cv::Mat& FrameDecoder::OnDemandJpeg::colour(const cv::Rect& roi_px) {
+    if (jpeg_ == nullptr || !status_.isOk()) return none_;
+    const cv::Rect want = roi_px & cv::Rect(0, 0, width_px_, height_px_);
+    if (want.empty() || (want & decoded_) == want) return decoded_.empty() ? none_ : bgr_;
+    status_ = decoder_.decodeRegion(jpeg_, size_, width_px_, height_px_, want, bgr_);
+    if (!status_.isOk()) return none_;
+    decoded_ = want;
+    return bgr_;
 }
 
 }  // namespace facescan::wire

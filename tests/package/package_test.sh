@@ -56,7 +56,7 @@ cat "$work/info.txt"
 depends=$(dpkg-deb --field "$deb" Depends)
 # From dpkg-shlibdeps: the shared libraries the programs link (versioned), plus the two added by hand.
 for dep in libc6 libstdc++6 libddsc0 libopencv-core libopencv-objdetect libdraco libopenmesh libopenni2-0 libzstd1 \
-    libturbojpeg0 libssl3 libcivetweb opencv-data adduser openssl; do
+    libturbojpeg0 libjpeg62-turbo libssl3 libcivetweb opencv-data adduser openssl; do
     grep -q "$dep" <<<"$depends" || fail "Depends lacks $dep: $depends"
 done
 grep -qE 'libddsc0[^,]*\(>= ' <<<"$depends" || fail "Depends has no versions (dpkg-shlibdeps did not run?): $depends"

@@ -1,6 +1,7 @@
-// JPEG colour codec: PSNR and size on pattern and real frames, and a decoder that refuses truncated, corrupt,
-// mismatched and oversized input with a Status.
+// JPEG colour codec: PSNR and size on pattern and real frames, a decoder that gives TurboJPEG's pixels, for the
+// whole image or a region of it, and refuses truncated, corrupt, mismatched and oversized input with a Status.
 #include <gtest/gtest.h>
+#include <turbojpeg.h>
 
 #include <filesystem>
 #include <opencv2/imgcodecs.hpp>
@@ -122,6 +123,120 @@ TEST(ColourJpeg, CorruptBytesNeverCrash) {
         }
     }
     EXPECT_GT(failures, 0);  // the markers and tables are checked; entropy-coded damage may pass as noise
+}
+
+// The decoder moved from TurboJPEG to libjpeg's API (for regions): it must give TurboJPEG's pixels exactly, for
+// the agent's 4:2:0, for 4:4:4, for greyscale files and for sizes that are not whole blocks.
+TEST(ColourJpeg, DecodesTheSamePixelsAsTurboJpeg) {
+    tjhandle tj = tjInitDecompress();
+    ASSERT_NE(tj, nullptr);
+    tjhandle tjc = tjInitCompress();
+    ASSERT_NE(tjc, nullptr);
+    ColourJpegDecoder decoder;
+    for (const int samp : {TJSAMP_420, TJSAMP_444, TJSAMP_422, TJSAMP_GRAY}) {
+        for (const cv::Size size : {cv::Size(640, 480), cv::Size(33, 17), cv::Size(1, 1)}) {
+            const cv::Mat bgr = colourPattern(size.width, size.height);
+            unsigned char* jpeg = nullptr;
+            unsigned long bytes = 0;
+            ASSERT_EQ(tjCompress2(tjc, bgr.data, bgr.cols, static_cast<int>(bgr.step[0]), bgr.rows, TJPF_BGR, &jpeg,
+                                  &bytes, samp, 90, TJFLAG_FASTDCT),
+                      0);
+            cv::Mat theirs(size, CV_8UC3);
+            ASSERT_EQ(tjDecompress2(tj, jpeg, bytes, theirs.data, size.width, static_cast<int>(theirs.step[0]),
+                                    size.height, TJPF_BGR, TJFLAG_FASTDCT),
+                      0);
+            cv::Mat ours;
+            const Status st = decoder.decode(jpeg, bytes, size.width, size.height, ours);
+            tjFree(jpeg);
+            ASSERT_TRUE(st.isOk()) << st.toString();
+            EXPECT_EQ(cv::norm(ours, theirs, cv::NORM_INF), 0.0) << "subsampling " << samp << ", " << size;
+        }
+    }
+    tjDestroy(tjc);
+    tjDestroy(tj);
+}
+
+int pixelsNot(const cv::Mat& bgr, cv::Vec3b value) {
+    int n = 0;
+    for (int v = 0; v < bgr.rows; ++v) {
+        for (int u = 0; u < bgr.cols; ++u) n += bgr.at<cv::Vec3b>(v, u) != value ? 1 : 0;
+    }
+    return n;
+}
+
+// A region's pixels are the whole image's, wherever the region lies (block edges or not, at the image's edges,
+// one pixel, all of it, partly outside); rows outside it are never written.
+TEST(ColourJpeg, ARegionDecodesTheSamePixelsAsTheWholeImage) {
+    ColourJpegDecoder decoder;
+    cv::RNG rng(16);
+    for (const bool subsample : {true, false}) {
+        ColourJpegParams params;
+        params.subsample_420 = subsample;
+        for (const cv::Size size : {cv::Size(640, 480), cv::Size(37, 29)}) {
+            std::vector<uint8_t> bytes;
+            ASSERT_TRUE(ColourJpegEncoder(params).encode(colourPattern(size.width, size.height), bytes).isOk());
+            cv::Mat whole;
+            ASSERT_TRUE(decoder.decode(bytes.data(), bytes.size(), size.width, size.height, whole).isOk());
+            std::vector<cv::Rect> regions = {{0, 0, size.width, size.height},
+                                             {0, 0, 1, 1},
+                                             {size.width - 1, size.height - 1, 1, 1},
+                                             {-20, -20, 45, 40},
+                                             {size.width / 2, size.height / 2, size.width, size.height}};
+            for (int i = 0; i < 40; ++i) {
+                const int x = rng.uniform(0, size.width);
+                const int y = rng.uniform(0, size.height);
+                regions.emplace_back(x, y, rng.uniform(1, size.width - x + 1), rng.uniform(1, size.height - y + 1));
+            }
+            for (const cv::Rect& roi : regions) {
+                cv::Mat part(size, CV_8UC3, cv::Scalar(1, 2, 3));
+                const Status st = decoder.decodeRegion(bytes.data(), bytes.size(), size.width, size.height, roi, part);
+                ASSERT_TRUE(st.isOk()) << st.toString() << " " << roi;
+                const cv::Rect in = roi & cv::Rect(cv::Point(), size);
+                EXPECT_EQ(cv::norm(part(in), whole(in), cv::NORM_INF), 0.0) << roi << " of " << size;
+                EXPECT_EQ(pixelsNot(part.rowRange(0, in.y), {1, 2, 3}), 0) << "rows above " << roi << " written";
+                EXPECT_EQ(pixelsNot(part.rowRange(in.y + in.height, size.height), {1, 2, 3}), 0)
+                    << "rows below " << roi << " written";
+            }
+        }
+    }
+}
+
+// A region is refused when its own data is cut or corrupt; what follows its last row is not read.
+TEST(ColourJpeg, ARegionFailsOnlyWhenItsOwnDataIsDamaged) {
+    const cv::Mat bgr = colourPattern(64, 64);
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(encodeColourJpeg(bgr, 90, bytes).isOk());
+    ColourJpegDecoder decoder;
+    cv::Mat out;
+    const cv::Rect top(8, 0, 16, 16);
+    const cv::Rect bottom(8, 48, 16, 16);
+    int top_ok_when_cut = 0;
+    for (size_t len = 0; len < bytes.size(); ++len) {
+        const std::vector<uint8_t> prefix(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(len));
+        EXPECT_FALSE(decoder.decodeRegion(prefix.data(), prefix.size(), 64, 64, bottom, out).isOk()) << len;
+        top_ok_when_cut += decoder.decodeRegion(prefix.data(), prefix.size(), 64, 64, top, out).isOk() ? 1 : 0;
+    }
+    EXPECT_GT(top_ok_when_cut, 0) << "a region above the cut needs none of the bytes after it";
+    ASSERT_TRUE(decoder.decodeRegion(bytes.data(), bytes.size(), 64, 64, bottom, out).isOk());
+}
+
+TEST(ColourJpeg, TheHeaderAloneIsChecked) {
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(encodeColourJpeg(colourPattern(640, 480), 90, bytes).isOk());
+    ColourJpegDecoder decoder;
+    EXPECT_TRUE(decoder.checkHeader(bytes.data(), bytes.size(), 640, 480).isOk());
+    const Status wrong = decoder.checkHeader(bytes.data(), bytes.size(), 64, 48);
+    EXPECT_EQ(wrong.code(), StatusCode::kDataLoss);
+    EXPECT_NE(wrong.message().find("JPEG is 640x480, camera says 64x48"), std::string::npos) << wrong.message();
+    const std::vector<uint8_t> garbage(300, 0x5a);
+    EXPECT_EQ(decoder.checkHeader(garbage.data(), garbage.size(), 640, 480).code(), StatusCode::kDataLoss);
+    // The header says nothing of the entropy data: a payload cut after it passes, and fails when decoded.
+    const std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(bytes.size() / 2));
+    EXPECT_TRUE(decoder.checkHeader(cut.data(), cut.size(), 640, 480).isOk());
+    cv::Mat out;
+    EXPECT_EQ(decoder.decode(cut.data(), cut.size(), 640, 480, out).code(), StatusCode::kDataLoss);
+    // And the decoder is whole again after the failure.
+    EXPECT_TRUE(decoder.decode(bytes.data(), bytes.size(), 640, 480, out).isOk());
 }
 
 TEST(ColourJpeg, RejectsWrongSizeGarbageAndBadInput) {

@@ -1,6 +1,7 @@
-// Colour codec for RgbdFrame.colour: baseline JPEG through libjpeg-turbo's TurboJPEG API (measured faster than
-// OpenCV's imencode on the same frames, see `facescan-bench codecs`). Colour only drives detection and vertex
-// colours, so it is lossy; the payload is a plain JPEG file (self-describing, checked before decoding).
+// Colour codec for RgbdFrame.colour: baseline JPEG through libjpeg-turbo, encoded with its TurboJPEG API (measured
+// faster than OpenCV's imencode on the same frames, see `facescan-bench codecs`), decoded with its libjpeg API. Colour
+// only drives detection and vertex colours, so it is lossy; the payload is a plain JPEG file (self-describing, checked
+// before decoding).
 #pragma once
 
 #include <cstddef>
@@ -46,9 +47,12 @@ class ColourJpegEncoder {
     void* handle_ = nullptr;  // tjhandle
 };
 
-// Checks the JPEG header (dimensions against expected and the caps) before it allocates; progressive scans are
-// limited (TJFLAG_LIMITSCANS) so a hostile file cannot make it spin; any libjpeg warning (truncated or corrupt
-// data) is a DATA_LOSS error, never a grey-filled image. Thread-compatible: one per thread.
+// Decodes through libjpeg-turbo's libjpeg API, which can decode a region (TurboJPEG 2.1, Debian 12's, cannot:
+// tj3SetCroppingRegion is 3.0's). Checks the JPEG header (dimensions against expected and the caps) before it
+// allocates; progressive scans are limited (500, as TurboJPEG's TJFLAG_LIMITSCANS) so a hostile file cannot make
+// it spin; any libjpeg warning (truncated or corrupt data) is a DATA_LOSS error, never a grey-filled image.
+// Output as TurboJPEG's TJFLAG_FASTDCT with BGR pixels gives. After a failure the libjpeg state is replaced, so
+// one bad frame cannot poison the next. Thread-compatible: one per thread.
 class ColourJpegDecoder {
  public:
     ColourJpegDecoder();
@@ -60,12 +64,24 @@ class ColourJpegDecoder {
 
     // bgr becomes CV_8UC3 expected_height x expected_width (its buffer is reused when it has that shape).
     Status decode(const uint8_t* data, size_t size, int expected_width, int expected_height, cv::Mat& bgr);
+    // Only the pixels of roi_px (clipped to the image) are decoded, and the same as decode() gives them: rows
+    // above and below it are skipped (their entropy data is still read, so a cut or corrupt payload before the
+    // region's end still fails), and columns outside it are not transformed. bgr is shaped as for decode(); its
+    // pixels outside the region keep what they held (libjpeg may write a few columns either side).
+    Status decodeRegion(const uint8_t* data, size_t size, int expected_width, int expected_height,
+                        const cv::Rect& roi_px, cv::Mat& bgr);
+    // The header alone: a JPEG of the expected size (no pixel is decoded, nothing is allocated).
+    Status checkHeader(const uint8_t* data, size_t size, int expected_width, int expected_height);
+
+    struct Impl;  // libjpeg's state (public for the C callbacks in colour_codec.cpp)
 
  private:
-    void* handle_ = nullptr;  // tjhandle
+    Status run(const uint8_t* data, size_t size, int expected_width, int expected_height, const cv::Rect* roi_px,
+               cv::Mat* bgr);
+    std::unique_ptr<Impl> impl_;
 };
 
-// One-shot helpers (a TurboJPEG handle per call: for tests and tools, not a 30 Hz loop).
+// One-shot helpers (a codec per call: for tests and tools, not a 30 Hz loop).
 Status encodeColourJpeg(const cv::Mat& bgr, int quality, std::vector<uint8_t>& out);
 Status decodeColourJpeg(const uint8_t* data, size_t size, int expected_width, int expected_height, cv::Mat& bgr);
 

@@ -94,16 +94,51 @@ class FrameEncoder {
 // A sample that points into `frame`'s buffers and `session_id` (no copy): write it before they change.
 facescan_wire_RgbdFrame toMessage(const std::string& session_id, const EncodedFrame& frame);
 
+// What FrameDecoder does with a frame's colour (when it has some, registered to depth).
+enum class ColourDecode {
+    kNone,      // left out
+    kEager,     // decoded whole, into RgbdFrame::colour_bgr
+    kOnDemand,  // its header checked now; RgbdFrame::colour_on_demand decodes what a stage reads, when it reads it
+};
+
 // Server side: a received sample to a frame in metres, checked against the session's CameraInfo.
 class FrameDecoder {
  public:
-    // Decodes depth (and colour when present and `want_colour`) into `out` (buffers reused).
-    Status decode(const facescan_wire_RgbdFrame& msg, const CameraInfoData& camera, bool want_colour,
+    FrameDecoder() = default;
+    FrameDecoder(const FrameDecoder&) = delete;  // `out.colour_on_demand` points into it
+    FrameDecoder& operator=(const FrameDecoder&) = delete;
+
+    // Decodes depth, and colour as `colour` says, into `out` (buffers reused). With kOnDemand the colour is
+    // decoded from msg's bytes: they must outlive the frame's processing, and releaseColour() forgets them.
+    Status decode(const facescan_wire_RgbdFrame& msg, const CameraInfoData& camera, ColourDecode colour,
                   recon::RgbdFrame& out);
+    // Why the last frame's on-demand colour could not be decoded (ok: it could, or nothing asked for it).
+    const Status& colourStatus() const { return on_demand_.status(); }
+    void releaseColour() { on_demand_.release(); }
 
  private:
+    // The colour regions a frame's stages ask for, decoded from its JPEG (each region once).
+    class OnDemandJpeg final : public recon::ColourSource {
+     public:
+        void reset(const uint8_t* jpeg, size_t size, int width_px, int height_px);
+        void release() { jpeg_ = nullptr; }
+        const Status& status() const { return status_; }
+        const cv::Mat& colour(const cv::Rect& roi_px) override;
+        ColourJpegDecoder& decoder() { return decoder_; }
+
+     private:
+        ColourJpegDecoder decoder_;
+        const uint8_t* jpeg_ = nullptr;
+        size_t size_ = 0;
+        int width_px_ = 0;
+        int height_px_ = 0;
+        cv::Rect decoded_;  // the region bgr_ holds for this frame
+        cv::Mat bgr_;
+        const cv::Mat none_;
+        Status status_;
+    };
     DepthDecoder depth_;
-    ColourJpegDecoder colour_;
+    OnDemandJpeg on_demand_;
     cv::Mat depth_raw_;
 };
 

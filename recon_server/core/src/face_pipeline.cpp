@@ -68,9 +68,12 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
     obs.detection_ran = true;
     frames_since_detection_ = 0;
     std::string detect_reason = "no colour image";
-    if (!frame.colour_bgr.empty()) {
+    const auto t_colour = Clock::now();
+    const cv::Mat& colour = frameColour(frame, cv::Rect(0, 0, depth.cols, depth.rows));  // decoded now, if on demand
+    obs.detect_ms += msSince(t_colour);
+    if (!colour.empty()) {
         const auto t0 = Clock::now();
-        StatusOr<FaceDetections> faces = detector_.detect(depth, frame.colour_bgr, depth_, colour_);
+        StatusOr<FaceDetections> faces = detector_.detect(depth, colour, depth_, colour_);
         obs.detect_ms += msSince(t0);
         if (!faces.isOk()) {
             detect_reason = faces.status().message();

@@ -4,6 +4,11 @@
 
 namespace facescan::recon {
 
+const cv::Mat& frameColour(const RgbdFrame& frame, const cv::Rect& roi_px) {
+    if (!frame.colour_bgr.empty() || frame.colour_on_demand == nullptr) return frame.colour_bgr;
+    return frame.colour_on_demand->colour(roi_px);
+}
+
 void depthRawToMetres(const cv::Mat& raw_u16, float metres_per_unit, cv::Mat& depth_m) {
     CV_Assert(raw_u16.type() == CV_16UC1);
     raw_u16.convertTo(depth_m, CV_32F, metres_per_unit);

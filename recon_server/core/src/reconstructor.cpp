@@ -232,10 +232,15 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     if (!fuse) return result;  // tracked only: the model and its last cast stay as they are
     frames_since_fuse_ = 0;
 
-    // Volumetric integration (thesis 4.2.1) and ray casting for the next registration (4.2.2).
+    // Volumetric integration (thesis 4.2.1) and ray casting for the next registration (4.2.2). Integration reads
+    // colour only inside the surface's ROI, so a colour source decodes just that (its time counts as fusion's);
+    // colour of the wrong shape is left out, as checkInput does for colour_bgr.
     {
+        const cv::Mat& colour = frameColour(frame, frame_.levels[0].roi);
+        const bool colour_fits = colour.type() == CV_8UC3 && colour.rows == k_.height_px && colour.cols == k_.width_px;
+        const cv::Mat none;
         std::lock_guard<std::mutex> lock(volume_mutex_);
-        volume_.integrate(frame_.levels[0], frame.colour_bgr, T_world_camera_);
+        volume_.integrate(frame_.levels[0], colour_fits ? colour : none, T_world_camera_);
     }
     result.ms.integrate = watch.lapMs();
     result.integrated = true;

@@ -345,8 +345,9 @@ void Session::workerLoop() {
 
 void Session::processFrame(PendingFrame& pending) {
     const int64_t t0 = steadyNowNs();
-    // camera_ is set once before the worker starts and never changes: no lock needed to read it here.
-    const Status decoded = decoder_.decode(pending.view(), *camera_, /*want_colour=*/true, frame_);
+    // camera_ is set once before the worker starts: no lock to read it. Colour on demand: a frame only tracked
+    // decodes none, a fused one only its head's region (issue 16).
+    const Status decoded = decoder_.decode(pending.view(), *camera_, wire::ColourDecode::kOnDemand, frame_);
     if (!decoded.isOk()) {
         std::lock_guard lk(mutex_);
         ++stats_.frames_dropped;
@@ -356,12 +357,15 @@ void Session::processFrame(PendingFrame& pending) {
     // The model's prediction seeds the segmentation, detection otherwise; a frame without a head counts as
     // rejected, and the next head after a loss is verified before it is fused (recon/scan_step.hpp).
     recon::scanFrame(*pipeline_, *recon_, frame_, step_);
+    const Status colour = decoder_.colourStatus();  // damaged colour costs the frame its colour, not its depth
+    decoder_.releaseColour();                       // pending's bytes are recycled after this frame
     const recon::HeadObservation& head = step_.head;
     const recon::FrameResult& r = step_.frame;
     const int64_t pose_known_ns = realtimeNowNs();
     const int64_t now = steadyNowNs();
     // What the person should do comes first in the status detail ("face lost: hold still (...)").
     auto detail = [&](std::string what) {
+        if (!colour.isOk()) what += "; frame " + std::to_string(pending.seq) + " without colour: " + colour.message();
         return *step_.advice ? std::string(step_.advice) + " (" + what + ")" : what;
     };
 
@@ -524,25 +528,6 @@ void Session::copySnapshotIfAsked() {
         snapshot_copy_ = SnapshotCopy::kDone;
     }
     snapshot_copy_cv_.notify_all();
-}
-
-wire::MeshCodecParams meshCodecParams(const recon::VoxelBlockGrid& grid, float max_error_m) {
-    wire::MeshCodecParams params;
-    params.max_position_error_m = max_error_m;
-    params.lattice_step_m = grid.voxel_size_m;
-    params.lattice_origin_m = grid.origin_world;
-    return params;
-}
-
-StatusOr<MeshResult> encodeMesh(const recon::IndexedMesh& mesh, const wire::MeshCodecParams& params,
-                                recon::IndexedMesh* encoded) {
-    auto bytes = std::make_shared<std::vector<uint8_t>>();
-    recon::IndexedMesh cleaned;
-    RETURN_IF_ERROR(wire::encodeMeshDraco(mesh, params, *bytes, &cleaned));
-    MeshResult result{std::move(bytes), static_cast<uint32_t>(cleaned.vertexCount()),
-                      static_cast<uint32_t>(cleaned.triangleCount())};
-    if (encoded) *encoded = std::move(cleaned);
-    return result;
 }
 
 std::optional<SnapshotResult> Session::makeSnapshot() {

@@ -1,6 +1,6 @@
-// Finishing a session: the final full-resolution mesh, its Draco bytes, a last preview, and the files in the
-// data dir (session_store.hpp). Runs on the session's worker (or on the caller's thread when the session never
-// had a worker), never on the intake thread.
+// Finishing a session: the final full-resolution mesh, its Draco bytes (encodeMesh, which snapshots use too), a
+// last preview, and the files in the data dir (session_store.hpp). Runs on the session's worker (or on the caller's
+// thread when the session never had a worker), never on the intake thread.
 #include <cstdio>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
@@ -26,6 +26,25 @@ std::string msJson(const recon::StageTimesMs& ms) {
 }
 
 }  // namespace
+
+wire::MeshCodecParams meshCodecParams(const recon::VoxelBlockGrid& grid, float max_error_m) {
+    wire::MeshCodecParams params;
+    params.max_position_error_m = max_error_m;
+    params.lattice_step_m = grid.voxel_size_m;
+    params.lattice_origin_m = grid.origin_world;
+    return params;
+}
+
+StatusOr<MeshResult> encodeMesh(const recon::IndexedMesh& mesh, const wire::MeshCodecParams& params,
+                                recon::IndexedMesh* encoded) {
+    auto bytes = std::make_shared<std::vector<uint8_t>>();
+    recon::IndexedMesh cleaned;
+    RETURN_IF_ERROR(wire::encodeMeshDraco(mesh, params, *bytes, &cleaned));
+    MeshResult result{std::move(bytes), static_cast<uint32_t>(cleaned.vertexCount()),
+                      static_cast<uint32_t>(cleaned.triangleCount())};
+    if (encoded) *encoded = std::move(cleaned);
+    return result;
+}
 
 void Session::finalize(const std::string& why, const FinishCallback& done) {
     std::shared_ptr<recon::Reconstructor> rec;
