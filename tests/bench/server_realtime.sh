@@ -20,7 +20,7 @@
 #   compare runs, and builds, only at a similar figure.
 #   Ends with a table: per session, frames integrated of those sent, skipped (live mode keeps the newest frame),
 #   capture-to-pose latency p50/p95, the wall-clock ms of its last snapshot, and the frames tracked but not fused
-#   (a loaded server's last economy step fuses every other frame; those are not skipped: each has its pose, and
+#   (a loaded server's last economy steps fuse every other or third frame; those are not skipped: each has its pose, and
 #   counts in the latency); then the server's CPU while
 #   the agents streamed, in cores, by job (its threads are named: fs-s SESSION, fs-pool, fs-replicate, ...).
 set -euo pipefail
@@ -142,10 +142,10 @@ for s in $(seq 1 "$sessions"); do
 done
 # The economy ladder (recon_server/service/frame_load.hpp) as the server logged it.
 if [ -f "$work/server.log" ]; then
-    fusing=$( (grep -E ': model cast at .*, every other tracked frame fused' "$work/server.log" || true) |
-        sed -E 's/.*session ([^:]+):.*/\1/' | sort -u | tr '\n' ' ')
-    echo "economy: $(grep -c ': model cast at ' "$work/server.log" || true) step changes; fused every other frame at" \
-        "some point: ${fusing:-none}"
+    fusing=$( (grep -E ': model cast at .*, every (other|third) tracked frame fused' "$work/server.log" || true) |
+        sed -E 's/.*session ([^:]+):.*, (every [a-z]+) tracked frame fused.*/\1 (\2)/' | sort -u | tr '\n' ' ')
+    echo "economy: $(grep -c ': model cast at ' "$work/server.log" || true) step changes; fused only every other or" \
+        "third frame at some point: ${fusing:-none}"
 fi
 # Where the server's CPU went while the agents streamed (from the first release to the last agent's end), in
 # cores: each thread's last sample minus its first (a thread that ended between two samples loses at most 0.5 s).

@@ -137,25 +137,28 @@ TEST(Robustness, CastingTheModelAfterEveryOtherFrameTracksTheWideTurnAsWell) {
     EXPECT_GE(casts, kWideTurnFrames / 2);
 }
 
-// ReconParams::fuse_every 2 (a loaded server's last economy step): every other tracked frame is fused, and the
-// model is cast after the fused ones only. The frames fused and cast alternate (the first two always fused), and a
-// frame left out costs no integration.
-TEST(Robustness, FusingEveryOtherFrameTracksTheWideTurnAsWell) {
-    ReconParams params = ReconParams::faceDefaults();
-    params.fuse_every = 2;
-    const ScenarioRun other = wideTurnAsWellAsTheDefault(params, "fusing every other frame");
-    int fused = 0;
-    for (int i = 0; i < kWideTurnFrames; ++i) {
-        const FrameResult& r = other.steps[static_cast<size_t>(i)].frame;
-        ASSERT_TRUE(r.tracked) << i << ": " << r.reason;
-        EXPECT_EQ(r.integrated, i < 2 || i % 2 == 1) << "frame " << i;
-        EXPECT_EQ(r.model_cast, r.integrated) << "frame " << i << ": cast after each fused frame, and only then";
-        if (!r.integrated) {
-            EXPECT_EQ(r.ms.integrate, 0.0f) << "frame " << i;
+// ReconParams::fuse_every 2 and 3 (a loaded server's last economy steps): one tracked frame in N is fused, and
+// the model is cast after the fused ones only: frames 0 and 1 (the first two are always fused), then 1 + N,
+// 1 + 2N, ...; a frame left out costs no integration.
+TEST(Robustness, FusingEveryOtherOrThirdFrameTracksTheWideTurnAsWell) {
+    for (const int n : {2, 3}) {
+        ReconParams params = ReconParams::faceDefaults();
+        params.fuse_every = n;
+        const ScenarioRun other =
+            wideTurnAsWellAsTheDefault(params, n == 2 ? "fusing every other frame" : "fusing every third frame");
+        int fused = 0;
+        for (int i = 0; i < kWideTurnFrames; ++i) {
+            const FrameResult& r = other.steps[static_cast<size_t>(i)].frame;
+            ASSERT_TRUE(r.tracked) << i << ": " << r.reason;
+            EXPECT_EQ(r.integrated, i < 2 || (i - 1) % n == 0) << "frame " << i << ", one in " << n;
+            EXPECT_EQ(r.model_cast, r.integrated) << "frame " << i << ": cast after each fused frame, and only then";
+            if (!r.integrated) {
+                EXPECT_EQ(r.ms.integrate, 0.0f) << "frame " << i;
+            }
+            fused += r.integrated;
         }
-        fused += r.integrated;
+        EXPECT_EQ(fused, 1 + (kWideTurnFrames - 2) / n + 1) << "one in " << n;
     }
-    EXPECT_EQ(fused, kWideTurnFrames / 2 + 1);
 }
 
 // A loaded server switches a live session's model level (Reconstructor::setModelLevel): full resolution, half

@@ -132,7 +132,9 @@ void applyEconomy(const FrameLoad& load, const recon::ReconParams& base, const s
         fuse == reconstructor.fuseEvery()) {
         return;
     }
-    const auto often = [](int n) { return n == 1 ? "every" : n == 2 ? "every other" : "fewer than every other"; };
+    const auto often = [](int n) {
+        return n == 1 ? "every" : n == 2 ? "every other" : n == 3 ? "every third" : "fewer than every third";
+    };
     std::fprintf(stderr,
                  "facescan-server: session %s: model cast at %s after %s fused frame, %s tracked frame fused (%.1f ms "
                  "of CPU a frame, budget %.1f ms)\n",
