@@ -92,36 +92,28 @@ TEST(FrameLoad, OverItsShareASessionStepsDownTheLadderAndBackUpOnceTheStepAboveW
         EXPECT_TRUE(busy.coarseModel());
         EXPECT_EQ(busy.modelCastEvery(), 2);
         EXPECT_EQ(busy.fuseEvery(), 1);
-        for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(1.3f));
-        EXPECT_EQ(busy.economy(), 3) << "still over budget: every other frame fused";
-        EXPECT_TRUE(busy.coarseModel());
-        EXPECT_EQ(busy.fuseEvery(), 2);
-        EXPECT_EQ(busy.modelCastEvery(), 1) << "cast after each fused frame: every other tracked one, as at step 2";
-        {
-            // What the session's reconstructor is told (applyEconomy); a session's own settings are a floor.
-            recon::ReconParams base = recon::ReconParams::faceDefaults();
-            recon::Reconstructor rec(recon::Intrinsics::kinectV1(), base);
+        // Steps 3 and 4, still over budget: every other, then every third tracked frame fused, the model cast after
+        // each fused frame (at step 3 as often as at step 2). The session's reconstructor is told so (applyEconomy).
+        const recon::ReconParams base = recon::ReconParams::faceDefaults();
+        recon::Reconstructor rec(recon::Intrinsics::kinectV1(), base);
+        for (const int step : {3, 4}) {
+            for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(1.3f));
+            EXPECT_EQ(busy.economy(), step) << "still over budget";
+            EXPECT_TRUE(busy.coarseModel());
+            EXPECT_EQ(busy.fuseEvery(), step - 1);
+            EXPECT_EQ(busy.modelCastEvery(), 1) << "cast after each fused frame";
             applyEconomy(busy, base, "s", rec);
             EXPECT_EQ(rec.requestedModelLevel(), 1);
             EXPECT_EQ(rec.modelCastEvery(), 1);
-            EXPECT_EQ(rec.fuseEvery(), 2);
-            base.model_cast_every = 3;
-            base.fuse_every = 4;
-            applyEconomy(busy, base, "s", rec);
-            EXPECT_EQ(rec.modelCastEvery(), 3);
-            EXPECT_EQ(rec.fuseEvery(), 4);
+            EXPECT_EQ(rec.fuseEvery(), step - 1);
         }
-        for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(1.3f));
-        EXPECT_EQ(busy.economy(), 4) << "still over budget: every third frame fused";
-        EXPECT_TRUE(busy.coarseModel());
-        EXPECT_EQ(busy.fuseEvery(), 3);
-        EXPECT_EQ(busy.modelCastEvery(), 1) << "cast after each fused frame";
-        {
-            recon::ReconParams base = recon::ReconParams::faceDefaults();
-            recon::Reconstructor rec(recon::Intrinsics::kinectV1(), base);
-            applyEconomy(busy, base, "s", rec);
-            EXPECT_EQ(rec.fuseEvery(), 3);
-        }
+        // A session's own settings are a floor.
+        recon::ReconParams floor = base;
+        floor.model_cast_every = 3;
+        floor.fuse_every = 4;
+        applyEconomy(busy, floor, "s", rec);
+        EXPECT_EQ(rec.modelCastEvery(), 3);
+        EXPECT_EQ(rec.fuseEvery(), 4);
         for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(1.3f));
         EXPECT_EQ(busy.economy(), 4) << "the last step";
         // At 0.75 of the budget, the step above (~1.3 x 0.75) would not fit: it stays, past the hold.
