@@ -132,5 +132,23 @@ TEST(ColourOnDemand, ColourThatCannotBeHadIsColourNotGiven) {
     expectSameScan(none, damaged);
 }
 
+// A source that hands back colour of another shape gives none (integration and detection read it per depth pixel).
+TEST(ColourOnDemand, ColourOfAnotherShapeIsColourNotGiven) {
+    class Wrong final : public ColourSource {
+     public:
+        const cv::Mat& colour(const cv::Rect&) override { return mat; }
+        cv::Mat mat;
+    } source;
+    RgbdFrame frame;
+    frame.depth_m = cv::Mat(48, 64, CV_32FC1, cv::Scalar(0.7f));
+    frame.colour_on_demand = &source;
+    source.mat = cv::Mat(24, 32, CV_8UC3, cv::Scalar(1, 2, 3));
+    EXPECT_TRUE(frameColour(frame, {0, 0, 64, 48}).empty()) << "smaller than the depth";
+    source.mat = cv::Mat(48, 64, CV_8UC1, cv::Scalar(1));
+    EXPECT_TRUE(frameColour(frame, {0, 0, 64, 48}).empty()) << "one channel";
+    source.mat = cv::Mat(48, 64, CV_8UC3, cv::Scalar(1, 2, 3));
+    EXPECT_EQ(frameColour(frame, {0, 0, 64, 48}).data, source.mat.data) << "the right shape is handed on as it is";
+}
+
 }  // namespace
 }  // namespace facescan::recon

@@ -5,8 +5,11 @@
 namespace facescan::recon {
 
 const cv::Mat& frameColour(const RgbdFrame& frame, const cv::Rect& roi_px) {
+    static const cv::Mat kNone;
     if (!frame.colour_bgr.empty() || frame.colour_on_demand == nullptr) return frame.colour_bgr;
-    return frame.colour_on_demand->colour(roi_px);
+    const cv::Mat& colour = frame.colour_on_demand->colour(roi_px);
+    // A source's colour of another shape is none, as Reconstructor::checkInput refuses such a colour_bgr.
+    return colour.type() == CV_8UC3 && colour.size() == frame.depth_m.size() ? colour : kNone;
 }
 
 void depthRawToMetres(const cv::Mat& raw_u16, float metres_per_unit, cv::Mat& depth_m) {

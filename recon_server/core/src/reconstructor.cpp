@@ -233,14 +233,11 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     frames_since_fuse_ = 0;
 
     // Volumetric integration (thesis 4.2.1) and ray casting for the next registration (4.2.2). Integration reads
-    // colour only inside the surface's ROI, so a colour source decodes just that (its time counts as fusion's);
-    // colour of the wrong shape is left out, as checkInput does for colour_bgr.
+    // colour only inside the surface's ROI, so a colour source decodes just that (its time counts as fusion's).
     {
         const cv::Mat& colour = frameColour(frame, frame_.levels[0].roi);
-        const bool colour_fits = colour.type() == CV_8UC3 && colour.rows == k_.height_px && colour.cols == k_.width_px;
-        const cv::Mat none;
         std::lock_guard<std::mutex> lock(volume_mutex_);
-        volume_.integrate(frame_.levels[0], colour_fits ? colour : none, T_world_camera_);
+        volume_.integrate(frame_.levels[0], colour, T_world_camera_);
     }
     result.ms.integrate = watch.lapMs();
     result.integrated = true;

@@ -27,7 +27,8 @@ struct RgbdFrame {
     ColourSource* colour_on_demand = nullptr;
 };
 
-// The frame's colour, right at least inside roi_px: colour_bgr when set, else colour_on_demand's; empty: none.
+// The frame's colour, right at least inside roi_px: colour_bgr when set, else colour_on_demand's when it is CV_8UC3
+// of the depth's size; empty: none.
 const cv::Mat& frameColour(const RgbdFrame& frame, const cv::Rect& roi_px);
 
 // Raw sensor depth (CV_16UC1) to metres: raw * metres_per_unit (Kinect/OpenNI: 0.001; TUM PNGs: 1/5000).
