@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <opencv2/imgproc.hpp>
 #include <random>
 #include <vector>
 
@@ -135,6 +136,43 @@ TEST(DepthFilter, EveryPixelIsEquation4_4OverItsWindow) {
     // The filter tabulates the range weight in steps of 0.3 mm of depth difference: across the 80 mm step that
     // moves a weight by up to 0.5 %, 0.02 mm of depth here. A wrong window or weight moves it by millimetres.
     EXPECT_LT(worst_m, 5e-5) << "worst difference from eq. 4.4 over " << checked << " pixels";
+}
+
+// A segmentation's box (HeadObservation::mask_box) is all the filter sweeps: with the mask 0 outside it, every
+// level comes out bit for bit as from the whole-frame sweep, even after a frame that left other values in the
+// filter's buffers; depth outside the box is never kept, whatever the mask says.
+TEST(DepthFilter, TheMaskBoxIsAllThatIsSwept) {
+    const cv::Mat depth = sphereDepth(Pose::Identity(), Eigen::Vector3f(0.02f, -0.01f, 0.75f), 0.12f);
+    cv::Mat mask(depth.size(), CV_8U, cv::Scalar(0));
+    cv::circle(mask, cv::Point(345, 225), 70, cv::Scalar(255), cv::FILLED);
+    const cv::Rect box = cv::boundingRect(mask);
+    DepthFilter whole(kCam, FilterParams{}), boxed(kCam, FilterParams{});
+    SurfacePyramid expected, got;
+    expected.allocate(kCam, 3);
+    got.allocate(kCam, 3);
+    ASSERT_GT(boxed.filter(depth, cv::Mat(), got), 10000);  // the whole sphere first: its values stay behind
+    const int valid = whole.filter(depth, mask, expected);
+    ASSERT_GT(valid, 5000);
+    ASSERT_EQ(boxed.filter(depth, mask, got, box), valid);
+    for (int l = 0; l < 3; ++l) {
+        const SurfaceLevel &e = expected.levels[l], &g = got.levels[l];
+        ASSERT_EQ(e.roi, g.roi) << "level " << l;
+        // NaN marks invalid vertices and normals: compared bytewise.
+        for (const auto& [me, mg] :
+             {std::pair{&e.depth_m, &g.depth_m}, {&e.vertex, &g.vertex}, {&e.normal, &g.normal}}) {
+            for (int v = e.roi.y; v < e.roi.br().y; ++v) {
+                ASSERT_EQ(std::memcmp(me->ptr(v) + e.roi.x * me->elemSize(), mg->ptr(v) + e.roi.x * mg->elemSize(),
+                                      static_cast<size_t>(e.roi.width) * me->elemSize()),
+                          0)
+                    << "level " << l << " row " << v;
+            }
+        }
+    }
+    // No mask at all: the box alone decides what is kept.
+    const int in_box = cv::countNonZero(depth(box) > 0.0f);
+    EXPECT_EQ(boxed.filter(depth, cv::Mat(), got, box), in_box);
+    EXPECT_TRUE((box & got.levels[0].roi) == got.levels[0].roi) << got.levels[0].roi;
+    EXPECT_LT(in_box, cv::countNonZero(depth > 0.0f));
 }
 
 TEST(Tsdf, PlaneGivesTruncatedDistanceAlongTheRay) {

@@ -14,6 +14,7 @@ void adopt(const HeadSegmentation& seg, HeadObservation& obs) {
     obs.found = seg.found;
     obs.mask = seg.mask;
     obs.depth_m = seg.depth_m;
+    obs.mask_box = seg.written_px;
     obs.centroid_m = seg.centroid_m;
     obs.extent_m = seg.extent_m;
     if (!seg.found) obs.reason = seg.reason;

@@ -122,7 +122,7 @@ bool Reconstructor::checkInput(const RgbdFrame& frame, const cv::Mat& head_mask,
     return false;
 }
 
-FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& head_mask) {
+FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& head_mask, const cv::Rect& mask_box) {
     FrameResult result;
     if (!checkInput(frame, head_mask, result)) {
         result.consecutive_failures = consecutive_failures_;
@@ -142,7 +142,7 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     };
 
     // Noise reduction and point cloud (thesis 4.1.1-4.1.2).
-    const int valid = filter_.filter(frame.depth_m, head_mask, frame_);
+    const int valid = filter_.filter(frame.depth_m, head_mask, frame_, mask_box);
     result.ms.filter = watch.lapMs();
     if (valid < params_.min_head_pixels) return reject(TrackingStatus::kNoHead, "too few valid head pixels");
 

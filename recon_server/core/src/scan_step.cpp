@@ -22,7 +22,7 @@ void scanFrame(FacePipeline& pipeline, Reconstructor& reconstructor, const RgbdF
     out.tracked_before = reconstructor.predictHead(prediction);
     out.head = out.tracked_before ? pipeline.process(frame, prediction) : pipeline.process(frame);
     if (out.head.found) {
-        out.frame = reconstructor.processFrame(frame, out.head.mask);
+        out.frame = reconstructor.processFrame(frame, out.head.mask, out.head.mask_box);
     } else {
         out.frame = reconstructor.noHead("no head found in the frame");
     }

@@ -49,9 +49,11 @@ class DepthFilter {
     DepthFilter(const Intrinsics& k, const FilterParams& p);
 
     // depth_m: CV_32F metres (0 or NaN = invalid) of the camera's size; mask: CV_8U nonzero = keep, or empty (keep
-    // all). Returns the number of valid level-0 pixels after filtering (0 when none). Sizes must match the camera
-    // (the caller checks; see Reconstructor).
-    int filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyramid& out);
+    // all). mask_box: where the mask may be nonzero (a segmenter's HeadSegmentation::written_px); pixels outside it
+    // are not kept and not read, so the first pass sweeps the head's box instead of the whole frame. Empty: the
+    // whole frame. Returns the number of valid level-0 pixels after filtering (0 when none). Sizes must match the
+    // camera (the caller checks; see Reconstructor).
+    int filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyramid& out, const cv::Rect& mask_box = {});
 
     const FilterParams& params() const { return params_; }
 

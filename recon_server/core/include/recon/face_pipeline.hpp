@@ -8,7 +8,7 @@
 //   recon::HeadPrediction prediction;
 //   const bool tracked = reconstructor.predictHead(prediction);
 //   recon::HeadObservation head = tracked ? pipeline.process(frame, prediction) : pipeline.process(frame);
-//   if (head.found) reconstructor.processFrame(frame, head.mask) ... else reconstructor.noHead(...);
+//   if (head.found) reconstructor.processFrame(frame, head.mask, head.mask_box) ... else reconstructor.noHead(...);
 // (recon/scan_step.hpp does exactly this, with the advice for the person being scanned.)
 #pragma once
 
@@ -42,6 +42,7 @@ struct HeadObservation {
     bool found = false;
     cv::Mat mask;         // CV_8UC1, 255 on the head (depth pixel grid)
     cv::Mat depth_m;      // the frame's depth with everything outside the head set to 0 (metres)
+    cv::Rect mask_box;    // mask and depth_m are 0 outside this box (for Reconstructor::processFrame)
     cv::Rect face_box;    // the face (detected) or head (tracked / depth-only) box in depth pixels
     std::string reason;   // why nothing was found: empty when found
     int other_faces = 0;  // further faces detected and ignored (the nearest one is scanned)

@@ -131,8 +131,10 @@ class Reconstructor {
     const Status& initStatus() const { return init_status_; }
 
     // One frame: depth (CV_32F metres, 0/NaN invalid, camera size), optional colour (CV_8UC3, camera size),
-    // head_mask CV_8U nonzero = head, or empty for the whole frame. Bad input gives kInvalidInput, never a crash.
-    FrameResult processFrame(const RgbdFrame& frame, const cv::Mat& head_mask);
+    // head_mask CV_8U nonzero = head, or empty for the whole frame. mask_box: where head_mask may be nonzero (a
+    // segmentation's box: HeadObservation::mask_box), or empty when unknown; only that box is read (DepthFilter).
+    // Bad input gives kInvalidInput, never a crash.
+    FrameResult processFrame(const RgbdFrame& frame, const cv::Mat& head_mask, const cv::Rect& mask_box = {});
 
     // A frame in which the caller found no head (the pipeline could not segment one): counts as a rejected
     // frame (kNoHead), so a loss is noticed and the next head seen is verified before it is fused. `why` must
