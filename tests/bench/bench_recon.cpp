@@ -58,6 +58,7 @@ struct Options {
     float trunc_m = 0;
     int cast_every = -1;     // --cast-every: ReconParams::model_cast_every (-1 = the preset's)
     int fuse_every = -1;     // --fuse-every: ReconParams::fuse_every (-1 = the preset's)
+    int unfused_level = -1;  // --unfused-level: ReconParams::unfused_finest_level (-1 = the preset's)
     int model_level = -1;    // --model-level: ReconParams::model_level (-1 = the preset's)
     std::string misses_out;  // --gt-misses: GT face vertices coloured by why they are not covered
     float observed_tol_m = eval::ObservedRegionParams().surface_tolerance_m;  // metres, see observed_region.hpp
@@ -183,6 +184,7 @@ struct LoopResult {
     int reacquisitions = 0;    // frames re-acquired by the hypothesis search
     int model_casts = 0;       // frames after which the model was ray cast (ReconParams::model_cast_every)
     int fused = 0;             // frames fused into the model (ReconParams::fuse_every)
+    int coarse = 0;            // frames registered on the coarser levels only (ReconParams::unfused_finest_level)
     double search_ms_max = 0;  // slowest verification/search of a frame
 };
 
@@ -222,6 +224,7 @@ LoopResult runLoop(const Sequence& seq, recon::Reconstructor& rec, recon::FacePi
         out.search_ms_max = std::max(out.search_ms_max, static_cast<double>(r.reacquire_ms));
         if (verbose) printFrame(i, seq, r, pipeline ? &step.head : nullptr, advice);
         out.fused += r.integrated;
+        out.coarse += r.finest_level > 0;
         if (r.tracked) {
             out.estimate[static_cast<size_t>(i)] = r.tracking.T_world_camera;
         } else {
@@ -339,6 +342,8 @@ int runRecon(const std::vector<std::string>& args) {
             o.cast_every = std::atoi(next().c_str());  // junk reads 0: refused by ReconParams::validate
         else if (a == "--fuse-every")
             o.fuse_every = std::atoi(next().c_str());  // junk reads 0: refused by ReconParams::validate
+        else if (a == "--unfused-level")
+            o.unfused_level = std::atoi(next().c_str());  // junk reads 0: every level
         else if (a == "--model-level")
             o.model_level = std::atoi(next().c_str());  // junk reads 0: the full-resolution model
         else {
@@ -346,7 +351,7 @@ int runRecon(const std::vector<std::string>& args) {
                 "usage: facescan-bench recon [--input SRC] [--frames N] [--preset face|fast] [--mesh OUT.ply]\n"
                 "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply] [--observed-tol-m M]\n"
                 "       [--volume-m M] [--trunc-m M] [--mask input|pipeline|none] [--twin] [--serial] [--verbose]\n"
-                "       [--model-level L] [--cast-every N] [--fuse-every N] [--json]\n"
+                "       [--model-level L] [--cast-every N] [--fuse-every N] [--unfused-level L] [--json]\n"
                 "SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR\n"
                 "Synthetic input also reports the robustness figures of issue 18 (tracked share, re-acquisition,\n"
                 "wrong poses, foreign surface). --twin (implies --gt-accuracy) also scans the same motion without the\n"
@@ -362,6 +367,8 @@ int runRecon(const std::vector<std::string>& args) {
                 "     register against the last cast.\n"
                 "--fuse-every N: fuse one tracked frame in N (1, the default, to 4); the frames between are tracked\n"
                 "     only (their poses count in the ATE), and --cast-every counts fused frames.\n"
+                "--unfused-level L: register the frames that are not fused down to pyramid level L only (default\n"
+                "     1; 0 = every level, as fused frames are).\n"
                 "%s\n",
                 synth::syntheticOptionsHelp());
             return a == "--help" ? 0 : 2;
@@ -386,6 +393,7 @@ int runRecon(const std::vector<std::string>& args) {
     if (o.model_level >= 0) params.model_level = o.model_level;
     if (o.cast_every >= 0) params.model_cast_every = o.cast_every;
     if (o.fuse_every >= 0) params.fuse_every = o.fuse_every;
+    if (o.unfused_level >= 0) params.unfused_finest_level = o.unfused_level;
     if (o.volume_m > 1.0f) {
         // A room-sized volume (7-Scenes): everything in range is "the head", the cube sits mid-scene.
         params.tsdf.centre_behind_surface_m = 0.0f;
@@ -453,7 +461,10 @@ int runRecon(const std::vector<std::string>& args) {
                 sum.icp / n, "integrate", sum.integrate / n, "raycast", sum.raycast / n);
     if (params.model_cast_every > 1)
         std::printf("           (the model cast after %d of %d frames)\n", loop.model_casts, n);
-    if (params.fuse_every > 1) std::printf("           (%d of %d frames fused)\n", loop.fused, n);
+    if (params.fuse_every > 1) {
+        std::printf("           (%d of %d frames fused, %d registered down to level %d only)\n", loop.fused, n,
+                    loop.coarse, params.unfused_finest_level);
+    }
     std::printf("%-10s %10.3f   (wall clock over the whole loop)\n", "total", 1000.0 * loop_s / n);
     std::printf("fps %.1f (wall clock, every frame processed), rejected %d, mesh %zu vertices %zu faces in %.1f ms\n",
                 fps, rejected, mesh.n_vertices(), mesh.n_faces(), mesh_ms);

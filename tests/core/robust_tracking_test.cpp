@@ -139,7 +139,7 @@ TEST(Robustness, CastingTheModelAfterEveryOtherFrameTracksTheWideTurnAsWell) {
 
 // ReconParams::fuse_every 2 and 3 (a loaded server's last economy steps): one tracked frame in N is fused, and
 // the model is cast after the fused ones only: frames 0 and 1 (the first two are always fused), then 1 + N,
-// 1 + 2N, ...; a frame left out costs no integration.
+// 1 + 2N, ...; a frame left out costs no integration, and is registered on the coarser levels only.
 TEST(Robustness, FusingEveryOtherOrThirdFrameTracksTheWideTurnAsWell) {
     for (const int n : {2, 3}) {
         ReconParams params = ReconParams::faceDefaults();
@@ -152,6 +152,8 @@ TEST(Robustness, FusingEveryOtherOrThirdFrameTracksTheWideTurnAsWell) {
             ASSERT_TRUE(r.tracked) << i << ": " << r.reason;
             EXPECT_EQ(r.integrated, i < 2 || (i - 1) % n == 0) << "frame " << i << ", one in " << n;
             EXPECT_EQ(r.model_cast, r.integrated) << "frame " << i << ": cast after each fused frame, and only then";
+            // ReconParams::unfused_finest_level (1 by default): the frames left out are registered coarse.
+            EXPECT_EQ(r.finest_level, r.integrated ? 0 : 1) << "frame " << i;
             if (!r.integrated) {
                 EXPECT_EQ(r.ms.integrate, 0.0f) << "frame " << i;
             }
@@ -159,6 +161,43 @@ TEST(Robustness, FusingEveryOtherOrThirdFrameTracksTheWideTurnAsWell) {
         }
         EXPECT_EQ(fused, 1 + (kWideTurnFrames - 2) / n + 1) << "one in " << n;
     }
+}
+
+// A live server that is behind skips frames: the frame after a gap may have moved further than one frame allows,
+// so it is registered at every level (and verified, and then fused, when its fit moved that far) even where
+// fuse_every would leave it out; the next frame, one period later, is registered coarse again.
+TEST(Robustness, AFrameAfterSkippedOnesIsRegisteredAtEveryLevel) {
+    synth::SequenceParams sp = scenario("wide");
+    sp.frames = 60;
+    sp.seed = 29;
+    const synth::KinectSimulator sim(synth::builtinHead(), sp);
+    ReconParams params = ReconParams::faceDefaults();
+    params.fuse_every = 3;
+    Reconstructor rec(sim.intrinsics(), params);
+    FacePipeline pipeline = makePipeline(sim.intrinsics());
+    RgbdFrame frame;
+    int after_gap = 0, unfused_after_gap = 0, coarse = 0;
+    for (int i = 0; i < sp.frames; ++i) {
+        if (i > 5 && i % 5 == 0) continue;  // skipped, as a server that is behind does
+        sim.render(i, frame, nullptr);
+        ScanStep step;
+        scanFrame(pipeline, rec, frame, step);
+        ASSERT_TRUE(step.frame.tracked) << i << ": " << step.frame.reason;
+        if (i > 10 && i % 5 == 1) {
+            EXPECT_EQ(step.frame.finest_level, 0) << "frame " << i << ", after a skipped one";
+            ++after_gap;
+            unfused_after_gap += !step.frame.integrated;
+        } else if (!step.frame.integrated) {
+            EXPECT_EQ(step.frame.finest_level, 1) << "frame " << i;
+            ++coarse;
+        }
+        if (step.frame.integrated) {
+            EXPECT_EQ(step.frame.finest_level, 0) << "frame " << i << ", fused";
+        }
+    }
+    EXPECT_EQ(after_gap, 10);  // frames 11, 16, ..., 56
+    EXPECT_GE(coarse, 20);
+    EXPECT_GE(unfused_after_gap, 3) << "the check above needs frames after a gap that are not fused";
 }
 
 // A loaded server switches a live session's model level (Reconstructor::setModelLevel): full resolution, half

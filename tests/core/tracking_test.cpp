@@ -106,6 +106,38 @@ TEST(IcpOnHead, TheFinestLevelOnEverySecondPixelReachesThePoseOfEveryPixel) {
     EXPECT_FALSE(strided.validate().isOk());
 }
 
+// Icp::align's finest_level (ReconParams::unfused_finest_level): registered down to level 1 only, frame 5 still
+// converges near the truth from the identity, and level 0 is not read at all: with its vertices moved 3 cm and its
+// normals garbled the fit is bit for bit the same (with finest_level 0 the damage is seen). The inlier and share
+// tests are made at level 1 (stride 1), so the inlier count is about a quarter of level 0's.
+TEST(IcpOnHead, RegisteredDownToLevelOneTheFinestLevelIsNotRead) {
+    HeadFramePair pair;
+    ASSERT_NO_FATAL_FAILURE(pair.filter(5));
+    Icp icp(IcpParams{});
+    Pose full = Pose::Identity(), coarse = Pose::Identity(), damaged = Pose::Identity(), damaged0 = Pose::Identity();
+    const Pose id = Pose::Identity();
+    const TrackingResult r0 = icp.align(pair.source, pair.target, id, id, full);
+    const TrackingResult r1 = icp.align(pair.source, pair.target, id, id, coarse, 1.0f, 1);
+    ASSERT_EQ(r0.status, TrackingStatus::kTracked) << trackingStatusName(r0.status);
+    ASSERT_EQ(r1.status, TrackingStatus::kTracked) << trackingStatusName(r1.status);
+    for (const Pose& estimate : {full, coarse}) {
+        const Pose err = pair.fk.T_c0_ci.inverse() * estimate;
+        EXPECT_LT(err.translation().norm(), 0.002f);
+        EXPECT_LT(rotationDeg(err), 0.3f);
+    }
+    EXPECT_NEAR(static_cast<double>(r1.inliers) / r0.inliers, 0.25, 0.1) << r1.inliers << " vs " << r0.inliers;
+    EXPECT_LT(r1.iterations, r0.iterations);
+    SurfaceLevel& l0 = pair.source.levels[0];
+    l0.vertex.forEach<cv::Vec3f>([](cv::Vec3f& v, const int*) { v[2] += 0.03f; });
+    l0.normal.setTo(cv::Scalar(0.0f, 1.0f, 0.0f));
+    const TrackingResult d1 = icp.align(pair.source, pair.target, id, id, damaged, 1.0f, 1);
+    ASSERT_EQ(d1.status, TrackingStatus::kTracked);
+    EXPECT_TRUE(damaged.matrix() == coarse.matrix()) << "level 0 was read";
+    EXPECT_EQ(d1.inliers, r1.inliers);
+    (void)icp.align(pair.source, pair.target, id, id, damaged0);
+    EXPECT_FALSE(damaged0.matrix() == full.matrix()) << "the damage to level 0 should show at finest_level 0";
+}
+
 // Known-transform recovery over seeded random motions: frame 4 of a noise-free sequence against frame 0's
 // point cloud, ICP started from the true pose disturbed by a random rigid motion (up to 15 mm and 4 deg, a few
 // frames of fast head motion at 30 Hz). Nearly every start must converge to the truth; a start that is rejected

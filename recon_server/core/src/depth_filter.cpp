@@ -155,7 +155,8 @@ DepthFilter::DepthFilter(const Intrinsics& k, const FilterParams& p) : k_(k), pa
     }
 }
 
-int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyramid& out, const cv::Rect& mask_box) {
+int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyramid& out, const cv::Rect& mask_box,
+                        int normals_from_level) {
     const FilterParams& p = params_;
     const int w = k_.width_px, h = k_.height_px;
     // Mask, range-check and find the head's box in one pass, over fixed stripes of rows (a third of the filter's
@@ -290,9 +291,13 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
     for (int l = 0; l < out.count; ++l) {
         SurfaceLevel& lv = out.levels[l];
         if (l > 0) computeVertexMap(lv.k, lv.depth_m, lv.roi, lv.vertex);  // level 0's came with the filter
-        computeNormalMap(lv.vertex, lv.roi, p.pyramid_max_step_m, lv.normal);
+        if (l >= normals_from_level) computeNormals(lv);
     }
     return valid.load();
+}
+
+void DepthFilter::computeNormals(SurfaceLevel& level) const {
+    computeNormalMap(level.vertex, level.roi, params_.pyramid_max_step_m, level.normal);
 }
 
 int validCentroid(const SurfaceLevel& lv, Eigen::Vector3f& centroid) {

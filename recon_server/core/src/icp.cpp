@@ -84,11 +84,12 @@ bool centroidAlignment(const SurfaceLevel& source, const SurfaceLevel& target_wo
 Icp::Icp(const IcpParams& p) : params_(p), partial_(kStripes) {}
 
 TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& model_world, const Pose& T_world_model,
-                          const Pose& prediction, Pose& T_world_camera, float motion_scale) {
+                          const Pose& prediction, Pose& T_world_camera, float motion_scale, int finest_level) {
     TrackingResult result;
     result.T_world_camera = T_world_camera;
     const int levels = std::min(params_.levels, source.count);
-    if (model_world.count < 1) return result;
+    if (model_world.count < 1 || levels < 1) return result;
+    const int finest = std::clamp(finest_level, 0, levels - 1);
     // The model may be cast coarser than the frame (ReconParams::model_level): whole levels coarser, source level
     // l pairs with the model level of its own size, or with the model's finest where the source is finer.
     const int model_shift =
@@ -99,7 +100,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
     int last_inliers = 0;
     double last_error = 0.0;
     bool solve_failed = false;
-    for (int level = levels - 1; level >= 0; --level) {
+    for (int level = levels - 1; level >= finest; --level) {
         const SurfaceLevel& src = source.levels[level];
         const SurfaceLevel& dst = model_world.levels[std::clamp(level - model_shift, 0, model_world.count - 1)];
         const float dist_gate2 = params_.dist_gate_m[level] * params_.dist_gate_m[level];
@@ -173,7 +174,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
             const int count = static_cast<int>(sum[28]);
             ++result.iterations;
             if (count < 6) {
-                if (level == 0) last_inliers = count * stride * stride;
+                if (level == finest) last_inliers = count * stride * stride;
                 break;  // nothing to solve at this level; a finer one may still have pairs
             }
             Eigen::Matrix<double, 6, 6> ata;
@@ -197,7 +198,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
             }
             estimate = incrementFromX(x) * estimate;  // eq. 4.13
             const double error = sum[27] / count;
-            if (level == 0) {
+            if (level == finest) {
                 last_inliers = count * stride * stride;  // the pixels the sampled pairs stand for
                 last_error = error;
             }
@@ -220,7 +221,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
     }
 
     int source_valid = 0;
-    const SurfaceLevel& s0 = source.levels[0];
+    const SurfaceLevel& s0 = source.levels[finest];
     for (int v = s0.roi.y; v < s0.roi.y + s0.roi.height; ++v) {
         const auto* row = s0.normal.ptr<cv::Vec3f>(v);
         for (int u = s0.roi.x; u < s0.roi.x + s0.roi.width; ++u) source_valid += std::isnan(row[u][0]) ? 0 : 1;

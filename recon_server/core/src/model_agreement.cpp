@@ -112,10 +112,11 @@ PoseCheck checkPose(const SurfaceLevel& source, const SurfaceLevel& model, const
 
 int rejectOccludingDepth(SurfacePyramid& pyramid, const SurfaceLevel& model, const Pose& T_world_model,
                          const Pose& T_world_camera, const VoxelBlockGrid& grid, float band_m, float min_weight,
-                         cv::Mat* hint_m) {
-    SurfaceLevel& frame = pyramid.levels[0];
-    if (frame.roi.empty() || model.roi.empty() || grid.allocated_blocks == 0) return 0;
+                         cv::Mat* hint_m, int level) {
     const int levels = std::min(pyramid.count, 4);
+    if (level < 0 || level >= levels || (level > 0 && hint_m != nullptr)) return 0;
+    SurfaceLevel& frame = pyramid.levels[level];
+    if (frame.roi.empty() || model.roi.empty() || grid.allocated_blocks == 0) return 0;
     std::array<int, kStripes> removed{};
     constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
     const ToModel to_model(T_world_model);
@@ -130,9 +131,9 @@ int rejectOccludingDepth(SurfacePyramid& pyramid, const SurfaceLevel& model, con
         if (vx == nullptr || vx->weight < min_weight) return;
         // The pixel's row belongs to this stripe only, so writing it here is race-free.
         if (hint_m != nullptr) hint_m->ptr<float>(p.v)[p.u] = d_z;
-        for (int l = 0; l < levels; ++l) {
+        for (int l = level; l < levels; ++l) {
             SurfaceLevel& lv = pyramid.levels[l];
-            const int u = p.u >> l, v = p.v >> l;
+            const int u = p.u >> (l - level), v = p.v >> (l - level);
             lv.depth_m.ptr<float>(v)[u] = 0.0f;
             lv.vertex.ptr<cv::Vec3f>(v)[u] = cv::Vec3f(kNaN, kNaN, kNaN);
             lv.normal.ptr<cv::Vec3f>(v)[u] = cv::Vec3f(kNaN, kNaN, kNaN);

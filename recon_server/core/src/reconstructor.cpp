@@ -74,6 +74,8 @@ Status ReconParams::validate() const {
         return invalidArgument("model_cast_every must be in [1, " + std::to_string(kMaxModelCastEvery) + "]");
     if (fuse_every < 1 || fuse_every > kMaxFuseEvery)
         return invalidArgument("fuse_every must be in [1, " + std::to_string(kMaxFuseEvery) + "]");
+    if (unfused_finest_level < 0 || unfused_finest_level >= icp.levels)
+        return invalidArgument("unfused_finest_level must be >= 0 and below icp.levels");
     return Status::ok();
 }
 
@@ -141,8 +143,15 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         return result;
     };
 
+    // A frame that will not be fused may be registered on the coarser levels alone (unfused_finest_level): known
+    // before registration, since fusion only depends on the count (a verified fit, which is always fused, only
+    // follows skipped frames or a failed fit, and such frames take the full path).
+    const float motion_scale = motionScale(frame.timestamp_ns);
+    const bool fuse_due = frames_integrated_ < 2 || after_gap || frames_since_fuse_ + 1 >= fuse_every_;
+    const int coarse_level = have_model_ && !fuse_due && motion_scale <= 1.0f ? params_.unfused_finest_level : 0;
+
     // Noise reduction and point cloud (thesis 4.1.1-4.1.2).
-    const int valid = filter_.filter(frame.depth_m, head_mask, frame_, mask_box);
+    const int valid = filter_.filter(frame.depth_m, head_mask, frame_, mask_box, coarse_level);
     result.ms.filter = watch.lapMs();
     if (valid < params_.min_head_pixels) return reject(TrackingStatus::kNoHead, "too few valid head pixels");
 
@@ -167,13 +176,8 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         // Robust integration, part 1: whatever lies well in front of the confident model at the predicted pose
         // (further than any head motion between frames could put it: a hand in front of the face) is an occluder;
         // it leaves the frame before registration, so it cannot pull the fit either.
-        if (params_.robust_integration) {
-            const cv::Rect& roi = frame_.levels[0].roi;
-            frame_.levels[0].depth_m(roi).copyTo(hint_m_(roi));
-            result.occluding_pixels =
-                rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_, volume_.grid(),
-                                     params_.occluder_prefilter_m, params_.confident_weight, &hint_m_);
-        }
+        // A frame registered on the coarser levels only is tested there (its finer levels are not read again).
+        if (params_.robust_integration) prefilterOccluders(coarse_level, result);
         // A head mostly hidden (a hand across the face, a head half out of view) leaves too little surface to pin
         // down all six degrees of freedom: a fit may slide along the visible part, and so may a search. Such a
         // frame is held: neither registered nor fused; the last good pose stays the next frame's start, and the
@@ -190,7 +194,19 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
             return result;
         }
         Pose estimate = T_world_camera_;
-        if (!registerFrame(valid, motionScale(frame.timestamp_ns), result, estimate)) {
+        bool registered = false;
+        if (coarse_level > 0) {
+            result.tracking =
+                icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate, motion_scale, coarse_level);
+            registered = result.tracking.ok();
+            if (registered) result.finest_level = coarse_level;
+            if (!registered) {  // the full path after all, with the finer levels it needs
+                estimate = T_world_camera_;
+                if (params_.robust_integration) prefilterOccluders(0, result);
+                for (int l = 0; l < coarse_level; ++l) filter_.computeNormals(frame_.levels[l]);
+            }
+        }
+        if (!registered && !registerFrame(valid, motion_scale, result, estimate)) {
             const char* why = "registration failed";
             switch (result.tracking.status) {
                 case TrackingStatus::kNotEnoughPoints: why = "too few correspondences with the model"; break;
@@ -219,8 +235,8 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         // the occluder stays.
         if (params_.robust_integration && fuse) {
             const float band = params_.occluder_band_m > 0.0f ? params_.occluder_band_m : params_.tsdf.trunc_dist_m;
-            result.occluding_pixels += rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_,
-                                                            volume_.grid(), band, params_.confident_weight, &hint_m_);
+            result.occluding_pixels = rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_,
+                                                           volume_.grid(), band, params_.confident_weight, &hint_m_);
         }
         result.ms.icp = watch.lapMs();
     }
@@ -257,6 +273,18 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
     result.model_cast = cast;
     result.ms.raycast = watch.lapMs();
     return result;
+}
+
+void Reconstructor::prefilterOccluders(int level, FrameResult& result) {
+    cv::Mat* hint = nullptr;  // only a frame that may be fused casts the model after (level 0)
+    if (level == 0) {
+        const cv::Rect& roi = frame_.levels[0].roi;
+        frame_.levels[0].depth_m(roi).copyTo(hint_m_(roi));
+        hint = &hint_m_;
+    }
+    result.occluding_pixels +=
+        rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_, volume_.grid(),
+                             params_.occluder_prefilter_m, params_.confident_weight, hint, level);
 }
 
 bool Reconstructor::headMostlyHidden(int visible) {

@@ -114,6 +114,7 @@ const std::map<std::string, Setter>& setters() {
         INT("model_level", p.recon.model_level),
         INT("model_cast_every", p.recon.model_cast_every),
         INT("fuse_every", p.recon.fuse_every),
+        INT("unfused_finest_level", p.recon.unfused_finest_level),
         // Detection and segmentation (recon::FacePipelineParams).
         BOOL("face.depth_only_fallback", p.face.depth_only_fallback),
         INT("face.redetect_every_frames", p.face.redetect_every_frames),

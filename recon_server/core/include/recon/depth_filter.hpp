@@ -52,8 +52,12 @@ class DepthFilter {
     // all). mask_box: where the mask may be nonzero (a segmenter's HeadSegmentation::written_px); pixels outside it
     // are not kept and not read, so the first pass sweeps the head's box instead of the whole frame. Empty: the
     // whole frame. Returns the number of valid level-0 pixels after filtering (0 when none). Sizes must match the
-    // camera (the caller checks; see Reconstructor).
-    int filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyramid& out, const cv::Rect& mask_box = {});
+    // camera (the caller checks; see Reconstructor). normals_from_level: the normal maps of the finer levels are
+    // not computed (they keep the last frame's: computeNormals when one is needed after all); 0 = every level.
+    int filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyramid& out, const cv::Rect& mask_box = {},
+               int normals_from_level = 0);
+    // The normal map of one level (eq. 4.10) from its vertex map, as filter() makes it.
+    void computeNormals(SurfaceLevel& level) const;
 
     const FilterParams& params() const { return params_; }
 

@@ -27,8 +27,8 @@ const char* trackingStatusName(TrackingStatus s);
 struct TrackingResult {
     TrackingStatus status = TrackingStatus::kInvalidInput;
     Pose T_world_camera = Pose::Identity();  // the estimate (the prediction when the frame was rejected)
-    float rmse_m = 0.0f;                     // metres; point-to-plane RMS of the inliers at the finest level
-    int inliers = 0;                         // count; finest-level pairs, last iteration (x finest_stride_px^2)
+    float rmse_m = 0.0f;                     // metres; point-to-plane RMS of the inliers at the finest level used
+    int inliers = 0;                         // count; pairs at the finest level used, last iteration (x stride^2)
     int iterations = 0;                      // count; iterations run over all levels
     bool ok() const { return status == TrackingStatus::kTracked || status == TrackingStatus::kFirstFrame; }
 };
@@ -80,9 +80,11 @@ class Icp {
     // T_world_camera: in, the initial guess; out, the estimate when status is kTracked (left unchanged otherwise,
     // and returned in the result either way). `prediction` is what the motion limits are measured against;
     // motion_scale (>= 1) multiplies them: the limits are per frame, and a frame may come several frames after the
-    // prediction's (a live server skips frames when it is behind).
+    // prediction's (a live server skips frames when it is behind). finest_level: the last level registered (0 = the
+    // finest; ReconParams::unfused_finest_level); the inlier and residual checks are made at that level, against its
+    // own valid pixels, and finer levels are not read (their normal maps may be stale).
     TrackingResult align(const SurfacePyramid& source, const SurfacePyramid& model_world, const Pose& T_world_model,
-                         const Pose& prediction, Pose& T_world_camera, float motion_scale = 1.0f);
+                         const Pose& prediction, Pose& T_world_camera, float motion_scale = 1.0f, int finest_level = 0);
 
     const IcpParams& params() const { return params_; }
 

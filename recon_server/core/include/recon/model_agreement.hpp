@@ -35,9 +35,11 @@ PoseCheck checkPose(const SurfaceLevel& source_camera, const SurfaceLevel& model
 // volume's weight at that surface is at least min_weight, and the coarser levels' pixels that cover them. Returns
 // the number of level-0 pixels removed. When hint_m is given (CV_32F, frame size), the model's depth is written
 // there for each removed pixel, so the next ray cast still finds the surface behind the occluder (and the next
-// frame is compared with it). No allocation.
+// frame is compared with it). level > 0: the same test over that level's pixels instead of level 0's (and the
+// coarser levels'; the finer ones are left as they are, and hint_m must be null): for a frame registered on the
+// coarser levels only (ReconParams::unfused_finest_level), a quarter of the pixels. No allocation.
 int rejectOccludingDepth(SurfacePyramid& frame, const SurfaceLevel& model_world, const Pose& T_world_model,
                          const Pose& T_world_camera, const VoxelBlockGrid& grid, float band_m, float min_weight,
-                         cv::Mat* hint_m = nullptr);
+                         cv::Mat* hint_m = nullptr, int level = 0);
 
 }  // namespace facescan::recon
