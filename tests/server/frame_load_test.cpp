@@ -85,9 +85,10 @@ TEST(FrameLoad, OverItsShareASessionStepsDownTheLadderAndBackUpOnceTheStepAboveW
         EXPECT_EQ(busy.economy(), 1) << "over kStepDownFraction of the budget with another session running";
         EXPECT_EQ(busy.modelCastEvery(), 2);
         EXPECT_FALSE(busy.coarseModel());
-        for (int i = 0; i < FrameLoad::kStepDownFrames - 1; ++i) frame(busy, ns(1.3f));
+        // 0.85 of the budget: over, and one step down (0.85 / kStepCostRatio) is predicted to fit.
+        for (int i = 0; i < FrameLoad::kStepDownFrames - 1; ++i) frame(busy, ns(0.85f));
         EXPECT_EQ(busy.economy(), 1) << "a step holds kStepDownFrames before the next one down";
-        frame(busy, ns(1.3f));
+        frame(busy, ns(0.85f));
         EXPECT_EQ(busy.economy(), 2) << "still over budget";
         EXPECT_TRUE(busy.coarseModel());
         EXPECT_EQ(busy.modelCastEvery(), 2);
@@ -97,7 +98,7 @@ TEST(FrameLoad, OverItsShareASessionStepsDownTheLadderAndBackUpOnceTheStepAboveW
         const recon::ReconParams base = recon::ReconParams::faceDefaults();
         recon::Reconstructor rec(recon::Intrinsics::kinectV1(), base);
         for (const int step : {3, 4}) {
-            for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(1.3f));
+            for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(0.85f));
             EXPECT_EQ(busy.economy(), step) << "still over budget";
             EXPECT_TRUE(busy.coarseModel());
             EXPECT_EQ(busy.fuseEvery(), step - 1);
@@ -134,11 +135,68 @@ TEST(FrameLoad, OverItsShareASessionStepsDownTheLadderAndBackUpOnceTheStepAboveW
         EXPECT_GE(n, FrameLoad::kStepHoldFrames - 1);
         EXPECT_LE(n, FrameLoad::kStepHoldFrames + 1);
         frame(busy, ns(1.3f));
-        EXPECT_EQ(busy.economy(), 1) << "over budget again";
+        EXPECT_EQ(busy.economy(), 0) << "one frame over on its own (a stall) does not move the ladder";
+        frame(busy, ns(1.3f));
+        EXPECT_EQ(busy.economy(), 1) << "over budget again: the probe of full fails, back one step";
         other.leave();  // alone: the whole machine, full, even for a frame full would not fit
         frame(busy, ns(10.0f));
         EXPECT_EQ(busy.economy(), 0);
         busy.leave();
+    }).join();
+}
+
+// Far over its share (a session that starts beside others, or a session joined): straight down to the first step
+// predicted to fit, each step costing 1 / kStepCostRatio of the one above, instead of one step every
+// kStepDownFrames. A probe of the step above that fails goes back one step only.
+TEST(FrameLoad, FarOverItsShareASessionGoesStraightToTheStepPredictedToFit) {
+    std::thread([] {
+        FrameLoad other(30.0f), busy(100.0f);
+        other.join();
+        busy.join();
+        const float budget_ms = busy.budgetMs();
+        const auto ns = [&](float share) { return static_cast<int64_t>(share * budget_ms * 1e6f); };
+        for (int i = 0; i < FrameLoad::kWarmUpFrames; ++i) frame(busy, ns(3.0f));
+        frame(busy, ns(1.0f));
+        EXPECT_EQ(busy.economy(), 2) << "1.0 / 1.3 = 0.77 is still over 0.7 of the budget; 1.0 / 1.69 = 0.59 is not";
+        for (int i = 0; i < FrameLoad::kStepHoldFrames + 1 && busy.economy() == 2; ++i) frame(busy, ns(0.3f));
+        ASSERT_EQ(busy.economy(), 1) << "a probe after the hold";
+        frame(busy, ns(2.5f));
+        frame(busy, ns(2.5f));
+        EXPECT_EQ(busy.economy(), 2) << "a failed probe goes back one step";
+        for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(2.5f));
+        EXPECT_EQ(busy.economy(), FrameLoad::kEconomySteps - 1) << "then to the last step at once";
+        other.leave();
+        busy.leave();
+    }).join();
+}
+
+// A session that joins running ones starts at the deepest step one of them is at (with one more session every
+// share shrinks), not at full cost; one that joins alone, or only beside sessions at full, starts at full.
+TEST(FrameLoad, ASessionThatJoinsStartsAtTheDeepestStepInUse) {
+    std::thread([] {
+        FrameLoad first(30.0f), busy(100.0f);
+        first.join();
+        busy.join();
+        EXPECT_EQ(first.economy(), 0);
+        EXPECT_EQ(busy.economy(), 0);
+        const float budget_ms = busy.budgetMs();
+        const auto ns = [&](float share) { return static_cast<int64_t>(share * budget_ms * 1e6f); };
+        for (int i = 0; i < FrameLoad::kWarmUpFrames; ++i) frame(busy, ns(3.0f));
+        frame(busy, ns(1.0f));
+        ASSERT_EQ(busy.economy(), 2);
+        FrameLoad late(30.0f);
+        late.join();
+        EXPECT_EQ(late.economy(), 2) << "the deepest step in use";
+        recon::Reconstructor rec(recon::Intrinsics::kinectV1(), recon::ReconParams::faceDefaults());
+        applyEconomy(late, recon::ReconParams::faceDefaults(), "late", rec);
+        EXPECT_EQ(rec.requestedModelLevel(), 1) << "its reconstructor is told before its first frame";
+        late.leave();
+        busy.leave();
+        FrameLoad again(30.0f);
+        again.join();
+        EXPECT_EQ(again.economy(), 0) << "the sessions left are at full";
+        again.leave();
+        first.leave();
     }).join();
 }
 

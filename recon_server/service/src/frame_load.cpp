@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cstdio>
 
@@ -16,6 +17,8 @@ namespace facescan::service {
 namespace {
 
 std::atomic<int> g_running_workers{0};
+// How many running workers are at each economy step: a worker that joins starts at the deepest one in use.
+std::array<std::atomic<int>, FrameLoad::kEconomySteps> g_at_step{};
 
 int64_t threadCpuNs() {
     timespec ts{};
@@ -29,7 +32,9 @@ FrameLoad::FrameLoad(float source_rate_hz) : period_ms_(1000.0f / (source_rate_h
 
 FrameLoad::~FrameLoad() {
     // Normally the worker left already. Its thread may be gone, and its id reused: touch no priority here.
-    if (joined_) g_running_workers.fetch_sub(1, std::memory_order_relaxed);
+    if (!joined_) return;
+    g_running_workers.fetch_sub(1, std::memory_order_relaxed);
+    g_at_step[static_cast<size_t>(economy_)].fetch_sub(1, std::memory_order_relaxed);
 }
 
 int FrameLoad::runningWorkers() { return g_running_workers.load(std::memory_order_relaxed); }
@@ -46,11 +51,21 @@ void FrameLoad::join() {
     base_nice_ = getpriority(PRIO_PROCESS, static_cast<id_t>(tid_));  // the server may run niced as a whole
     g_running_workers.fetch_add(1, std::memory_order_relaxed);
     recon::setParallelAccounting(true);
+    // Beside running sessions, start at the deepest step one of them needs: with one more session each one's share
+    // only shrinks, and a session that starts at full cost skipped its first second of frames while it found its
+    // step (issue 16 note). It probes the steps above after the hold, as any session does.
+    int deepest = 0;
+    for (int s = 0; s < kEconomySteps; ++s) {
+        if (g_at_step[static_cast<size_t>(s)].load(std::memory_order_relaxed) > 0) deepest = s;
+    }
+    economy_ = deepest;
+    g_at_step[static_cast<size_t>(economy_)].fetch_add(1, std::memory_order_relaxed);
 }
 
 void FrameLoad::leave() {
     if (!joined_) return;
     throttle(false);
+    g_at_step[static_cast<size_t>(economy_)].fetch_sub(1, std::memory_order_relaxed);
     economy_ = 0;
     recon::setParallelAccounting(false);
     g_running_workers.fetch_sub(1, std::memory_order_relaxed);
@@ -76,6 +91,8 @@ void FrameLoad::endFrame() {
 }
 
 void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
+    const float previous_ms = last_frame_ms_;
+    last_frame_ms_ = frame_ms;
     // The first frames (detection, the model's start: tens of ms) say nothing about the steady cost.
     if (++frames_ <= kWarmUpFrames) return;
     float& cost = step_cost_ms_[economy_];
@@ -84,6 +101,8 @@ void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
     last_budget_ms_ = budget_ms;
     ++frames_at_step_;
     const auto step = [&](int to, bool probe) {
+        g_at_step[static_cast<size_t>(economy_)].fetch_sub(1, std::memory_order_relaxed);
+        g_at_step[static_cast<size_t>(to)].fetch_add(1, std::memory_order_relaxed);
         economy_ = to;
         step_frames_[to] = 0;  // its average starts afresh: the last one may be from a busier minute
         probing_ = probe;
@@ -97,11 +116,25 @@ void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
     // and the server's own threads take). Below full, only after kStepDownFrames at this step: its average and the
     // skip share need that long to show what the step did. A probe that fails steps back after two frames (one
     // with a cast, one without) and doubles the hold.
-    const bool over = cost > kStepDownFraction * budget_ms || skipped_recent_ > kStepDownSkipFraction;
+    // Over by cost only when this frame and the one before are over too: one frame stalled on its own (on a shared
+    // virtual machine a thread's CPU clock also runs while the host holds its core) does not move the ladder.
+    const float down_ms = kStepDownFraction * budget_ms;
+    const bool over =
+        (cost > down_ms && std::min(frame_ms, previous_ms) > down_ms) || skipped_recent_ > kStepDownSkipFraction;
     const bool settled = economy_ == 0 || frames_at_step_ >= (probing_ ? 2 : kStepDownFrames);
     if (economy_ + 1 < kEconomySteps && over && settled) {
         if (probing_ && frames_at_step_ < kProbeFrames) hold_frames_ = std::min(2 * hold_frames_, kMaxStepHoldFrames);
-        step(economy_ + 1, false);
+        // Far over (a session joined, or this one just started beside others): straight to the first step predicted
+        // to fit, each step costing 1 / kStepCostRatio of the one above, rather than one step every
+        // kStepDownFrames. Four sessions on 2 cores took 45 frames and more to get from full to the last step, and
+        // most of a 300-frame run's skipped frames fell in those (issue 16 note). A failed probe goes back one.
+        int to = economy_ + 1;
+        for (float predicted_ms = cost / kStepCostRatio;
+             !probing_ && to + 1 < kEconomySteps && predicted_ms > kStepDownFraction * budget_ms;
+             predicted_ms /= kStepCostRatio) {
+            ++to;
+        }
+        step(to, false);
         return;
     }
     if (economy_ == 0 || frames_at_step_ < hold_frames_) return;

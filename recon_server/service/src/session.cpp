@@ -277,6 +277,7 @@ void Session::workerLoop() {
         FrameLoad& load;
         ~Leave() { load.leave(); }
     } leave{*load_};
+    applyEconomy(*load_, params_.recon, id_, *recon_);  // a session joining busy ones starts at their step
     for (;;) {
         std::unique_lock lk(mutex_);
         cv_.wait(lk, [&] { return stop_ || !control_.empty() || !queue_.empty(); });

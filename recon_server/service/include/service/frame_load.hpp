@@ -41,9 +41,10 @@ class FrameLoad {
     // A throttled session that lost tracking runs its hypothesis search (tens of ms) on one frame in this many
     // (recon::Reconstructor::setSearchEvery); the frames between try the cheap plain fit only.
     static constexpr int kThrottledSearchEvery = 4;
-    // The economy step, after the first kWarmUpFrames: one step down when the step's average cost is over
+    // The economy step, after the first kWarmUpFrames: down when the step's average cost is over
     // kStepDownFraction of the budget or the session skips more than kStepDownSkipFraction of its frames
-    // (noteSkipped), while others run; a step is kept kStepDownFrames before the next one down (the skip share
+    // (noteSkipped), while others run: to the first step whose cost, the average over kStepCostRatio per step,
+    // would fit (skipping alone: one step); a step is kept kStepDownFrames before the next one down (the skip share
     // lags). After kStepHoldFrames at a step it probes the step above if that would fit kStepUpFraction of the
     // budget (the lower of that step's last average and this one's times kStepCostRatio: measured 10.3 / 8.0,
     // 8.0 / 6.1, and 1.25-1.48 for step 2 over step 3: see the issue 16 note). A probe that steps down again within
@@ -70,7 +71,8 @@ class FrameLoad {
     FrameLoad& operator=(const FrameLoad&) = delete;
 
     // On the worker thread, once before its first frame: counts it among the running workers and turns the pool's
-    // CPU accounting on for it. leave(), on the same thread, undoes both and the throttle; safe to call twice.
+    // CPU accounting on for it. Beside running workers it starts at the deepest economy step one of them is at.
+    // leave(), on the same thread, undoes both and the throttle; safe to call twice.
     void join();
     void leave();
 
@@ -104,6 +106,7 @@ class FrameLoad {
     float step_cost_ms_[kEconomySteps] = {};  // average CPU a frame at each economy step
     int step_frames_[kEconomySteps] = {};     // frames measured at each step
     float skipped_recent_ = 0.0f;
+    float last_frame_ms_ = 0.0f;         // the CPU of the frame before
     int frames_at_step_ = 0;             // since the last change of step
     bool probing_ = false;               // a step up after a hold, not yet proven
     int hold_frames_ = kStepHoldFrames;  // how long a step below full holds before a probe
