@@ -25,6 +25,19 @@ void frame(FrameLoad& load, int64_t cpu_ns) {
     load.endFrame();
 }
 
+// Two running sessions, on the calling thread: `other` at 30 Hz and `busy` with a 10 ms frame period; ns(share) is
+// the CPU of that share of busy's budget. Each test leaves them itself, in the order it needs.
+struct TwoSessions {
+    FrameLoad other{30.0f}, busy{100.0f};
+    float budget_ms = 0.0f;  // busy's, with the two running
+    TwoSessions() {
+        other.join();
+        busy.join();
+        budget_ms = busy.budgetMs();
+    }
+    int64_t ns(float share) const { return static_cast<int64_t>(share * budget_ms * 1e6f); }
+};
+
 TEST(FrameLoad, AFrameOverItsShareIsThrottledWhileOthersRunAndReleasedAlone) {
     std::thread([] {
         const int base = myNice();              // ctest may run niced
@@ -74,11 +87,9 @@ TEST(FrameLoad, AFrameWithinItsShareIsLeftAlone) {
 // once.
 TEST(FrameLoad, OverItsShareASessionStepsDownTheLadderAndBackUpOnceTheStepAboveWouldFit) {
     std::thread([] {
-        FrameLoad other(30.0f), busy(100.0f);  // busy: a 10 ms frame period
-        other.join();
-        busy.join();
-        const float budget_ms = busy.budgetMs();
-        const auto ns = [&](float share) { return static_cast<int64_t>(share * budget_ms * 1e6f); };
+        TwoSessions two;
+        FrameLoad &other = two.other, &busy = two.busy;
+        const auto ns = [&](float share) { return two.ns(share); };
         for (int i = 0; i < FrameLoad::kWarmUpFrames; ++i) frame(busy, ns(3.0f));
         EXPECT_EQ(busy.economy(), 0) << "the first frames do not count";
         frame(busy, ns(0.8f));
@@ -147,17 +158,27 @@ TEST(FrameLoad, OverItsShareASessionStepsDownTheLadderAndBackUpOnceTheStepAboveW
 
 // Far over its share (a session that starts beside others, or a session joined): straight down to the first step
 // predicted to fit, each step costing 1 / kStepCostRatio of the one above, instead of one step every
-// kStepDownFrames. A probe of the step above that fails goes back one step only.
-TEST(FrameLoad, FarOverItsShareASessionGoesStraightToTheStepPredictedToFit) {
+// kStepDownFrames. A probe of the step above that fails goes back one step only. A session that joins starts at the
+// deepest step in use.
+TEST(FrameLoad, FarOverItsShareASessionGoesStraightToTheStepPredictedToFitAndJoinersStartThere) {
     std::thread([] {
-        FrameLoad other(30.0f), busy(100.0f);
-        other.join();
-        busy.join();
-        const float budget_ms = busy.budgetMs();
-        const auto ns = [&](float share) { return static_cast<int64_t>(share * budget_ms * 1e6f); };
+        TwoSessions two;
+        FrameLoad &other = two.other, &busy = two.busy;
+        const auto ns = [&](float share) { return two.ns(share); };
         for (int i = 0; i < FrameLoad::kWarmUpFrames; ++i) frame(busy, ns(3.0f));
         frame(busy, ns(1.0f));
         EXPECT_EQ(busy.economy(), 2) << "1.0 / 1.3 = 0.77 is still over 0.7 of the budget; 1.0 / 1.69 = 0.59 is not";
+        {
+            // A session that joins now starts at the deepest step in use (with one more session every share only
+            // shrinks), and its reconstructor is told so before its first frame.
+            FrameLoad late(30.0f);
+            late.join();
+            EXPECT_EQ(late.economy(), 2);
+            recon::Reconstructor rec(recon::Intrinsics::kinectV1(), recon::ReconParams::faceDefaults());
+            applyEconomy(late, recon::ReconParams::faceDefaults(), "late", rec);
+            EXPECT_EQ(rec.requestedModelLevel(), 1);
+            late.leave();
+        }
         for (int i = 0; i < FrameLoad::kStepHoldFrames + 1 && busy.economy() == 2; ++i) frame(busy, ns(0.3f));
         ASSERT_EQ(busy.economy(), 1) << "a probe after the hold";
         frame(busy, ns(2.5f));
@@ -165,38 +186,12 @@ TEST(FrameLoad, FarOverItsShareASessionGoesStraightToTheStepPredictedToFit) {
         EXPECT_EQ(busy.economy(), 2) << "a failed probe goes back one step";
         for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(2.5f));
         EXPECT_EQ(busy.economy(), FrameLoad::kEconomySteps - 1) << "then to the last step at once";
-        other.leave();
-        busy.leave();
-    }).join();
-}
-
-// A session that joins running ones starts at the deepest step one of them is at (with one more session every
-// share shrinks), not at full cost; one that joins alone, or only beside sessions at full, starts at full.
-TEST(FrameLoad, ASessionThatJoinsStartsAtTheDeepestStepInUse) {
-    std::thread([] {
-        FrameLoad first(30.0f), busy(100.0f);
-        first.join();
-        busy.join();
-        EXPECT_EQ(first.economy(), 0);
-        EXPECT_EQ(busy.economy(), 0);
-        const float budget_ms = busy.budgetMs();
-        const auto ns = [&](float share) { return static_cast<int64_t>(share * budget_ms * 1e6f); };
-        for (int i = 0; i < FrameLoad::kWarmUpFrames; ++i) frame(busy, ns(3.0f));
-        frame(busy, ns(1.0f));
-        ASSERT_EQ(busy.economy(), 2);
-        FrameLoad late(30.0f);
-        late.join();
-        EXPECT_EQ(late.economy(), 2) << "the deepest step in use";
-        recon::Reconstructor rec(recon::Intrinsics::kinectV1(), recon::ReconParams::faceDefaults());
-        applyEconomy(late, recon::ReconParams::faceDefaults(), "late", rec);
-        EXPECT_EQ(rec.requestedModelLevel(), 1) << "its reconstructor is told before its first frame";
-        late.leave();
         busy.leave();
         FrameLoad again(30.0f);
         again.join();
-        EXPECT_EQ(again.economy(), 0) << "the sessions left are at full";
+        EXPECT_EQ(again.economy(), 0) << "beside a session at full, a session joining starts at full";
         again.leave();
-        first.leave();
+        other.leave();
     }).join();
 }
 
@@ -204,11 +199,9 @@ TEST(FrameLoad, ASessionThatJoinsStartsAtTheDeepestStepInUse) {
 // the budget does not see): down the ladder too. A probe of the step above that skips again holds twice as long.
 TEST(FrameLoad, ASessionThatSkipsFramesStepsDownAndProbesLessOften) {
     std::thread([] {
-        FrameLoad other(30.0f), busy(100.0f);
-        other.join();
-        busy.join();
-        const float budget_ms = busy.budgetMs();
-        const auto ns = [&](float share) { return static_cast<int64_t>(share * budget_ms * 1e6f); };
+        TwoSessions two;
+        FrameLoad &other = two.other, &busy = two.busy;
+        const auto ns = [&](float share) { return two.ns(share); };
         for (int i = 0; i < FrameLoad::kWarmUpFrames + 3; ++i) frame(busy, ns(0.4f));
         EXPECT_EQ(busy.economy(), 0);
         busy.noteSkipped(0.2f);

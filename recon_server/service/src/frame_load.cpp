@@ -127,9 +127,11 @@ void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
         // Far over (a session joined, or this one just started beside others): straight to the first step predicted
         // to fit, each step costing 1 / kStepCostRatio of the one above, rather than one step every
         // kStepDownFrames. Four sessions on 2 cores took 45 frames and more to get from full to the last step, and
-        // most of a 300-frame run's skipped frames fell in those (issue 16 note). A failed probe goes back one.
+        // most of a 300-frame run's skipped frames fell in those (issue 16 note). A failed probe goes back one. The
+        // prediction starts from the lowest of the step's average and the last two frames: a stall does not add
+        // steps.
         int to = economy_ + 1;
-        for (float predicted_ms = cost / kStepCostRatio;
+        for (float predicted_ms = std::min({cost, frame_ms, previous_ms}) / kStepCostRatio;
              !probing_ && to + 1 < kEconomySteps && predicted_ms > kStepDownFraction * budget_ms;
              predicted_ms /= kStepCostRatio) {
             ++to;
