@@ -15,6 +15,8 @@ constexpr size_t kTrajectoryReserve = 18000;  // 10 minutes at 30 frames/s befor
 // their running mean over fused frames (rate per fused frame), which drifts slowly towards the count while the
 // head is hidden (rate per unfused frame).
 constexpr int kVisibilityLevel = 2;
+// A frame less than this many source periods after the last tracked one is the next frame (none skipped between).
+constexpr float kNextFrameScale = 1.5f;
 constexpr float kVisibleRefRate = 0.05f, kVisibleRefDecay = 0.02f;
 
 // The ray caster's parameters for a model cast model_level levels coarser than the frame: a ray without a hint
@@ -145,10 +147,12 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
 
     // A frame that will not be fused may be registered on the coarser levels alone (unfused_finest_level): known
     // before registration, since fusion only depends on the count (a verified fit, which is always fused, only
-    // follows skipped frames or a failed fit, and such frames take the full path).
+    // follows skipped frames or a failed fit, and such frames take the full path). Only the next frame: less than
+    // half a period late (a camera's clock jitters; one skipped frame makes it two periods).
     const float motion_scale = motionScale(frame.timestamp_ns);
     const bool fuse_due = frames_integrated_ < 2 || after_gap || frames_since_fuse_ + 1 >= fuse_every_;
-    const int coarse_level = have_model_ && !fuse_due && motion_scale <= 1.0f ? params_.unfused_finest_level : 0;
+    const bool next_frame = motion_scale < kNextFrameScale;
+    const int coarse_level = have_model_ && !fuse_due && next_frame ? params_.unfused_finest_level : 0;
 
     // Noise reduction and point cloud (thesis 4.1.1-4.1.2).
     const int valid = filter_.filter(frame.depth_m, head_mask, frame_, mask_box, coarse_level);
@@ -196,11 +200,12 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         Pose estimate = T_world_camera_;
         bool registered = false;
         if (coarse_level > 0) {
-            result.tracking =
-                icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate, motion_scale, coarse_level);
+            // Within one frame's motion limits: a fit that moved further takes the full path, which verifies it.
+            result.tracking = icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate, 1.0f, coarse_level);
             registered = result.tracking.ok();
-            if (registered) result.finest_level = coarse_level;
-            if (!registered) {  // the full path after all, with the finer levels it needs
+            if (registered) {
+                result.finest_level = coarse_level;
+            } else {  // the full path after all, with the finer levels it needs
                 estimate = T_world_camera_;
                 if (params_.robust_integration) prefilterOccluders(0, result);
                 for (int l = 0; l < coarse_level; ++l) filter_.computeNormals(frame_.levels[l]);
@@ -235,8 +240,8 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         // the occluder stays.
         if (params_.robust_integration && fuse) {
             const float band = params_.occluder_band_m > 0.0f ? params_.occluder_band_m : params_.tsdf.trunc_dist_m;
-            result.occluding_pixels = rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_,
-                                                           volume_.grid(), band, params_.confident_weight, &hint_m_);
+            result.occluding_pixels += rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_,
+                                                            volume_.grid(), band, params_.confident_weight, &hint_m_);
         }
         result.ms.icp = watch.lapMs();
     }
@@ -282,7 +287,7 @@ void Reconstructor::prefilterOccluders(int level, FrameResult& result) {
         frame_.levels[0].depth_m(roi).copyTo(hint_m_(roi));
         hint = &hint_m_;
     }
-    result.occluding_pixels +=
+    result.occluding_pixels =  // the first count of the frame (or, on the full path after all, the one that holds)
         rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_, volume_.grid(),
                              params_.occluder_prefilter_m, params_.confident_weight, hint, level);
 }

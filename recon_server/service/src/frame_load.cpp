@@ -132,8 +132,7 @@ void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
         // steps.
         int to = economy_ + 1;
         for (float predicted_ms = std::min({cost, frame_ms, previous_ms}) / kStepCostRatio;
-             !probing_ && to + 1 < kEconomySteps && predicted_ms > kStepDownFraction * budget_ms;
-             predicted_ms /= kStepCostRatio) {
+             !probing_ && to + 1 < kEconomySteps && predicted_ms > down_ms; predicted_ms /= kStepCostRatio) {
             ++to;
         }
         step(to, false);
