@@ -21,7 +21,8 @@
 #   Ends with a table: per session, frames integrated of those sent, skipped (live mode keeps the newest frame),
 #   capture-to-pose latency p50/p95, the wall-clock ms of its last snapshot, and the frames tracked but not fused
 #   (a loaded server's last economy steps fuse every other or third frame; those are not skipped: each has its pose, and
-#   counts in the latency); then the server's CPU while
+#   counts in the latency), and from the session's frames.tsv its skipped frames in the first 2 s and its p95 after
+#   them; then the server's CPU while
 #   the agents streamed, in cores, by job (its threads are named: fs-s SESSION, fs-pool, fs-replicate, ...).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -125,7 +126,20 @@ for s in $(seq 1 "$sessions"); do
 done
 # One number out of a summary line: field KEY of the line that starts with "SECTION".
 field() { grep -E "^  \"$2\"" "$1" | sed -nE "s/.*\"$3\": ([0-9.e+-]+).*/\1/p"; }
-printf '%-8s %12s %9s %9s %9s %14s %13s\n' session integrated skipped p50_ms p95_ms last_snapshot tracked_only
+# From the session's frames.tsv: frames of its first 2 s (seq < 60) never processed, and the p95 of queued +
+# processing (capture to pose, to within the bookkeeping after it) over the tracked frames after those 2 s: a
+# session's start (detection, the model's first frames, the ladder finding its step) against its steady state.
+start_and_after() {
+    local t=$1
+    [ -f "$t" ] || { echo "- -"; return; }
+    local early after
+    early=$(awk -F'\t' '!/^#/ && $1 < 60 { n++ } END { print 60 - n }' "$t")
+    after=$(awk -F'\t' '!/^#/ && $1 >= 60 && ($6 == "F" || $6 == "T") { print $2 + $3 }' "$t" | sort -n |
+        awk '{ v[NR] = $1 } END { if (NR) printf "%.1f", v[int(0.95 * (NR - 1) + 0.5) + 1]; else printf "-" }')
+    echo "$early $after"
+}
+printf '%-8s %12s %9s %9s %9s %14s %13s %11s %13s\n' session integrated skipped p50_ms p95_ms last_snapshot tracked_only \
+    skipped_2s p95_after_2s
 for s in $(seq 1 "$sessions"); do
     f="$work/data/rt$s/summary.json"
     [ -f "$f" ] || continue
@@ -136,9 +150,10 @@ for s in $(seq 1 "$sessions"); do
     last_snapshot=$(awk -v c="$(field "$f" snapshot copy_ms)" -v m="$(field "$f" snapshot mesh_ms)" \
         -v e="$(field "$f" snapshot encode_ms)" 'BEGIN { printf "%.0f", c + m + e }')
     tracked_only=$(field "$f" frames tracked_only)
-    printf '%-8s %5s of %-4s %5s %2s %9.1f %9.1f %11s ms %13s\n' "rt$s" "$(field "$f" frames integrated)" "$frames" \
-        "$skipped" "($(( received > 0 ? 100 * skipped / received : 0 ))%)" "$(field "$f" latency_ms p50)" \
-        "$(field "$f" latency_ms p95)" "$last_snapshot" "${tracked_only:-0}"
+    read -r early after < <(start_and_after "$work/data/rt$s/frames.tsv")
+    printf '%-8s %5s of %-4s %5s %2s %9.1f %9.1f %11s ms %13s %11s %13s\n' "rt$s" "$(field "$f" frames integrated)" \
+        "$frames" "$skipped" "($(( received > 0 ? 100 * skipped / received : 0 ))%)" "$(field "$f" latency_ms p50)" \
+        "$(field "$f" latency_ms p95)" "$last_snapshot" "${tracked_only:-0}" "$early" "$after"
 done
 # The economy ladder (recon_server/service/frame_load.hpp) as the server logged it.
 if [ -f "$work/server.log" ]; then

@@ -13,10 +13,13 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include "recon/indexed_mesh.hpp"
+#include "service/frame_load.hpp"
 #include "test_agent.hpp"
 #include "wire/mesh_codec.hpp"
 
@@ -52,6 +55,35 @@ std::string readFile(const std::filesystem::path& path) {
     return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
 }
 
+// frames.tsv of a finished session: how many of its frames had each outcome (F, T, R, D), after checking that every
+// line has six fields, that seqs rise and that the times are plausible.
+std::map<char, uint32_t> frameOutcomes(const std::filesystem::path& dir) {
+    std::map<char, uint32_t> n;
+    std::istringstream in(readFile(dir / "frames.tsv"));
+    std::string line;
+    long last_seq = -1;
+    while (std::getline(in, line)) {
+        if (line.empty() || line[0] == '#') continue;
+        std::istringstream fields(line);
+        long seq = 0;
+        float queued_ms = 0, processing_ms = 0, cpu_ms = 0;
+        int step = -1;
+        char outcome = 0;
+        EXPECT_TRUE(fields >> seq >> queued_ms >> processing_ms >> cpu_ms >> step >> outcome) << line;
+        EXPECT_GT(seq, last_seq) << line;
+        EXPECT_GE(queued_ms, -1.0f) << line;  // the agent's clock is this machine's here
+        EXPECT_GE(processing_ms, 0.0f) << line;
+        EXPECT_GE(cpu_ms, 0.0f) << line;
+        if (outcome == 'F') {
+            EXPECT_GT(cpu_ms, 0.1f) << "a fused frame costs something: " << line;
+        }
+        EXPECT_TRUE(step >= 0 && step < FrameLoad::kEconomySteps) << line;
+        last_seq = seq;
+        ++n[outcome];
+    }
+    return n;
+}
+
 // The data dir of a finished session: every file complete, nothing temporary left behind.
 void expectSessionWritten(const std::filesystem::path& dir, bool with_mesh) {
     ASSERT_TRUE(std::filesystem::exists(dir / "summary.json")) << dir;
@@ -60,6 +92,7 @@ void expectSessionWritten(const std::filesystem::path& dir, bool with_mesh) {
     EXPECT_NE(summary.find("\"integrated\": "), std::string::npos);
     EXPECT_EQ(summary.back(), '\n');
     EXPECT_TRUE(std::filesystem::exists(dir / "trajectory.txt"));
+    EXPECT_TRUE(std::filesystem::exists(dir / "frames.tsv"));
     for (const auto& entry : std::filesystem::directory_iterator(dir)) {
         EXPECT_EQ(entry.path().extension(), entry.path().extension() == ".tmp" ? ".none" : entry.path().extension())
             << "temporary file left: " << entry.path();
@@ -274,6 +307,10 @@ TEST(ServerSession, EveryFrameRecordingProcessesAllFramesAndFinishesAtEndOfStrea
     EXPECT_EQ(status->frames_integrated + status->frames_rejected, kFrames - 2);
     EXPECT_GE(status->frames_integrated, 30u) << "the damaged frames must not harm the session: " << status->detail;
     expectSessionWritten(params.data_dir / "rec-1", /*with_mesh=*/true);
+    auto outcomes = frameOutcomes(params.data_dir / "rec-1");
+    EXPECT_EQ(outcomes['D'], 2u) << "frames.tsv has the damaged frames too";
+    EXPECT_EQ(outcomes['F'], status->frames_integrated);
+    EXPECT_EQ(outcomes['R'], status->frames_rejected);
     EXPECT_NE(readFile(params.data_dir / "rec-1" / "summary.json").find("\"mode\": \"every_frame\""),
               std::string::npos);
 }
@@ -298,6 +335,10 @@ TEST(ServerSession, ASessionThatFusesEveryOtherFramePosesAndCountsEveryTrackedFr
     EXPECT_GE(status->frames_tracked_only, 10u) << status->detail;
     EXPECT_LE(status->frames_tracked_only, status->frames_integrated) << "the first frames are always fused";
     expectSessionWritten(params.data_dir / "fuse-1", /*with_mesh=*/true);
+    auto outcomes = frameOutcomes(params.data_dir / "fuse-1");
+    EXPECT_EQ(outcomes['F'], status->frames_integrated);
+    EXPECT_EQ(outcomes['T'], status->frames_tracked_only);
+    EXPECT_EQ(outcomes['R'], status->frames_rejected);
     const std::string tum = readFile(params.data_dir / "fuse-1" / "trajectory.txt");
     EXPECT_EQ(static_cast<uint32_t>(std::count(tum.begin(), tum.end(), '\n')),
               status->frames_integrated + status->frames_tracked_only);

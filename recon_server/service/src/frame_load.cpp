@@ -80,6 +80,7 @@ void FrameLoad::beginFrame() {
 void FrameLoad::endFrame() {
     const int64_t cpu_ns = (threadCpuNs() - thread_cpu0_ns_) + (recon::parallelPoolCpuNs() - pool_cpu0_ns_);
     const float ms = static_cast<float>(cpu_ns) * 1e-6f;
+    last_frame_cpu_ms_ = ms;
     cost_ms_ = first_ ? ms : cost_ms_ + kEmaAlpha * (ms - cost_ms_);
     first_ = false;
     if (!joined_) return;

@@ -14,6 +14,7 @@ namespace facescan::service {
 namespace {
 
 constexpr size_t kLatencyWindow = 512;  // frames; latency percentiles are over the last this many tracked frames
+constexpr size_t kMaxFrameTimings = 30 * 3600;   // frames.tsv keeps a session's first hour (2.6 MB)
 constexpr int64_t kFpsWindowNs = 2'000'000'000;  // the status fps counts frames processed in the last 2 s
 constexpr float kEmaAlpha = 0.1f;                // per-stage ms in the status: exponential average over ~10 frames
 constexpr float kBehindSkipFraction = 0.1f;      // a live session skipping more of its recent frames is behind
@@ -109,6 +110,7 @@ Session::Session(std::string session_id, const ServerParams& params, std::functi
     stats_.session_id = id_;
     stats_.detail = "waiting for CameraInfo";
     latency_ms_.reserve(kLatencyWindow);
+    frame_timings_.reserve(30 * 60);  // a minute at 30 Hz before the vector first grows
     last_activity_ns_ = steadyNowNs();
 }
 
@@ -329,9 +331,13 @@ void Session::workerLoop() {
         const uint64_t digest =
             wire::frameDigest(stats_.frames_digest, working_.depth.data(), working_.depth.size(),
                               working_.colour.data(), working_.colour.size());  // the worker alone writes it
+        const int64_t start_ns = steadyNowNs();
         load_->beginFrame();
         processFrame(working_);
         load_->endFrame();
+        timing_.processing_ms = static_cast<float>(steadyNowNs() - start_ns) * 1e-6f;
+        timing_.cpu_ms = load_->lastFrameMs();
+        if (frame_timings_.size() < kMaxFrameTimings) frame_timings_.push_back(timing_);
         recon_->setSearchEvery(load_->searchEvery());  // a lost session over budget searches less often
         applyEconomy(*load_, params_.recon, id_, *recon_);
         noteLoad();
@@ -346,6 +352,12 @@ void Session::workerLoop() {
 
 void Session::processFrame(PendingFrame& pending) {
     const int64_t t0 = steadyNowNs();
+    timing_ = {pending.seq,
+               static_cast<float>(realtimeNowNs() - pending.capture_time_ns) * 1e-6f,
+               0,
+               0,
+               static_cast<uint8_t>(load_->economy()),
+               'D'};
     // camera_ is set once before the worker starts: no lock to read it. Colour on demand: a frame only tracked
     // decodes none, a fused one only its head's region (issue 16).
     const Status decoded = decoder_.decode(pending.view(), *camera_, wire::ColourDecode::kOnDemand, frame_);
@@ -358,6 +370,7 @@ void Session::processFrame(PendingFrame& pending) {
     // The model's prediction seeds the segmentation, detection otherwise; a frame without a head counts as
     // rejected, and the next head after a loss is verified before it is fused (recon/scan_step.hpp).
     recon::scanFrame(*pipeline_, *recon_, frame_, step_);
+    timing_.outcome = !step_.head.found ? 'R' : !step_.frame.tracked ? 'R' : step_.frame.integrated ? 'F' : 'T';
     const Status colour = decoder_.colourStatus();  // damaged colour costs the frame its colour, not its depth
     decoder_.releaseColour();                       // pending's bytes are recycled after this frame
     const recon::HeadObservation& head = step_.head;

@@ -89,6 +89,7 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     files.draco = result.draco.get();
     files.trajectory_tum = trajectoryTum();
     files.summary_json = summaryJson(s, result);
+    files.frames_tsv = frameTimingsTsv();
     if (status.isOk()) {
         // The folder records its owner: a server that lost the session to another one (two servers that could
         // not see each other) writes beside the other's files, never over them.
@@ -135,6 +136,22 @@ std::optional<SnapshotResult> Session::takeFinalSnapshot() {
     out.frames_integrated = stats_.frames_integrated;
     out.mesh = final_mesh_;
     return out;
+}
+
+std::string Session::frameTimingsTsv() const {
+    // Only this server's frames: after a takeover the previous owner's are in its own data dir, if it wrote one.
+    if (frame_timings_.empty()) return {};
+    std::string tsv =
+        "# seq\tqueued_ms\tprocessing_ms\tcpu_ms\teconomy_step\toutcome (F fused, T tracked only, R "
+        "rejected, D dropped)\n";
+    tsv.reserve(tsv.size() + frame_timings_.size() * 32);
+    char line[96];
+    for (const FrameTiming& t : frame_timings_) {
+        std::snprintf(line, sizeof line, "%u\t%.2f\t%.2f\t%.2f\t%u\t%c\n", t.seq, static_cast<double>(t.queued_ms),
+                      static_cast<double>(t.processing_ms), static_cast<double>(t.cpu_ms), t.economy_step, t.outcome);
+        tsv += line;
+    }
+    return tsv;
 }
 
 std::string Session::summaryJson(const SessionStats& s, const MeshResult& m) const {

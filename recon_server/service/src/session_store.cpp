@@ -75,6 +75,7 @@ Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& f
         }
     }
     RETURN_IF_ERROR(writeFileAtomic(dir / "trajectory.txt", files.trajectory_tum));
+    if (!files.frames_tsv.empty()) RETURN_IF_ERROR(writeFileAtomic(dir / "frames.tsv", files.frames_tsv));
     return writeFileAtomic(dir / "summary.json", files.summary_json);
 }
 

@@ -90,9 +90,10 @@ class FrameLoad {
     int fuseEvery() const { return economy_ >= 4 ? 3 : economy_ == 3 ? 2 : 1; }  // one tracked frame in this many fused
     // The session's recent share of skipped frames (live sessions keep only the newest frame), after each frame.
     void noteSkipped(float recent_fraction) { skipped_recent_ = recent_fraction; }
-    float costMs() const { return cost_ms_; }  // CPU a frame, recent average
-    float budgetMs() const;                    // CPU a frame this session may use now
-    static int runningWorkers();               // sessions with a worker (joined and not left)
+    float costMs() const { return cost_ms_; }                 // CPU a frame, recent average
+    float lastFrameMs() const { return last_frame_cpu_ms_; }  // CPU of the last frame (endFrame)
+    float budgetMs() const;                                   // CPU a frame this session may use now
+    static int runningWorkers();                              // sessions with a worker (joined and not left)
 
  private:
     void throttle(bool on);
@@ -113,6 +114,7 @@ class FrameLoad {
     float last_budget_ms_ = 0.0f;
     bool first_ = true;
     float cost_ms_ = 0;
+    float last_frame_cpu_ms_ = 0;
     int64_t thread_cpu0_ns_ = 0, pool_cpu0_ns_ = 0;
     int tid_ = 0;
     int base_nice_ = 0;  // the thread's nice value when it joined

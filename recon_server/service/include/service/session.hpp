@@ -123,6 +123,17 @@ struct SnapshotResult {
     MeshResult mesh;
 };
 
+// One processed frame's timings, written to the data dir as frames.tsv: where a loaded server's slow poses and
+// skipped frames fell (issue 16), which the summary's percentiles cannot say.
+struct FrameTiming {
+    uint32_t seq = 0;
+    float queued_ms = 0;       // capture (the agent's clock) to the worker taking it: transport and the wait
+    float processing_ms = 0;   // the worker's wall clock on it; capture to pose is about queued + processing
+    float cpu_ms = 0;          // its CPU: the worker's thread and the pool's work for it (FrameLoad)
+    uint8_t economy_step = 0;  // FrameLoad::economy() while it ran
+    char outcome = 'D';        // F fused, T tracked only, R rejected (no face, or not fitted), D dropped (undecodable)
+};
+
 // Called once the session is finished (written to disk or not): ok, or why the files could not be written.
 using FinishCallback = std::function<void(const Status&, const MeshResult&)>;
 
@@ -214,6 +225,7 @@ class Session {
     void noteLoad();  // after a frame: the worker's load and recent skips into stats_
     void recordLatency(float ms);
     std::string summaryJson(const SessionStats& s, const MeshResult& m) const;
+    std::string frameTimingsTsv() const;
 
     const std::string id_;
     const ServerParams params_;
@@ -237,6 +249,9 @@ class Session {
     std::vector<std::pair<int64_t, recon::Pose>> trajectory_;  // copy of the recon core's, for other threads
     recon::Pose last_pose_ = recon::Pose::Identity();
     std::vector<float> latency_ms_;  // ring of the last kLatencyWindow
+    // Worker only (finalize runs on the worker when there is one): the frame in hand, and those processed.
+    FrameTiming timing_;
+    std::vector<FrameTiming> frame_timings_;
     size_t latency_next_ = 0;
     std::deque<int64_t> processed_ns_;  // steady times of recently processed frames (fps)
     int64_t first_processed_ns_ = 0, last_processed_ns_ = 0;

@@ -1,6 +1,7 @@
 // Writing a finished session to the data dir (--data-dir/SESSION/): mesh.ply (binary, normals and colours),
-// mesh.drc (Draco), trajectory.txt (TUM), summary.json. Every file goes to NAME.tmp first, is fsync'ed and then
-// renamed over NAME, so a crash leaves either the old file or the whole new one, never a half file.
+// mesh.drc (Draco), trajectory.txt (TUM), summary.json, frames.tsv (each processed frame's timings). Every file goes to
+// NAME.tmp first, is fsync'ed and then renamed over NAME, so a crash leaves either the old file or the whole new one,
+// never a half file.
 #pragma once
 
 #include <cstdint>
@@ -27,6 +28,7 @@ struct SessionFiles {
     const recon::IndexedMesh* mesh = nullptr;     // the final full-resolution mesh (may be empty: no faces)
     const std::vector<uint8_t>* draco = nullptr;  // Draco bytes of mesh (empty when the mesh is empty)
     std::string trajectory_tum;                   // TUM lines
+    std::string frames_tsv;                       // Session::frameTimingsTsv; not written when empty
     std::string summary_json;                     // written last: its presence means the session is complete
 };
 
