@@ -170,7 +170,8 @@ TEST(FrameLoad, FarOverItsShareASessionGoesStraightToTheStepPredictedToFitAndJoi
         EXPECT_EQ(busy.economy(), 2) << "1.0 / 1.3 = 0.77 is still over 0.7 of the budget; 1.0 / 1.69 = 0.59 is not";
         {
             // A session that joins now starts at the deepest step in use (with one more session every share only
-            // shrinks), and its reconstructor is told so before its first frame.
+            // shrinks; no step has been measured for kSettledFrames yet), and its reconstructor is told so before
+            // its first frame.
             FrameLoad late(30.0f);
             late.join();
             EXPECT_EQ(late.economy(), 2);
@@ -187,11 +188,44 @@ TEST(FrameLoad, FarOverItsShareASessionGoesStraightToTheStepPredictedToFitAndJoi
         for (int i = 0; i < FrameLoad::kStepDownFrames; ++i) frame(busy, ns(2.5f));
         EXPECT_EQ(busy.economy(), FrameLoad::kEconomySteps - 1) << "then to the last step at once";
         busy.leave();
-        FrameLoad again(30.0f);
-        again.join();
-        EXPECT_EQ(again.economy(), 0) << "beside a session at full, a session joining starts at full";
-        again.leave();
         other.leave();
+    }).join();
+}
+
+// A session that joins starts at the step its share is predicted to need from the costs the running sessions
+// measured, and they go at once to the step their smaller share needs; both judge that step on its first two
+// frames. The costs are forgotten when the last session leaves (the host may be another speed by the next).
+TEST(FrameLoad, AJoinerStartsWhereTheMeasuredCostsSayAndTheOthersStepDownAtOnce) {
+    std::thread([] {
+        TwoSessions two;  // `other` at 30 Hz, `busy` at 100 Hz
+        FrameLoad &other = two.other, &busy = two.busy;
+        const auto ns = [&](float share) { return two.ns(share); };
+        for (int i = 0; i < FrameLoad::kWarmUpFrames + FrameLoad::kStepDownFrames; ++i) frame(busy, ns(0.6f));
+        ASSERT_EQ(busy.economy(), 0) << "0.6 of its share is within kStepDownFraction";
+        // A third session at 100 Hz: its share, and busy's, is 2/3 of what it was; 0.7 x 2/3 = 0.47 of the old.
+        // Full is measured at 0.6 of it; one step down is predicted at 0.6 / 1.3 = 0.46: it fits.
+        FrameLoad late(100.0f);
+        late.join();
+        EXPECT_EQ(late.economy(), 1) << "the step predicted to fit, below the deepest in use (full)";
+        frame(busy, ns(0.4f));
+        EXPECT_EQ(busy.economy(), 1) << "a session joined: at once, although this frame was within the share";
+        for (int i = 0; i < FrameLoad::kWarmUpFrames; ++i) frame(late, ns(3.0f));
+        EXPECT_EQ(late.economy(), 1) << "the first frames do not count";
+        frame(late, ns(0.6f));
+        frame(late, ns(0.6f));
+        EXPECT_EQ(late.economy(), 2) << "the predicted step was over: down after two frames, not kStepDownFrames";
+        late.leave();
+        busy.leave();
+        other.leave();
+        // All gone: a session joining three later starts at full, not where the old costs would have put it.
+        FrameLoad a(100.0f), b(100.0f), c(100.0f);
+        a.join();
+        b.join();
+        c.join();
+        EXPECT_EQ(c.economy(), 0);
+        c.leave();
+        b.leave();
+        a.leave();
     }).join();
 }
 

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cmath>
 #include <cstdio>
 
 #include "recon/parallel.hpp"
@@ -19,6 +20,9 @@ namespace {
 std::atomic<int> g_running_workers{0};
 // How many running workers are at each economy step: a worker that joins starts at the deepest one in use.
 std::array<std::atomic<int>, FrameLoad::kEconomySteps> g_at_step{};
+// The host's recent CPU a frame at each economy step, as the last session to settle there measured it (0: not yet
+// measured since the workers last all left). A session that joins, or sees one join, predicts its step from these.
+std::array<std::atomic<float>, FrameLoad::kEconomySteps> g_step_cost_ms{};
 
 int64_t threadCpuNs() {
     timespec ts{};
@@ -49,17 +53,46 @@ void FrameLoad::join() {
     joined_ = true;
     tid_ = static_cast<int>(syscall(SYS_gettid));
     base_nice_ = getpriority(PRIO_PROCESS, static_cast<id_t>(tid_));  // the server may run niced as a whole
-    g_running_workers.fetch_add(1, std::memory_order_relaxed);
     recon::setParallelAccounting(true);
-    // Beside running sessions, start at the deepest step one of them needs: with one more session each one's share
-    // only shrinks, and a session that starts at full cost skipped its first second of frames while it found its
-    // step (issue 16 note). It probes the steps above after the hold, as any session does.
+    // Beside running sessions, start at the deepest step one of them needs (with one more session each one's share
+    // only shrinks), or deeper where the costs they measured say this share needs it. A session that started at full
+    // skipped its first second of frames while it found its step; one that started at the deepest step in use still
+    // spent its first 25 frames above its step (warm-up, then kStepDownFrames), where most of four sessions' skipped
+    // frames and slowest poses fell (issue 16 note). It probes the steps above after the hold, as any session does.
     int deepest = 0;
     for (int s = 0; s < kEconomySteps; ++s) {
         if (g_at_step[static_cast<size_t>(s)].load(std::memory_order_relaxed) > 0) deepest = s;
     }
+    const int running = g_running_workers.fetch_add(1, std::memory_order_relaxed) + 1;
+    if (running > 1) deepest = std::max(deepest, stepToFit(kStepDownFraction * budgetMs()));
     economy_ = deepest;
+    predicted_ = economy_ > 0;
     g_at_step[static_cast<size_t>(economy_)].fetch_add(1, std::memory_order_relaxed);
+}
+
+int FrameLoad::stepToFit(float down_ms) const {
+    // Each step's cost: this session's own average where it has one, the host's otherwise, and where neither is
+    // known the nearest known step's scaled by kStepCostRatio a step.
+    std::array<float, kEconomySteps> known{};
+    for (int s = 0; s < kEconomySteps; ++s) {
+        known[static_cast<size_t>(s)] = step_frames_[s] >= kSettledFrames
+                                            ? step_cost_ms_[s]
+                                            : g_step_cost_ms[static_cast<size_t>(s)].load(std::memory_order_relaxed);
+    }
+    for (int s = 0; s < kEconomySteps; ++s) {
+        float predicted_ms = 0.0f;
+        for (int d = 0; d < kEconomySteps && predicted_ms <= 0.0f; ++d) {
+            // d steps away: below (cheaper, scaled up) first, then above (dearer, scaled down)
+            if (s + d < kEconomySteps && known[static_cast<size_t>(s + d)] > 0) {
+                predicted_ms = known[static_cast<size_t>(s + d)] * std::pow(kStepCostRatio, static_cast<float>(d));
+            } else if (s - d >= 0 && known[static_cast<size_t>(s - d)] > 0) {
+                predicted_ms = known[static_cast<size_t>(s - d)] / std::pow(kStepCostRatio, static_cast<float>(d));
+            }
+        }
+        if (predicted_ms <= 0.0f) return 0;  // nothing measured on this host yet
+        if (predicted_ms <= down_ms) return s;
+    }
+    return kEconomySteps - 1;
 }
 
 void FrameLoad::leave() {
@@ -68,7 +101,10 @@ void FrameLoad::leave() {
     g_at_step[static_cast<size_t>(economy_)].fetch_sub(1, std::memory_order_relaxed);
     economy_ = 0;
     recon::setParallelAccounting(false);
-    g_running_workers.fetch_sub(1, std::memory_order_relaxed);
+    if (g_running_workers.fetch_sub(1, std::memory_order_relaxed) == 1) {
+        // The last worker gone: the next ones may find a host of another speed (shared machines vary 2x by day).
+        for (auto& cost : g_step_cost_ms) cost.store(0.0f, std::memory_order_relaxed);
+    }
     joined_ = false;
 }
 
@@ -98,7 +134,11 @@ void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
     if (++frames_ <= kWarmUpFrames) return;
     float& cost = step_cost_ms_[economy_];
     cost = step_frames_[economy_]++ == 0 ? frame_ms : cost + kEmaAlpha * (frame_ms - cost);
+    if (step_frames_[economy_] >= kSettledFrames) {
+        g_step_cost_ms[static_cast<size_t>(economy_)].store(cost, std::memory_order_relaxed);
+    }
     if (budget_ms > last_budget_ms_ * 1.1f) hold_frames_ = kStepHoldFrames;  // a session left: probe sooner
+    const bool joined = budget_ms * 1.1f < last_budget_ms_;                  // a session joined: share shrank
     last_budget_ms_ = budget_ms;
     ++frames_at_step_;
     const auto step = [&](int to, bool probe) {
@@ -107,10 +147,19 @@ void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
         economy_ = to;
         step_frames_[to] = 0;  // its average starts afresh: the last one may be from a busier minute
         probing_ = probe;
+        predicted_ = false;
         frames_at_step_ = 0;
     };
     if (alone) {  // nobody to protect: the whole machine, every cast at full resolution
         if (economy_ > 0) step(0, false);
+        return;
+    }
+    const float down_ms = kStepDownFraction * budget_ms;
+    // A session joined: go at once to the step its smaller share is predicted to need, rather than when two frames
+    // over and kStepDownFrames at the step have shown it (the joiner's first frames cost the most).
+    if (joined && stepToFit(down_ms) > economy_) {
+        step(stepToFit(down_ms), false);
+        predicted_ = true;
         return;
     }
     // Down: over budget by this step's own average, or skipping frames (the budget cannot see what other processes
@@ -119,10 +168,10 @@ void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
     // with a cast, one without) and doubles the hold.
     // Over by cost only when this frame and the one before are over too: one frame stalled on its own (on a shared
     // virtual machine a thread's CPU clock also runs while the host holds its core) does not move the ladder.
-    const float down_ms = kStepDownFraction * budget_ms;
     const bool over =
         (cost > down_ms && std::min(frame_ms, previous_ms) > down_ms) || skipped_recent_ > kStepDownSkipFraction;
-    const bool settled = economy_ == 0 || frames_at_step_ >= (probing_ ? 2 : kStepDownFrames);
+    // A probe, or a step taken on a prediction, is judged on its first two frames.
+    const bool settled = economy_ == 0 || frames_at_step_ >= (probing_ || predicted_ ? 2 : kStepDownFrames);
     if (economy_ + 1 < kEconomySteps && over && settled) {
         if (probing_ && frames_at_step_ < kProbeFrames) hold_frames_ = std::min(2 * hold_frames_, kMaxStepHoldFrames);
         // Far over (a session joined, or this one just started beside others): straight to the first step predicted

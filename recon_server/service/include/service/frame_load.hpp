@@ -48,11 +48,15 @@ class FrameLoad {
     // lags). After kStepHoldFrames at a step it probes the step above if that would fit kStepUpFraction of the
     // budget (the lower of that step's last average and this one's times kStepCostRatio: measured 10.3 / 8.0,
     // 8.0 / 6.1, and 1.25-1.48 for step 2 over step 3: see the issue 16 note). A probe that steps down again within
-    // kProbeFrames doubles the hold, up to kMaxStepHoldFrames; a session leaving resets it. 0: the model cast after
-    // every frame; 1: after every other; 2: and coarse; 3: and every other frame fused; 4: every third fused
+    // kProbeFrames doubles the hold, up to kMaxStepHoldFrames; a session leaving resets it. A session joining, or
+    // seeing one join (its share shrinks), goes at once to the step predicted to fit its share from the costs
+    // measured on this host (stepToFit: its own steps' averages, or the last other session's, kSettledFrames or more
+    // frames old) and judges it on its first two frames, as a probe. 0: the model cast after every frame; 1: after
+    // every other; 2: and coarse; 3: and every other frame fused; 4: every third fused
     static constexpr int kEconomySteps = 5;
     static constexpr int kWarmUpFrames = 5;
     static constexpr int kStepDownFrames = 10;
+    static constexpr int kSettledFrames = 3;  // frames at a step before its average predicts (stepToFit)
     static constexpr float kStepDownSkipFraction = 0.05f;
     static constexpr int kStepHoldFrames = 150;  // 5 s at 30 Hz
     static constexpr int kProbeFrames = 90;
@@ -71,7 +75,8 @@ class FrameLoad {
     FrameLoad& operator=(const FrameLoad&) = delete;
 
     // On the worker thread, once before its first frame: counts it among the running workers and turns the pool's
-    // CPU accounting on for it. Beside running workers it starts at the deepest economy step one of them is at.
+    // CPU accounting on for it. Beside running workers it starts at the deepest economy step one of them is at, or
+    // deeper where the costs they measured say its share needs it.
     // leave(), on the same thread, undoes both and the throttle; safe to call twice.
     void join();
     void leave();
@@ -98,6 +103,8 @@ class FrameLoad {
  private:
     void throttle(bool on);
     void chooseModel(float frame_ms, float budget_ms, bool alone);
+    // The shallowest step predicted to cost at most down_ms a frame (0 with nothing measured yet on this host).
+    int stepToFit(float down_ms) const;
 
     const float period_ms_;
     bool joined_ = false;
@@ -110,6 +117,7 @@ class FrameLoad {
     float last_frame_ms_ = 0.0f;         // the CPU of the frame before
     int frames_at_step_ = 0;             // since the last change of step
     bool probing_ = false;               // a step up after a hold, not yet proven
+    bool predicted_ = false;             // a step taken on the costs measured, at a join: not yet proven
     int hold_frames_ = kStepHoldFrames;  // how long a step below full holds before a probe
     float last_budget_ms_ = 0.0f;
     bool first_ = true;
