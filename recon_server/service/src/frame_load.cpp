@@ -116,7 +116,8 @@ void FrameLoad::beginFrame() {
 void FrameLoad::endFrame() {
     const int64_t cpu_ns = (threadCpuNs() - thread_cpu0_ns_) + (recon::parallelPoolCpuNs() - pool_cpu0_ns_);
     const float ms = static_cast<float>(cpu_ns) * 1e-6f;
-    last_frame_cpu_ms_ = ms;
+    const float previous_ms = last_frame_ms_;
+    last_frame_ms_ = ms;
     cost_ms_ = first_ ? ms : cost_ms_ + kEmaAlpha * (ms - cost_ms_);
     first_ = false;
     if (!joined_) return;
@@ -124,12 +125,10 @@ void FrameLoad::endFrame() {
     const bool alone = runningWorkers() <= 1;  // nobody to protect: use the whole machine
     if (!throttled_ && !alone && cost_ms_ > budget) throttle(true);
     if (throttled_ && (alone || cost_ms_ < kReleaseFraction * budget)) throttle(false);
-    chooseModel(ms, budget, alone);
+    chooseModel(ms, previous_ms, budget, alone);
 }
 
-void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
-    const float previous_ms = last_frame_ms_;
-    last_frame_ms_ = frame_ms;
+void FrameLoad::chooseModel(float frame_ms, float previous_ms, float budget_ms, bool alone) {
     // The first frames (detection, the model's start: tens of ms) say nothing about the steady cost.
     if (++frames_ <= kWarmUpFrames) return;
     float& cost = step_cost_ms_[economy_];
@@ -157,10 +156,12 @@ void FrameLoad::chooseModel(float frame_ms, float budget_ms, bool alone) {
     const float down_ms = kStepDownFraction * budget_ms;
     // A session joined: go at once to the step its smaller share is predicted to need, rather than when two frames
     // over and kStepDownFrames at the step have shown it (the joiner's first frames cost the most).
-    if (joined && stepToFit(down_ms) > economy_) {
-        step(stepToFit(down_ms), false);
-        predicted_ = true;
-        return;
+    if (joined) {
+        if (const int to = stepToFit(down_ms); to > economy_) {
+            step(to, false);
+            predicted_ = true;
+            return;
+        }
     }
     // Down: over budget by this step's own average, or skipping frames (the budget cannot see what other processes
     // and the server's own threads take). Below full, only after kStepDownFrames at this step: its average and the

@@ -331,13 +331,17 @@ void Session::workerLoop() {
         const uint64_t digest =
             wire::frameDigest(stats_.frames_digest, working_.depth.data(), working_.depth.size(),
                               working_.colour.data(), working_.colour.size());  // the worker alone writes it
+        FrameTiming timing;
+        timing.seq = working_.seq;
+        timing.queued_ms = static_cast<float>(realtimeNowNs() - working_.capture_time_ns) * 1e-6f;
+        timing.economy_step = static_cast<uint8_t>(load_->economy());
         const int64_t start_ns = steadyNowNs();
         load_->beginFrame();
-        processFrame(working_);
+        timing.outcome = processFrame(working_);
         load_->endFrame();
-        timing_.processing_ms = static_cast<float>(steadyNowNs() - start_ns) * 1e-6f;
-        timing_.cpu_ms = load_->lastFrameMs();
-        if (frame_timings_.size() < kMaxFrameTimings) frame_timings_.push_back(timing_);
+        timing.processing_ms = static_cast<float>(steadyNowNs() - start_ns) * 1e-6f;
+        timing.cpu_ms = load_->lastFrameMs();
+        if (frame_timings_.size() < kMaxFrameTimings) frame_timings_.push_back(timing);
         recon_->setSearchEvery(load_->searchEvery());  // a lost session over budget searches less often
         applyEconomy(*load_, params_.recon, id_, *recon_);
         noteLoad();
@@ -350,14 +354,8 @@ void Session::workerLoop() {
     }
 }
 
-void Session::processFrame(PendingFrame& pending) {
+char Session::processFrame(PendingFrame& pending) {
     const int64_t t0 = steadyNowNs();
-    timing_ = {pending.seq,
-               static_cast<float>(realtimeNowNs() - pending.capture_time_ns) * 1e-6f,
-               0,
-               0,
-               static_cast<uint8_t>(load_->economy()),
-               'D'};
     // camera_ is set once before the worker starts: no lock to read it. Colour on demand: a frame only tracked
     // decodes none, a fused one only its head's region (issue 16).
     const Status decoded = decoder_.decode(pending.view(), *camera_, wire::ColourDecode::kOnDemand, frame_);
@@ -365,12 +363,12 @@ void Session::processFrame(PendingFrame& pending) {
         std::lock_guard lk(mutex_);
         ++stats_.frames_dropped;
         stats_.detail = "frame " + std::to_string(pending.seq) + " dropped: " + decoded.message();
-        return;
+        return 'D';
     }
     // The model's prediction seeds the segmentation, detection otherwise; a frame without a head counts as
     // rejected, and the next head after a loss is verified before it is fused (recon/scan_step.hpp).
     recon::scanFrame(*pipeline_, *recon_, frame_, step_);
-    timing_.outcome = !step_.head.found ? 'R' : !step_.frame.tracked ? 'R' : step_.frame.integrated ? 'F' : 'T';
+    const char outcome = !step_.head.found || !step_.frame.tracked ? 'R' : step_.frame.integrated ? 'F' : 'T';
     const Status colour = decoder_.colourStatus();  // damaged colour costs the frame its colour, not its depth
     decoder_.releaseColour();                       // pending's bytes are recycled after this frame
     const recon::HeadObservation& head = step_.head;
@@ -396,7 +394,7 @@ void Session::processFrame(PendingFrame& pending) {
         ++stats_.frames_rejected;
         stats_.state = stats_.frames_integrated > 0 ? SessionState::kLost : SessionState::kWaiting;
         stats_.detail = detail("no face: " + head.reason);
-        return;
+        return outcome;
     }
     if (r.tracked) {
         // A frame tracked but not fused (the load's last economy step) has its pose and latency like any other.
@@ -408,11 +406,12 @@ void Session::processFrame(PendingFrame& pending) {
         last_pose_ = recon_->lastPose();
         if (takeover_from_ns_ != 0) noteFirstFrameAfterTakeover(pending.seq, now);
         recordLatency(static_cast<float>(pose_known_ns - pending.capture_time_ns) * 1e-6f);
-        return;
+        return outcome;
     }
     ++stats_.frames_rejected;
     stats_.state = r.reacquiring ? SessionState::kLost : SessionState::kScanning;
     stats_.detail = detail(std::string("frame rejected: ") + r.reason);
+    return outcome;
 }
 
 void Session::noteLoad() {

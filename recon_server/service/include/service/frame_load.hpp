@@ -95,14 +95,14 @@ class FrameLoad {
     int fuseEvery() const { return economy_ >= 4 ? 3 : economy_ == 3 ? 2 : 1; }  // one tracked frame in this many fused
     // The session's recent share of skipped frames (live sessions keep only the newest frame), after each frame.
     void noteSkipped(float recent_fraction) { skipped_recent_ = recent_fraction; }
-    float costMs() const { return cost_ms_; }                 // CPU a frame, recent average
-    float lastFrameMs() const { return last_frame_cpu_ms_; }  // CPU of the last frame (endFrame)
-    float budgetMs() const;                                   // CPU a frame this session may use now
-    static int runningWorkers();                              // sessions with a worker (joined and not left)
+    float costMs() const { return cost_ms_; }             // CPU a frame, recent average
+    float lastFrameMs() const { return last_frame_ms_; }  // CPU of the last frame (endFrame)
+    float budgetMs() const;                               // CPU a frame this session may use now
+    static int runningWorkers();                          // sessions with a worker (joined and not left)
 
  private:
     void throttle(bool on);
-    void chooseModel(float frame_ms, float budget_ms, bool alone);
+    void chooseModel(float frame_ms, float previous_ms, float budget_ms, bool alone);
     // The shallowest step predicted to cost at most down_ms a frame (0 with nothing measured yet on this host).
     int stepToFit(float down_ms) const;
 
@@ -114,7 +114,7 @@ class FrameLoad {
     float step_cost_ms_[kEconomySteps] = {};  // average CPU a frame at each economy step
     int step_frames_[kEconomySteps] = {};     // frames measured at each step
     float skipped_recent_ = 0.0f;
-    float last_frame_ms_ = 0.0f;         // the CPU of the frame before
+    float last_frame_ms_ = 0.0f;         // the CPU of the last frame
     int frames_at_step_ = 0;             // since the last change of step
     bool probing_ = false;               // a step up after a hold, not yet proven
     bool predicted_ = false;             // a step taken on the costs measured, at a join: not yet proven
@@ -122,7 +122,6 @@ class FrameLoad {
     float last_budget_ms_ = 0.0f;
     bool first_ = true;
     float cost_ms_ = 0;
-    float last_frame_cpu_ms_ = 0;
     int64_t thread_cpu0_ns_ = 0, pool_cpu0_ns_ = 0;
     int tid_ = 0;
     int base_nice_ = 0;  // the thread's nice value when it joined

@@ -219,7 +219,7 @@ class Session {
     void captureOnWorker(bool full, ReplicaCapture& out);
     void noteFirstFrameAfterTakeover(uint32_t seq, int64_t now_ns);  // mutex_ held
     void workerLoop();
-    void processFrame(PendingFrame& pending);
+    char processFrame(PendingFrame& pending);  // the frame's FrameTiming::outcome
     void copySnapshotIfAsked();
     void finalize(const std::string& why, const FinishCallback& done);
     void noteLoad();  // after a frame: the worker's load and recent skips into stats_
@@ -249,8 +249,7 @@ class Session {
     std::vector<std::pair<int64_t, recon::Pose>> trajectory_;  // copy of the recon core's, for other threads
     recon::Pose last_pose_ = recon::Pose::Identity();
     std::vector<float> latency_ms_;  // ring of the last kLatencyWindow
-    // Worker only (finalize runs on the worker when there is one): the frame in hand, and those processed.
-    FrameTiming timing_;
+    // Worker only (finalize runs on the worker when there is one): the frames processed.
     std::vector<FrameTiming> frame_timings_;
     size_t latency_next_ = 0;
     std::deque<int64_t> processed_ns_;  // steady times of recently processed frames (fps)
