@@ -17,7 +17,8 @@
 #          CALIBRATE=0 skips the host check below.
 #   Starts with a host check: the serial frame loop of `facescan-bench recon` (100 synthetic frames, one core)
 #   in ms a frame. The sessions' figures scale with it, and a shared host's speed varies by 2x from day to day:
-#   compare runs, and builds, only at a similar figure.
+#   compare runs, and builds, only at a similar figure. After the streaming, the host's busy, idle and steal shares
+#   of its CPU time while the agents streamed (steal: taken by the hypervisor for other guests).
 #   Ends with a table: per session, frames integrated of those sent, skipped (live mode keeps the newest frame),
 #   capture-to-pose latency p50/p95, the wall-clock ms of its last snapshot, and the frames tracked but not fused
 #   (a loaded server's last economy steps fuse every other or third frame; those are not skipped: each has its pose, and
@@ -96,12 +97,14 @@ sample_threads() {
 sample_threads
 (while kill -0 "$server_pid" 2>/dev/null && [ ! -f "$work/streamed" ]; do sample_threads; sleep 0.5; done) &
 sampler_pid=$!
+head -1 /proc/stat >"$work/host_cpu_start"
 for s in $(seq 1 "$sessions"); do
     touch "$work/go$s"
     [ "$s" -lt "$sessions" ] && sleep 0.5
 done
 for p in "${agent_pids[@]}"; do wait "$p" || echo "server_realtime: an agent failed (logs in $work)" >&2; done
 touch "$work/streamed"
+head -1 /proc/stat >"$work/host_cpu_end"
 wait "$sampler_pid" 2>/dev/null || true
 sample_threads
 for s in $(seq 1 "$sessions"); do
@@ -115,6 +118,16 @@ what=${what:-synthetic Kinect}
 [ "$preload" = 1 ] && what="$what, preloaded by the agents"
 echo "server_realtime: $sessions session(s) x $frames frames at 30 Hz from $what, domain $domain, load $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "host check: the serial frame loop (facescan-bench recon --serial --frames 100) took $host_check"
+# The machine's CPU time while the agents streamed (/proc/stat's first line: user nice system idle iowait irq softirq
+# steal). Steal is time the hypervisor gave other guests: on this shared host it went from 0.0 % to 35 % between
+# runs a minute apart (2026-11-24), and four sessions missed the issue's bars in all 5 runs at 4-35 % and in 1 of
+# 9 under 1 %. The issue's figures are for a quiet machine, so the line says when it was not.
+paste "$work/host_cpu_start" "$work/host_cpu_end" | awk '{ n = NF / 2; for (i = 2; i <= 9 && i <= n; ++i) { d[i] = $(i + n) - $i; t += d[i] }
+    if (t <= 0) exit
+    steal = 100 * d[9] / t
+    note = steal > 1 ? " (not quiet: the hypervisor took CPU time, so these figures are a contended host'"'"'s)" : ""
+    printf "host while streaming: %.0f %% busy, %.0f %% idle, %.1f %% steal%s\n", 100 * (t - d[5] - d[6] - d[9]) / t,
+        100 * (d[5] + d[6]) / t, steal, note }'
 for s in $(seq 1 "$sessions"); do
     f="$work/data/rt$s/summary.json"
     if [ -f "$f" ]; then
