@@ -208,6 +208,12 @@ void FrameLoad::throttle(bool on) {
     (void)setpriority(PRIO_PROCESS, static_cast<id_t>(tid_), base_nice_ + (on ? kThrottledNice : 0));
 }
 
+void runThisThreadInBackground() {
+    const auto tid = static_cast<id_t>(syscall(SYS_gettid));
+    // Relative to the thread's own value: a server run niced as a whole keeps its background threads below it.
+    (void)setpriority(PRIO_PROCESS, tid, getpriority(PRIO_PROCESS, tid) + kBackgroundNice);
+}
+
 void applyEconomy(const FrameLoad& load, const recon::ReconParams& base, const std::string& session_id,
                   recon::Reconstructor& reconstructor) {
     const int level = std::max(base.model_level, load.coarseModel() ? 1 : 0);

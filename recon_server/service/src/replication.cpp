@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "recon/parallel.hpp"
+#include "service/frame_load.hpp"
 #include "service/server.hpp"
 #include "service/session_store.hpp"
 
@@ -66,6 +67,9 @@ void Replicator::poll() {
 
 void Replicator::loop() {
     recon::nameThisThread("fs-replicate");
+    // A round's encoding can wait a few milliseconds for the sessions' frames; the agents keep the frames until it
+    // is done (keep_frames), so nothing is lost while it waits.
+    runThisThreadInBackground();
     const auto interval_ns = static_cast<int64_t>(params_.replica_interval_s * 1e9);
     int64_t stats_due_ns = steadyNowNs() + kStatsEveryNs;
     ReplicationStats last;

@@ -1,9 +1,5 @@
 #include "service/server.hpp"
 
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -11,6 +7,7 @@
 #include <thread>
 
 #include "recon/parallel.hpp"
+#include "service/frame_load.hpp"
 #include "service/replication.hpp"
 #include "service/session_store.hpp"
 
@@ -475,8 +472,7 @@ bool Server::waitForTick(std::chrono::steady_clock::time_point& next, std::chron
 
 void Server::snapshotLoop() {
     recon::nameThisThread("fs-snapshot");
-    // Snapshots are a nicety; frames are not: let the scheduler prefer the workers on a busy machine.
-    (void)setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
+    runThisThreadInBackground();  // snapshots are a nicety; frames are not
     const auto period = params_.snapshot_hz > 0 ? std::chrono::duration<double>(1.0 / params_.snapshot_hz)
                                                 : std::chrono::duration<double>(0.5);
     auto next = std::chrono::steady_clock::now();

@@ -8,6 +8,7 @@
 #include <set>
 
 #include "recon/parallel.hpp"
+#include "service/frame_load.hpp"
 #include "service/replica_log.hpp"
 #include "service/replication.hpp"
 #include "service/server.hpp"
@@ -138,6 +139,9 @@ void Server::buildEngine(OwnedSession& o) {
         o.engine = std::async(
             std::launch::async, [params = params_, camera = replica ? replica->camera : *o.camera, replica, wake] {
                 recon::nameThisThread("fs-engine");
+                // The build (cascade parsed, buffers touched: 30-45 ms of CPU) lands as a session joins busy
+                // ones; the claim settles for claim_settle_s meanwhile, so it is rarely waited for.
+                runThisThreadInBackground();
                 StatusOr<SessionEngine> engine = SessionEngine::build(params, camera, replica);
                 if (wake > 0) (void)dds_set_guardcondition(wake, true);  // activate() on the intake thread's next turn
                 return engine;
