@@ -171,8 +171,7 @@ void printFrame(int i, const Sequence& seq, const recon::FrameResult& r, const r
     if (r.hypotheses > 0) std::printf(" %d hypotheses %.0f ms", r.hypotheses, r.reacquire_ms);
     if (r.occluding_pixels > 0) std::printf(" occluder px %d", r.occluding_pixels);
     if (*advice) std::printf(" -> \"%s\"", advice);
-    // The frame's stage times: where a scan's first frame goes (detection, the model's first blocks) is not
-    // visible in the averages.
+    // The frame's stage times: the averages hide where a scan's costly first frame goes.
     std::printf(" | ms detect %.2f segment %.2f filter %.2f icp %.2f integrate %.2f raycast %.2f",
                 head ? head->detect_ms : 0.0f, head ? head->segment_ms : 0.0f, r.ms.filter, r.ms.icp, r.ms.integrate,
                 r.ms.raycast);

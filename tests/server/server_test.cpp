@@ -166,7 +166,6 @@ class Feed {
     std::thread thread_;
 };
 
-// The names of this process's threads (Linux: /proc/self/task/*/comm).
 // Each of this process's threads by name (/proc/self/task/TID/comm), with its nice value (field 19 of its stat).
 std::map<std::string, int> threadNices() {
     std::map<std::string, int> nices;
