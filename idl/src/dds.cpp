@@ -100,6 +100,17 @@ StatusOr<std::string> loadProfileXml(const std::string& profile) {
     return *text;
 }
 
+double profileLeaseS(const std::string& profile_xml) {
+    constexpr double kCycloneDefaultS = 10.0;
+    static const std::regex kLease(R"(<LeaseDuration>\s*([0-9]*\.?[0-9]+)\s*(ms|s|min|hr)?\s*</LeaseDuration>)");
+    std::smatch m;
+    if (!std::regex_search(profile_xml, m, kLease)) return kCycloneDefaultS;
+    const double value = std::stod(m[1].str());
+    const std::string unit = m[2].str();
+    const double s = unit == "ms" ? value * 1e-3 : unit == "min" ? value * 60 : unit == "hr" ? value * 3600 : value;
+    return s > 0 ? s : kCycloneDefaultS;
+}
+
 Status checkSocketBuffers(const std::string& profile_xml) {
     static const std::regex kMin(R"(<SocketReceiveBufferSize[^>]*\bmin\s*=\s*\"([^\"]+)\")");
     std::smatch m;

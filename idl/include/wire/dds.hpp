@@ -47,6 +47,9 @@ StatusOr<std::string> loadProfileXml(const std::string& profile);
 // Reads net.core.rmem_max and compares it with the SocketReceiveBufferSize min of the profile. When the kernel
 // limit is lower, Cyclone cannot create the participant; the Status says exactly which sysctl to run.
 Status checkSocketBuffers(const std::string& profile_xml);
+// The profile's Discovery/LeaseDuration in seconds: how long a silent peer counts as alive. Cyclone's default
+// (10 s) when the profile sets none or sets one that cannot be read.
+double profileLeaseS(const std::string& profile_xml);
 
 // An owned DDS entity handle; deleting it deletes its children (DDS semantics).
 class Entity {

@@ -20,6 +20,11 @@ Qos replicaQos();         // reliable, volatile, keep-all with a small bound: a 
 Qos replicaAckQos();      // reliable, volatile, keep-last 4
 // A claim writer's QoS: sessionOwnerQos with this ownership strength (claimStrength).
 Qos claimWriterQos(int32_t strength);
+// A server's announcement and claims stay alive only while the server makes progress: MANUAL_BY_PARTICIPANT
+// liveliness with this lease, asserted (dds_assert_liveliness) by the loop that does the server's work. DDS keeps
+// automatic liveliness up as long as its own threads run, so a server whose work had stalled kept its sessions;
+// with this, a stalled server loses its claims within the lease, exactly as a dead one does.
+Qos withProgressLiveliness(Qos q, double lease_s);
 
 // Frames of a recording must all arrive: keep-all with a bounded history, so a slow server blocks the writer
 // (reliable back-pressure) instead of losing frames. Live cameras use keep-last: old frames are worth nothing.

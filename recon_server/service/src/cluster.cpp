@@ -77,7 +77,9 @@ StatusOr<std::unique_ptr<Cluster>> Cluster::create(const wire::Participant& p, c
     std::unique_ptr<Cluster> c(new Cluster(options));
     ASSIGN_OR_RETURN(c->announce_topic_, wire::Topic<facescan_wire_ServerAnnounce>::create(p));
     ASSIGN_OR_RETURN(c->owner_topic_, wire::Topic<facescan_wire_SessionOwner>::create(p));
-    ASSIGN_OR_RETURN(c->announce_writer_, wire::Writer<facescan_wire_ServerAnnounce>::create(*c->announce_topic_));
+    const wire::Qos announce_qos = wire::withProgressLiveliness(wire::serverAnnounceQos(), options.lease_s);
+    ASSIGN_OR_RETURN(c->announce_writer_,
+                     wire::Writer<facescan_wire_ServerAnnounce>::create(*c->announce_topic_, &announce_qos));
     ASSIGN_OR_RETURN(c->announce_reader_, wire::Reader<facescan_wire_ServerAnnounce>::create(*c->announce_topic_));
     ASSIGN_OR_RETURN(c->owner_reader_, wire::Reader<facescan_wire_SessionOwner>::create(*c->owner_topic_));
     std::random_device rd;
@@ -289,8 +291,9 @@ std::string Cluster::responder() const {
 }
 
 StatusOr<std::unique_ptr<Claim>> Cluster::claim(const wire::SessionOwnerData& initial) {
-    const wire::Qos qos =
-        wire::claimWriterQos(wire::claimStrength(initial.epoch, options_.server_id, initial.session_id));
+    const wire::Qos qos = wire::withProgressLiveliness(
+        wire::claimWriterQos(wire::claimStrength(initial.epoch, options_.server_id, initial.session_id)),
+        options_.lease_s);
     ASSIGN_OR_RETURN(auto writer, wire::Writer<facescan_wire_SessionOwner>::create(*owner_topic_, &qos));
     return std::make_unique<Claim>(std::move(writer), initial);
 }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <future>
 #include <thread>
 
@@ -13,6 +14,9 @@
 
 namespace facescan::service {
 namespace {
+
+// A server that found itself stuck exits with this (EX_SOFTWARE): systemd's Restart=on-failure starts it again.
+constexpr int kExitStalled = 70;
 
 constexpr int kBatch = 16;  // samples per take; also the reader's per-instance limit (wire::frameReaderQos)
 
@@ -52,13 +56,31 @@ Status Server::start() {
     ASSIGN_OR_RETURN(status_writer_, boxed(wire::Writer<facescan_wire_ScanStatus>::create(*status_topic_)));
     ASSIGN_OR_RETURN(snapshot_writer_, boxed(wire::Writer<facescan_wire_MeshSnapshot>::create(*snapshot_topic_)));
     ASSIGN_OR_RETURN(reply_writer_, boxed(wire::Writer<facescan_wire_ScanReply>::create(*reply_topic_)));
+    if (auto xml = wire::loadProfileXml(params_.domain.profile); xml.isOk()) {
+        lease_ns_ = static_cast<int64_t>(wire::profileLeaseS(*xml) * 1e9);
+    }
+    if (const char* fp = std::getenv("FACESCAN_FAILPOINT")) {
+        const std::string spec = fp;
+        const std::string stall = "intake-stall-when-file:";
+        if (spec.rfind(stall, 0) == 0) stall_file_ = spec.substr(stall.size());
+        std::fprintf(stderr, "facescan-server: FACESCAN_FAILPOINT=%s (fault injection for tests)\n", fp);
+    }
+    Watchdog::Options watch;
+    watch.stall_limit_s = params_.stall_limit_s;
+    watchdog_ = std::make_unique<Watchdog>(watch, [this](const std::string& what) { onStall(what); });
+    intake_beat_ = watchdog_->add("the intake thread");
+    retirer_ = std::make_unique<Retirer>(watchdog_->add("the retiring thread"));
     Cluster::Options cluster;
     cluster.server_id = params_.server_id;
+    cluster.lease_s = static_cast<double>(lease_ns_) * 1e-9;
     cluster.max_sessions = params_.max_sessions;
     cluster.join_settle_s = params_.join_settle_s;
     cluster.domain = params_.domain;
     ASSIGN_OR_RETURN(cluster_, Cluster::create(p, cluster));
-    ASSIGN_OR_RETURN(replicator_, Replicator::create(p, params_, *cluster_, [this] { return ownedSessions(); }));
+    // A server whose view is stale replicates nothing: its sessions may be another server's by now.
+    ASSIGN_OR_RETURN(replicator_, Replicator::create(p, params_, *cluster_, [this] {
+                         return viewFresh() ? ownedSessions() : std::vector<std::shared_ptr<OwnedSession>>{};
+                     }));
 
     const dds_entity_t ws = dds_create_waitset(p.handle());
     if (ws < 0) return wire::ddsStatus(ws, "create waitset");
@@ -79,6 +101,8 @@ Status Server::start() {
     loadResumable();
     RETURN_IF_ERROR(join());
     joined_ = true;
+    intake_seen_ns_ = steadyNowNs();
+    watchdog_->start();
     replicator_->start();
     intake_ = std::thread([this] { intakeLoop(); });
     command_ = std::thread([this] { commandLoop(); });
@@ -94,6 +118,7 @@ Status Server::join() {
         RETURN_IF_ERROR(cluster_->poll());
         replicator_->poll();  // replicas may already come in for sessions we stand by for
         cluster_->announce(0, standbySessions());
+        assertProgress(steadyNowNs());
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
     RETURN_IF_ERROR(cluster_->poll());
@@ -132,6 +157,8 @@ void Server::shutdown() {
         if (t->joinable()) t->join();
     }
     if (replicator_) replicator_->stop();
+    if (watchdog_) watchdog_->stop();
+    retirer_.reset();  // what was given up ends now, while the participant still exists
     if (!status_writer_) return;
     // The last word on every session: final status and final mesh (durable: late subscribers still get them),
     // and the claims say FINISHED (a standby must not take over a session that ended here).
@@ -197,11 +224,20 @@ std::vector<std::shared_ptr<OwnedSession>> Server::ownedSessions() const {
 void Server::intakeLoop() {
     recon::nameThisThread("fs-intake");
     bool duplicate_logged = false;
+    int64_t last_turn_ns = steadyNowNs();
     while (!stopping_) {
+        intake_beat_->end();
         dds_attach_t triggered[16];
         (void)dds_waitset_wait(waitset_.handle(), triggered, 16, DDS_MSECS(100));
+        intake_beat_->begin();
         dds_set_guardcondition(wake_.handle(), false);
         if (stopping_) break;
+        // The loop turns at least every 100 ms: a longer gap is time this process did not run.
+        const int64_t now = steadyNowNs();
+        noticePause(now - last_turn_ns, now);
+        last_turn_ns = now;
+        intake_seen_ns_ = now;
+        assertProgress(now);
         if (const Status s = cluster_->poll(); !s.isOk() && !duplicate_logged) {
             // After the join only a newer server can clash with our id, and that one refuses to start.
             std::fprintf(stderr, "facescan-server: %s\n", s.message().c_str());
@@ -211,7 +247,51 @@ void Server::intakeLoop() {
         clusterTick();
         takeCommands();
         takeFrames();
+        if (!stall_file_.empty()) failpoint();
     }
+    intake_beat_->end();
+}
+
+void Server::noticePause(int64_t gap_ns, int64_t now_ns) {
+    if (gap_ns < lease_ns_ / 2) return;
+    view_stale_until_ns_ = now_ns + 2 * lease_ns_;
+    std::fprintf(stderr,
+                 "facescan-server: this server did not run for %.1f s (frozen, or the machine paused): its view of "
+                 "the cluster is stale; re-observing it for %.1f s before taking anything over, and holding its "
+                 "own sessions until it knows it still owns them\n",
+                 static_cast<double>(gap_ns) * 1e-9, 2 * static_cast<double>(lease_ns_) * 1e-9);
+}
+
+bool Server::viewFresh() const {
+    // The intake's own turn must be recent too: after a pause the other threads may wake before the intake has
+    // noticed it, and they must not act in the meantime.
+    const int64_t now = steadyNowNs();
+    return now >= view_stale_until_ns_.load() && now - intake_seen_ns_.load() < lease_ns_ / 2;
+}
+
+void Server::assertProgress(int64_t now_ns) {
+    // A few times a lease is enough for the readers' lease, and cheap (one small message per peer).
+    if (now_ns - last_progress_ns_ < lease_ns_ / 6) return;
+    last_progress_ns_ = now_ns;
+    if (const dds_return_t rc = dds_assert_liveliness(participant_->handle()); rc < 0) {
+        std::fprintf(stderr, "facescan-server: %s\n", wire::ddsStatus(rc, "assert liveliness").toString().c_str());
+    }
+}
+
+void Server::failpoint() {
+    std::error_code ec;
+    if (!std::filesystem::exists(stall_file_, ec)) return;
+    std::fprintf(stderr, "facescan-server: failpoint: the intake thread stops (%s exists)\n", stall_file_.c_str());
+    while (!stopping_) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+}
+
+void Server::onStall(const std::string& what) {
+    std::fprintf(stderr,
+                 "facescan-server: stuck: %s. Exiting with status %d so that the service manager restarts this "
+                 "server; the cluster takes its sessions over from their standbys and data dir.\n",
+                 what.c_str(), kExitStalled);
+    std::fflush(stderr);
+    std::_Exit(kExitStalled);
 }
 
 void Server::takeCameraInfos() {
@@ -256,6 +336,11 @@ void Server::takeCommands() {
                        steadyNowNs()});
     });
     if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
+    if (!viewFresh()) {
+        // Answered once this server knows which of its sessions are still its own.
+        for (Command& c : got) deferred_.push_back(std::move(c));
+        return;
+    }
     // Deferred ones first (they came earlier), then the new ones.
     std::deque<Command> todo;
     todo.swap(deferred_);
@@ -477,6 +562,7 @@ void Server::snapshotLoop() {
                                                 : std::chrono::duration<double>(0.5);
     auto next = std::chrono::steady_clock::now();
     while (waitForTick(next, period)) {
+        if (!viewFresh()) continue;
         std::vector<std::shared_ptr<Session>> all;
         for (const auto& o : ownedSessions()) {
             if (o->session) all.push_back(o->session);
@@ -498,6 +584,7 @@ void Server::statusLoop() {
     std::map<std::string, bool> final_sent;  // finished sessions: their FINISHED status went out once
     auto next = std::chrono::steady_clock::now();
     while (waitForTick(next, period)) {
+        if (!viewFresh()) continue;
         std::vector<std::shared_ptr<OwnedSession>> all = ownedSessions();
         std::map<std::string, Refused> refused;
         {

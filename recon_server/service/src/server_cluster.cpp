@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cstdio>
 #include <set>
+#include <thread>
 
 #include "recon/parallel.hpp"
 #include "service/frame_load.hpp"
@@ -32,7 +33,8 @@ void Server::clusterTick() {
     for (const auto& o : ownedSessions()) open += o->phase != OwnedSession::Phase::kFinished ? 1 : 0;
     cluster_->announce(open, standbySessions());
     const std::map<std::string, OwnerView> owners = cluster_->owners();
-    settleClaims(owners);
+    settleClaims(owners);  // while the view is stale, only to give up what another server owns now
+    if (!viewFresh()) return;
     takeOverOrphans(owners);
     placeNewSessions(owners);
     requestReplays();
@@ -164,15 +166,13 @@ void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
             if (beaten) {
                 yield(o->id, "server '" + view->data.owner_id + "' claimed it too (epoch " +
                                  std::to_string(view->data.epoch) + ")");
-            } else if (ours && steadyNowNs() - o->claimed_ns >= settle_ns &&
+            } else if (ours && viewFresh() && steadyNowNs() - o->claimed_ns >= settle_ns &&
                        (!o->engine.valid() ||
                         o->engine.wait_for(std::chrono::seconds(0)) == std::future_status::ready)) {
                 if (const Status s = activate(*o); !s.isOk()) {
                     std::fprintf(stderr, "facescan-server: cannot start session %s: %s\n", o->id.c_str(),
                                  s.toString().c_str());
-                    o->claim->release();
-                    std::lock_guard lk(sessions_mutex_);
-                    owned_.erase(o->id);
+                    retireOwned(o, /*dispose_claim=*/true);
                 }
             }
         } else if (beaten) {
@@ -189,6 +189,7 @@ Status Server::activate(OwnedSession& o) {
         if (wake_.valid()) dds_set_guardcondition(wake_.handle(), true);
     });
     session->setOwnership(params_.server_id, o.epoch);
+    session->setWatch(watchdog_->add("the worker of session " + o.id), [this] { return !viewFresh(); });
     SessionEngine engine;
     if (o.engine.valid()) {
         ASSIGN_OR_RETURN(engine, o.engine.get());
@@ -227,26 +228,37 @@ Status Server::activate(OwnedSession& o) {
 void Server::yield(const std::string& session_id, const std::string& why) {
     std::shared_ptr<OwnedSession> o = owned(session_id);
     if (!o) return;
-    if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
-    o->frames.reset();
-    o->claim.reset();  // withdrawn, not disposed: the stronger claim stays the only one
+    // The stronger claim continues the scan from its replica and from the frames the agent keeps until they are
+    // confirmed, so nothing is lost if this server stops here. Writing what it integrated would split the scan
+    // (two results for one session), so it writes, replicates and answers nothing more for it.
+    const uint32_t integrated = o->session ? o->session->stats().frames_integrated : 0;
+    if (o->session) o->session->abandon();
+    retireOwned(o, /*dispose_claim=*/false);
+    std::fprintf(
+        stderr, "facescan-server: session %s: gave it up, %s; nothing written for it here%s\n", session_id.c_str(),
+        why.c_str(),
+        integrated > 0 ? (" (the " + std::to_string(integrated) + " frames integrated here are dropped)").c_str() : "");
+}
+
+void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_claim) {
     {
         std::lock_guard lk(sessions_mutex_);
-        owned_.erase(session_id);
+        if (auto it = owned_.find(o->id); it != owned_.end() && it->second == o) owned_.erase(it);
     }
-    const SessionStats st = o->session ? o->session->stats() : SessionStats{};
-    if (o->session && st.frames_integrated > 0 && !o->session->finished()) {
-        // It integrated frames here: keep them, as this server's result, in its own folder (session_store's
-        // owner rule puts them beside the other owner's files when both share a data dir).
-        std::fprintf(stderr,
-                     "facescan-server: session %s: gave it up, %s; writing what this server integrated (%u "
-                     "frames) to its data dir\n",
-                     session_id.c_str(), why.c_str(), st.frames_integrated);
-        std::shared_ptr<Session> keep = o->session;
-        keep->requestFinish("superseded: " + why, [keep](const Status&, const MeshResult&) {});
-        return;
-    }
-    std::fprintf(stderr, "facescan-server: session %s: gave it up, %s\n", session_id.c_str(), why.c_str());
+    o->phase = OwnedSession::Phase::kGivenUp;
+    if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
+    o->frame_condition = 0;
+    if (dispose_claim && o->claim) o->claim->release();
+    // The replication thread may still hold the OwnedSession for a moment (it copies the list each turn): the
+    // retiring thread waits until it holds the last reference, so the endpoints end there and in this order.
+    retirer_->retire([held = o]() mutable {
+        for (int i = 0; i < 1000 && held.use_count() > 1; ++i)
+            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        held->frames.reset();   // no more frames for this session here
+        held->claim.reset();    // withdrawn (or released above)
+        held->session.reset();  // its worker stops; joined here, never on itself
+        held.reset();
+    });
 }
 
 void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
@@ -377,18 +389,15 @@ void Server::releaseStale() {
             o->session->stats().frames_received == 0 && o->session->nextSeq() == 0) {
             std::fprintf(stderr, "facescan-server: session %s: released, no frame came within %.0f s\n", o->id.c_str(),
                          static_cast<double>(params_.first_frame_timeout_s));
-            if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
-            o->frames.reset();
-            o->claim->release();
-            std::lock_guard lk(sessions_mutex_);
-            owned_.erase(o->id);
+            retireOwned(o, /*dispose_claim=*/true);
             continue;
         }
         if (o->phase != OwnedSession::Phase::kFinished && o->session && o->session->finished()) {
             // Done: its frames are no longer read, and the claim says FINISHED (standbys drop their copies).
             if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
-            o->frames.reset();
             o->frame_condition = 0;
+            retirer_->retire([reader = std::shared_ptr<wire::Reader<facescan_wire_RgbdFrame>>(
+                                  std::move(o->frames))]() mutable { reader.reset(); });
             o->phase = OwnedSession::Phase::kFinished;
             o->claim->update([](wire::SessionOwnerData& r) { r.state = wire::OwnerState::kFinished; });
         }

@@ -134,6 +134,7 @@ const std::map<std::string, Setter>& setters() {
         FLOAT("join_settle_s", p.join_settle_s),
         FLOAT("claim_settle_s", p.claim_settle_s),
         FLOAT("first_frame_timeout_s", p.first_frame_timeout_s),
+        FLOAT("stall_limit_s", p.stall_limit_s),
         INT("queue_frames", p.queue_frames),
         {"data_dir",
          [](ServerParams& p, const std::string&, const std::string& value) -> Status {
@@ -219,6 +220,7 @@ Status ServerParams::validate() const {
     if (!(join_settle_s >= 0 && join_settle_s <= 60))
         return invalidArgument("join_settle_s must be in [0, 60] seconds");
     if (!(claim_settle_s >= 0 && claim_settle_s <= 10)) return invalidArgument("claim_settle_s must be in [0, 10] s");
+    if (!(stall_limit_s >= 1 && stall_limit_s <= 3600)) return invalidArgument("stall_limit_s must be in [1, 3600] s");
     if (!(first_frame_timeout_s >= 1 && first_frame_timeout_s <= 3600)) {
         return invalidArgument("first_frame_timeout_s must be in [1, 3600] seconds");
     }

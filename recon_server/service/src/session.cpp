@@ -121,10 +121,29 @@ Session::~Session() {
         queue_.clear();
     }
     cv_.notify_all();
+    // A Session ends on the server's retiring thread (retirer.hpp): its worker must never hold the last reference,
+    // since joining itself aborts the process.
     if (worker_.joinable()) worker_.join();
     for (Control& c : control_) {  // never leave a waiting caller without an answer
         if (c.kind == Control::kRun && c.reset_done) c.reset_done(unavailable("session '" + id_ + "' is closed"));
     }
+}
+
+void Session::setWatch(std::shared_ptr<Watchdog::Beat> beat, std::function<bool()> hold) {
+    std::lock_guard lk(mutex_);
+    beat_ = std::move(beat);
+    hold_ = std::move(hold);
+}
+
+void Session::abandon() {
+    std::deque<Control> dropped;
+    {
+        std::lock_guard lk(mutex_);
+        stop_ = true;
+        queue_.clear();
+        dropped.swap(control_);  // unanswered: the new owner answers these commands
+    }
+    cv_.notify_all();
 }
 
 Status Session::setCamera(const wire::CameraInfoData& camera, SessionEngine engine) {
@@ -253,6 +272,7 @@ void Session::requestReset(std::function<void(const Status&)> done) {
 
 void Session::requestFinish(const std::string& why, FinishCallback done) {
     std::unique_lock lk(mutex_);
+    if (stop_) return;  // given up (abandon) or closing: the owner now is another server
     if (stats_.state == SessionState::kFinished) {
         const MeshResult m = final_mesh_;
         lk.unlock();
@@ -277,12 +297,24 @@ void Session::workerLoop() {
     load_->join();
     struct Leave {
         FrameLoad& load;
-        ~Leave() { load.leave(); }
-    } leave{*load_};
+        Watchdog::Beat* beat;  // a worker that ended is not stuck in its last step
+        ~Leave() {
+            load.leave();
+            if (beat) beat->end();
+        }
+    } leave{*load_, beat_.get()};
     applyEconomy(*load_, params_.recon, id_, *recon_);  // a session joining busy ones starts at their step
     for (;;) {
         std::unique_lock lk(mutex_);
+        if (beat_) beat_->end();
         cv_.wait(lk, [&] { return stop_ || !control_.empty() || !queue_.empty(); });
+        if (!stop_ && hold_ && hold_()) {
+            // The server's view of the cluster is stale: nothing is integrated, finished or written until it knows
+            // whether it still owns this session. Frames wait in the queue meanwhile.
+            cv_.wait_for(lk, std::chrono::milliseconds(20), [&] { return stop_; });
+            continue;
+        }
+        if (beat_) beat_->begin();
         if (!control_.empty()) {
             Control c = std::move(control_.front());
             control_.pop_front();

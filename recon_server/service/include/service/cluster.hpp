@@ -70,7 +70,10 @@ class Cluster {
         std::string server_id;
         int max_sessions = 4;
         double join_settle_s = 2.0;  // seconds of discovery before this server takes sessions
-        wire::DomainConfig domain;   // for messages
+        // seconds: the DDS profile's lease. The announcement and the claims lose their liveliness this long after
+        // the server last asserted its progress (Server::intakeLoop), as they would if the process had died.
+        double lease_s = 10.0;
+        wire::DomainConfig domain;  // for messages
     };
     static StatusOr<std::unique_ptr<Cluster>> create(const wire::Participant& participant, const Options& options);
     ~Cluster();

@@ -29,8 +29,10 @@
 #include <vector>
 
 #include "service/cluster.hpp"
+#include "service/retirer.hpp"
 #include "service/server_params.hpp"
 #include "service/session.hpp"
+#include "service/watchdog.hpp"
 #include "wire/topics.hpp"
 
 namespace facescan::service {
@@ -40,7 +42,8 @@ class Replicator;
 // A session this server claimed: its claim on SessionOwner and, once the claim settled, the session and the
 // reader of its frames. Shared with the replication thread.
 struct OwnedSession {
-    enum class Phase { kClaiming, kReady, kActive, kFinished };
+    // kGivenUp: yielded or released; its endpoints are on their way to the retiring thread (retirer.hpp).
+    enum class Phase { kClaiming, kReady, kActive, kFinished, kGivenUp };
     std::string id;
     uint32_t epoch = 1;
     std::unique_ptr<Claim> claim;
@@ -131,6 +134,23 @@ class Server {
     void buildEngine(OwnedSession& owned);  // starts the build of owned.engine
     Status activate(OwnedSession& owned);
     void yield(const std::string& session_id, const std::string& why);
+    // The one way a session's endpoints end: out of owned_, its frame reader's condition off the waitset (both here,
+    // on the intake thread), then reader, claim and session ended in that order on the retiring thread.
+    // `dispose_claim`: the claim says RELEASED first (nobody owns the session); else it is withdrawn, as if this
+    // server had died, and a stronger claim stays the only one.
+    void retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_claim);
+    // server.cpp: the cluster view. A server that was frozen (SIGSTOP, a paused VM, a stall) for half a lease or
+    // more saw the others' leases lapse only in its own eyes: for two leases after it wakes, it re-observes the
+    // cluster and takes nothing over, places nothing, and holds its own sessions' work and output (frames,
+    // finishes, replicas, status, snapshots, replies) until it knows whether it still owns them.
+    void noticePause(int64_t gap_ns, int64_t now_ns);
+    bool viewFresh() const;
+    void assertProgress(int64_t now_ns);    // the announcement's and claims' liveliness (wire::withProgressLiveliness)
+    void onStall(const std::string& what);  // the watchdog found a loop stuck: say so and exit non-zero
+    // Fault injection for the cluster tests, as etcd's gofail or FreeBSD's fail(9): with FACESCAN_FAILPOINT=
+    // intake-stall-when-file:PATH the intake thread stops for good once PATH exists, a real stall of a real
+    // thread that the watchdog and the cluster must handle. Unset in production.
+    void failpoint();
     void loadResumable();
     std::shared_ptr<OwnedSession> owned(const std::string& session_id) const;
     std::vector<std::shared_ptr<OwnedSession>> ownedSessions() const;
@@ -150,6 +170,14 @@ class Server {
     std::unique_ptr<wire::Writer<facescan_wire_ScanStatus>> status_writer_;
     std::unique_ptr<wire::Writer<facescan_wire_MeshSnapshot>> snapshot_writer_;
     std::unique_ptr<wire::Writer<facescan_wire_ScanReply>> reply_writer_;
+    std::unique_ptr<Watchdog> watchdog_;
+    std::shared_ptr<Watchdog::Beat> intake_beat_;
+    std::unique_ptr<Retirer> retirer_;  // after the DDS entities: it ends readers and claims, so it goes first
+    int64_t lease_ns_ = 10'000'000'000;
+    std::atomic<int64_t> intake_seen_ns_{0};       // steady clock of the intake loop's last turn
+    std::atomic<int64_t> view_stale_until_ns_{0};  // steady clock: after a pause, the view is re-observed until then
+    int64_t last_progress_ns_ = 0;                 // intake thread: when liveliness was last asserted
+    std::filesystem::path stall_file_;             // FACESCAN_FAILPOINT; empty: none
     wire::Entity waitset_;
     wire::Entity wake_;  // guard condition: queue space freed, an engine built, or shutdown
 

@@ -36,6 +36,11 @@ struct ServerParams {
     float join_settle_s = 2.0f;           // seconds of discovery after start before taking sessions
     float claim_settle_s = 0.25f;         // seconds a claim must stand before the owner reads frames
     float first_frame_timeout_s = 10.0f;  // seconds a claimed session may wait for its first frame (then released)
+    // seconds one step of the intake, a session's worker or the retiring thread may take before this server counts
+    // as stuck: it then exits non-zero (the service manager restarts it) and the cluster takes its sessions over.
+    // Short, because a stuck server's frame reader still matches the agent's writer while the process lives, and a
+    // recording's reliable writer waits for every reader it matches. A finish (the whole mesh) takes about a second.
+    float stall_limit_s = 10.0f;
 
     Status validate() const;
 };

@@ -22,6 +22,7 @@
 #include "recon/scan_step.hpp"
 #include "service/frame_load.hpp"
 #include "service/server_params.hpp"
+#include "service/watchdog.hpp"
 #include "wire/mesh_codec.hpp"
 #include "wire/messages.hpp"
 #include "wire/replica_codec.hpp"
@@ -182,6 +183,14 @@ class Session {
     // After setCamera: the session starts over from its first frame because its dead owner left no replica (the
     // agent still keeps every frame); it counts as a failover, timed like one.
     void noteTakeoverFromFirstFrame(uint32_t failovers_before, int64_t takeover_from_ns);
+    // Before the worker starts: `beat` times each of the worker's steps (the server's watchdog); while `hold` returns
+    // true the worker takes nothing, neither a frame nor a finish: the server's view of the cluster is stale (it was
+    // frozen) and it must not integrate, finish or write for a session that another server may own by now.
+    void setWatch(std::shared_ptr<Watchdog::Beat> beat, std::function<bool()> hold);
+    // This server gave the session up (another one owns it): the worker stops without finishing, nothing more is
+    // written, replicated or answered for it here, and waiting callers are dropped unanswered (the new owner
+    // answers). The destructor then only joins.
+    void abandon();
     // Who owns it (the summary and the data dir record it) and where its replicas go.
     void setOwnership(const std::string& owner_id, uint32_t epoch);
     void setStandby(const std::string& standby_id);
@@ -239,6 +248,8 @@ class Session {
     std::deque<Control> control_;
     bool stop_ = false;
     bool finishing_ = false;
+    std::shared_ptr<Watchdog::Beat> beat_;  // set before the worker starts
+    std::function<bool()> hold_;
     SessionStats stats_;
     uint32_t next_seq_ = 0;  // the next frame to take (intake side)
     // Worker side of replication: where the last capture ended, and the frames processed.

@@ -1,0 +1,69 @@
+// A stuck server is a dead server. DDS keeps a process "alive" as long as its own threads run, so a server whose
+// intake or a session's worker hangs (a blocked call, a lock never released) would hold its sessions for ever. Every
+// loop that does the server's work holds a Beat: it marks when it starts a step and when it goes back to waiting.
+// The watchdog's thread looks at the beats; a loop that stays in one step beyond the stall limit means this process
+// no longer makes progress, and the watchdog calls on_stall (the server logs it and exits non-zero, so that the
+// service manager restarts it while the cluster takes its sessions over).
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace facescan::service {
+
+class Watchdog {
+ public:
+    class Beat {
+     public:
+        explicit Beat(std::string name) : name_(std::move(name)) {}
+        void begin();  // a step starts now: it must end within the stall limit
+        void end();    // back to waiting for work: not expected to progress
+        int64_t busySinceNs() const { return since_ns_.load(std::memory_order_relaxed); }
+        const std::string& name() const { return name_; }
+
+     private:
+        std::string name_;
+        std::atomic<int64_t> since_ns_{0};  // steady clock; 0 while waiting
+    };
+
+    struct Options {
+        double stall_limit_s = 20.0;  // seconds one step may take before the process counts as stuck
+        double period_s = 0.25;       // seconds between checks
+    };
+    Watchdog(Options options, std::function<void(const std::string& what)> on_stall);
+    ~Watchdog();  // stop()
+    Watchdog(const Watchdog&) = delete;
+    Watchdog& operator=(const Watchdog&) = delete;
+
+    // A beat for one loop; it is watched while anybody holds it.
+    std::shared_ptr<Beat> add(std::string name);
+    // The first loop that has been in one step beyond the limit ("the intake thread has been in one step for
+    // 21.3 s"), else nullopt.
+    std::optional<std::string> stalled(int64_t now_ns) const;
+
+    void start();
+    void stop();
+
+ private:
+    void loop();
+
+    Options options_;
+    std::function<void(const std::string&)> on_stall_;
+    mutable std::mutex mutex_;
+    std::vector<std::weak_ptr<Beat>> beats_;
+    // When this process last woke from a pause (SIGSTOP, a VM paused): the watchdog's own thread was frozen too, so
+    // a step that was under way then is timed from the wake, not from before the pause.
+    std::atomic<int64_t> resumed_ns_{0};
+    std::condition_variable cv_;
+    bool stopping_ = false;
+    std::thread thread_;
+};
+
+}  // namespace facescan::service

@@ -1,0 +1,51 @@
+#include "service/retirer.hpp"
+
+#include "recon/parallel.hpp"
+
+namespace facescan::service {
+
+Retirer::Retirer(std::shared_ptr<Watchdog::Beat> beat) : beat_(std::move(beat)) {
+    thread_ = std::thread([this] { loop(); });
+}
+
+Retirer::~Retirer() {
+    {
+        std::lock_guard lk(mutex_);
+        stopping_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+}
+
+size_t Retirer::pending() const {
+    std::lock_guard lk(mutex_);
+    return jobs_.size();
+}
+
+void Retirer::retire(std::function<void()> job) {
+    {
+        std::lock_guard lk(mutex_);
+        jobs_.push_back(std::move(job));
+    }
+    cv_.notify_one();
+}
+
+void Retirer::loop() {
+    recon::nameThisThread("fs-retire");
+    for (;;) {
+        std::function<void()> job;
+        {
+            std::unique_lock lk(mutex_);
+            if (beat_) beat_->end();
+            cv_.wait(lk, [&] { return stopping_ || !jobs_.empty(); });
+            if (jobs_.empty()) return;  // stopping, and everything handed over has ended
+            job = std::move(jobs_.front());
+            jobs_.pop_front();
+            if (beat_) beat_->begin();
+        }
+        job();
+        job = nullptr;  // what it captured ends here too, still timed by the beat
+    }
+}
+
+}  // namespace facescan::service

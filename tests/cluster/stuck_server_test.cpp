@@ -1,0 +1,115 @@
+// Servers that are not dead but not working either, with the real programs:
+//   - an owner frozen (SIGSTOP) for longer than the lease and woken (SIGCONT), as a paused VM or a stalled disk
+//     would freeze it: the cluster takes its session over meanwhile; once awake it acts on nothing it missed, gives
+//     the session up without writing anything for it, and the scan finishes once, on the other server, whole;
+//   - an owner whose intake thread stops for good while its DDS threads run on (a fault injected with
+//     FACESCAN_FAILPOINT): its claims lose their liveliness within the lease, so the other server takes the session
+//     over while the stuck process still lives, and its watchdog then ends it with a non-zero status.
+#include <gtest/gtest.h>
+
+#include <csignal>
+
+#include "cluster_rig.hpp"
+
+namespace facescan::testing {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+constexpr int kFrames = 90;
+
+// Alive and not a zombie (an exited child that nobody reaped yet still answers kill(pid, 0)).
+bool processRuns(pid_t pid) {
+    const std::string stat = readText("/proc/" + std::to_string(pid) + "/stat");
+    const size_t paren = stat.rfind(')');
+    return paren != std::string::npos && paren + 2 < stat.size() && stat[paren + 2] != 'Z';
+}
+
+int summaryNumber(const fs::path& summary, const std::string& key) {
+    const std::string v = lastMatch(readText(summary), "\"" + key + "\": ([0-9]+)");
+    return v.empty() ? -1 : std::stoi(v);
+}
+
+void expectFinishedOnceWhole(const ClusterRig& rig, const std::string& session, const std::string& where) {
+    const fs::path summary = rig.dataDir(where) / session / "summary.json";
+    ASSERT_TRUE(waitUntil([&] { return fs::exists(summary); }, 30s)) << summary;
+    EXPECT_EQ(summaryNumber(summary, "integrated") + summaryNumber(summary, "rejected"), kFrames) << readText(summary);
+    EXPECT_EQ(lastMatch(readText(summary), "\"frames_digest\": \"([0-9a-f]+)\""),
+              lastMatch(readText(rig.agentLog(session)), "frames digest ([0-9a-f]{16})"));
+}
+
+TEST(StuckServer, AFrozenOwnerWakesActsOnNothingItMissedAndWritesNothingForWhatWasTakenOver) {
+    ClusterRig rig("frozen", 61);
+    rig.startServer("srv-a");
+    rig.startServer("srv-b");
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    rig.startAgent("rec", kFrames, "max", ",period=900");
+    const std::string owner = rig.waitForOwner("rec", 30s);
+    ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("rec"));
+    const std::string other = owner == "srv-a" ? "srv-b" : "srv-a";
+    ASSERT_TRUE(waitUntil([&] { return rig.published("rec") >= 20; }, 60s));
+    rig.server(owner).signal(SIGSTOP);
+    // Frozen well past the lease (3 s): the other server takes the session over meanwhile.
+    const bool taken = waitUntil(
+        [&] {
+            return readText(rig.serverLog(other)).find("session rec: owner '" + owner + "' is gone") !=
+                   std::string::npos;
+        },
+        30s);
+    std::this_thread::sleep_for(2s);
+    rig.server(owner).signal(SIGCONT);
+    ASSERT_TRUE(taken) << readText(rig.serverLog(other));
+    ASSERT_EQ(rig.agent("rec").wait(180s), 0) << readText(rig.agentLog("rec"));
+    expectFinishedOnceWhole(rig, "rec", other);
+    // Once it sees the stronger claim again (rediscovery after the pause), it gives the session up.
+    EXPECT_TRUE(waitUntil(
+        [&] { return readText(rig.serverLog(owner)).find("session rec: gave it up") != std::string::npos; }, 30s));
+    const std::string woke = readText(rig.serverLog(owner));
+    EXPECT_NE(woke.find("its view of the cluster is stale"), std::string::npos) << woke;
+    EXPECT_NE(woke.find("session rec: gave it up"), std::string::npos) << woke;
+    EXPECT_EQ(woke.find("taking over"), std::string::npos) << woke;         // it took nothing over on a stale view
+    EXPECT_FALSE(fs::exists(rig.dataDir(owner) / "rec" / "summary.json"));  // the scan is not split
+    EXPECT_EQ(woke.find("terminate called"), std::string::npos) << woke;
+    // Still a working server: it answers, and takes the next session.
+    EXPECT_TRUE(rig.waitForServers(2, 20s));
+}
+
+TEST(StuckServer, AnOwnerWhoseIntakeStallsLosesItsSessionWithinTheLeaseAndItsWatchdogEndsIt) {
+    ClusterRig rig("stalled", 62);
+    // Each server stops its intake when its own file appears; the test makes the owner's.
+    const std::vector<std::string> extra = {"--set", "stall_limit_s=8"};
+    for (const std::string id : {"srv-a", "srv-b"}) {
+        ::setenv("FACESCAN_FAILPOINT", ("intake-stall-when-file:" + (rig.dir() / ("stall-" + id)).string()).c_str(), 1);
+        rig.startServer(id, extra);
+    }
+    ::unsetenv("FACESCAN_FAILPOINT");
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    rig.startAgent("rec", kFrames, "max", ",period=900");
+    const std::string owner = rig.waitForOwner("rec", 30s);
+    ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("rec"));
+    const std::string other = owner == "srv-a" ? "srv-b" : "srv-a";
+    ASSERT_TRUE(waitUntil([&] { return rig.published("rec") >= 20; }, 60s));
+    std::ofstream(rig.dir() / ("stall-" + owner)).put('\n');
+    ASSERT_TRUE(waitUntil(
+        [&] { return readText(rig.serverLog(owner)).find("failpoint: the intake thread stops") != std::string::npos; },
+        30s));
+    const auto stalled_at = std::chrono::steady_clock::now();
+    // The takeover comes from the lapsed liveliness of the claim, while the stuck process still runs (its DDS
+    // threads answer: with automatic liveliness it would have kept the session for ever).
+    ASSERT_TRUE(waitUntil(
+        [&] { return readText(rig.serverLog(other)).find("owner '" + owner + "' is gone") != std::string::npos; }, 20s))
+        << readText(rig.serverLog(other));
+    const double takeover_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - stalled_at).count();
+    EXPECT_TRUE(processRuns(rig.server(owner).pid())) << "the stuck server had already exited";
+    EXPECT_LT(takeover_s, 3.0 + 3.0) << "the lease is 3 s";
+    EXPECT_EQ(rig.server(owner).wait(30s), 70) << readText(rig.serverLog(owner));
+    EXPECT_NE(readText(rig.serverLog(owner)).find("stuck: the intake thread has been in one step for"),
+              std::string::npos)
+        << readText(rig.serverLog(owner));
+    ASSERT_EQ(rig.agent("rec").wait(180s), 0) << readText(rig.agentLog("rec"));
+    expectFinishedOnceWhole(rig, "rec", other);
+}
+
+}  // namespace
+}  // namespace facescan::testing
