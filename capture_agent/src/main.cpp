@@ -1,5 +1,6 @@
 // facescan-agent: runs beside the camera; reads frames, compresses them and streams them to facescan-server.
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
@@ -16,12 +17,29 @@
 namespace {
 
 std::atomic<bool> g_stop{false};
-void onSignal(int) { g_stop = true; }
+// The first SIGINT or SIGTERM stops the agent in order (within about 2 s: the stream's end told, unconfirmed
+// frames saved); a second one ends it at once, for an operator who will not wait.
+void onSignal(int) {
+    if (!g_stop.exchange(true)) return;
+    constexpr char kMessage[] = "facescan-agent: second signal: exiting at once\n";
+    (void)!::write(STDERR_FILENO, kMessage, sizeof(kMessage) - 1);
+    ::_exit(130);
+}
+
+void installSignalHandlers() {
+    struct sigaction action {};
+    action.sa_handler = onSignal;
+    sigemptyset(&action.sa_mask);
+    action.sa_flags = 0;  // no SA_RESETHAND: the second signal must reach onSignal too
+    sigaction(SIGINT, &action, nullptr);
+    sigaction(SIGTERM, &action, nullptr);
+}
 
 constexpr const char* kUsage = R"(usage: facescan-agent [options]
 
 Reads RGB-D frames from a camera or a recording, compresses depth losslessly and colour as JPEG, and streams
-them to facescan-server over DDS. Prints a status line every second; Ctrl-C ends the stream cleanly.
+them to facescan-server over DDS. Prints a status line every second; Ctrl-C or SIGTERM ends the stream within
+2 s, whatever the server does (a second Ctrl-C at once), and saves a recording's unconfirmed frames (--save-dir).
 
 options:
   --source SRC          where frames come from (default: openni2)
@@ -52,6 +70,12 @@ options:
                         standby or on its disk), to resend after a takeover; when full, the agent waits
                         (default 300)
   --finish-timeout S    after the last frame, wait at most S seconds for the server to finish (default 120)
+  --stalled-after S     report a server that has taken no frame for S seconds while the agent waits on it
+                        (default 10); the agent keeps waiting for it or for another server to take over
+  --save-dir DIR        where a recording's frames that no server confirmed are saved when the agent stops
+                        before its scan finished: DIR/SESSION, a TUM folder that --source tum: replays
+                        (default: $XDG_STATE_HOME/facescan/unconfirmed, else
+                        ~/.local/state/facescan/unconfirmed)
 )";
 constexpr const char* kUsageEnd = R"(  --help                this text
 
@@ -130,6 +154,11 @@ int main(int argc, char** argv) {
             options.keep_frames = static_cast<int>(n);
         } else if (arg == "--finish-timeout") {
             options.finish_timeout_s = std::strtof(text.c_str(), nullptr);
+        } else if (arg == "--stalled-after") {
+            options.stalled_after_s = std::strtof(text.c_str(), nullptr);
+        } else if (arg == "--save-dir") {
+            if (text.empty()) return usageError("--save-dir takes a folder");
+            options.save_dir = text;
         } else if (wire::isDdsOption(arg)) {
             if (const Status s = wire::applyDdsOption(options.dds, arg, text); !s.isOk())
                 return usageError(s.message());
@@ -165,8 +194,7 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
 
     uint64_t last_digest = 0;
-    std::signal(SIGINT, onSignal);
-    std::signal(SIGTERM, onSignal);
+    installSignalHandlers();
     if (!hold_until.empty()) {
         // Nothing is announced yet, so no server has taken the session: holding costs no frame.
         std::printf("facescan-agent: ready; holding until %s exists\n", hold_until.c_str());
@@ -175,7 +203,7 @@ int main(int argc, char** argv) {
         while (!g_stop && !std::filesystem::exists(hold_until, ec))
             std::this_thread::sleep_for(std::chrono::milliseconds(10));
         if (g_stop) {
-            std::printf("facescan-agent: stopped (Ctrl-C) before streaming\n");
+            std::printf("facescan-agent: stopped (signal) before streaming\n");
             return 0;
         }
     }
@@ -204,9 +232,8 @@ int main(int argc, char** argv) {
     getrusage(RUSAGE_SELF, &usage);
     const double cpu_s =
         usage.ru_utime.tv_sec + usage.ru_utime.tv_usec * 1e-6 + usage.ru_stime.tv_sec + usage.ru_stime.tv_usec * 1e-6;
-    std::printf("facescan-agent: %s; cpu %.2f s; frames digest %016llx\n",
-                g_stop ? "stopped (Ctrl-C), server told the stream ended" : "stream ended", cpu_s,
-                static_cast<unsigned long long>(last_digest));
+    std::printf("facescan-agent: %s; cpu %.2f s; frames digest %016llx\n", g_stop ? "stopped (signal)" : "stream ended",
+                cpu_s, static_cast<unsigned long long>(last_digest));
     if (!status.isOk()) {
         std::fprintf(stderr, "facescan-agent: %s\n", status.toString().c_str());
         return 1;

@@ -155,6 +155,12 @@ StatusOr<Participant> Participant::create(const DomainConfig& config) {
             if (!config.security.empty()) {
                 ASSIGN_OR_RETURN(xml, addSecurity(xml, config.security));
             }
+            if (config.writer_linger) {
+                // A second configuration fragment: Cyclone reads a comma-separated list, later ones on top.
+                xml += ",<CycloneDDS><Domain Id=\"any\"><Internal><WriterLingerDuration>" +
+                       std::to_string(config.writer_linger->count()) +
+                       "ms</WriterLingerDuration></Internal></Domain></CycloneDDS>";
+            }
             const dds_entity_t domain = dds_create_domain(config.domain_id, xml.c_str());
             if (domain < 0) return ddsStatus(domain, "create DDS " + config.describe());
             participant.domain_ = std::make_shared<Entity>(domain);

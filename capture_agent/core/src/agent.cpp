@@ -5,6 +5,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <ctime>
+#include <filesystem>
 #include <mutex>
 #include <optional>
 #include <random>
@@ -12,6 +13,7 @@
 #include <vector>
 
 #include "capture/owner_link.hpp"
+#include "capture/tum_recorder.hpp"
 #include "wire/dds_options.hpp"
 #include "wire/messages.hpp"
 
@@ -20,6 +22,14 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 using namespace std::chrono_literals;
+
+// How long the agent's writers keep resending unacknowledged samples once deleted: long enough for a live server
+// to acknowledge the end of the stream, short enough that a stuck server does not hold a stopping agent (its
+// frames are saved on disk instead).
+constexpr std::chrono::milliseconds kWriterLinger{200};
+// After a stop, how long the end of the stream may wait for the owner to take it: a server that takes frames
+// takes it at once (its reader has room within a frame or two), a stuck one never does.
+constexpr float kEndAfterStopS = 0.3f;
 
 int64_t wallClockNs() {
     timespec ts{};
@@ -69,6 +79,7 @@ Status AgentOptions::validate() const {
     if (keep_frames < 8 || keep_frames > 100000) return invalidArgument("--keep-frames must be 8..100000");
     if (!(finish_timeout_s > 0)) return invalidArgument("--finish-timeout must be > 0 seconds");
     if (wait_for_server_s < 0) return invalidArgument("--wait-for-server must be >= 0 seconds");
+    if (!(stalled_after_s > 0)) return invalidArgument("--stalled-after must be > 0 seconds");
     return depth.validate();
 }
 
@@ -88,6 +99,24 @@ std::string newSessionId() {
     }
     if (host.size() > 32) host.resize(32);
     return host + "-" + stamp + "-" + suffix;
+}
+
+Status Agent::saveUnconfirmed(const std::vector<wire::EncodedFrame>& kept,
+                              const std::vector<const CapturedFrame*>& queued,
+                              const std::function<void(const std::string&)>& on_event) {
+    if (kept.empty() && queued.empty()) return Status::ok();
+    const std::filesystem::path parent =
+        options_.save_dir.empty() ? defaultSaveDir() : std::filesystem::path(options_.save_dir);
+    ASSIGN_OR_RETURN(const std::filesystem::path dir, createFreshDir(parent, session_id_));
+    ASSIGN_OR_RETURN(TumRecorder recorder, TumRecorder::create(dir, source_->info(), options_.jpeg_quality));
+    for (const wire::EncodedFrame& f : kept) RETURN_IF_ERROR(recorder.add(f));
+    for (const CapturedFrame* f : queued) RETURN_IF_ERROR(recorder.add(*f));
+    const uint32_t first = kept.empty() ? queued.front()->index : kept.front().seq;
+    const uint32_t last = queued.empty() ? kept.back().seq : queued.back()->index;
+    on_event("saved the " + std::to_string(recorder.frames()) + " frames no server confirmed (frames " +
+             std::to_string(first) + "-" + std::to_string(last) + " of session " + session_id_ + ") to " +
+             dir.string() + ": replay them with --source tum:" + dir.string() + " --rate max");
+    return Status::ok();
 }
 
 struct Agent::Impl {
@@ -124,12 +153,16 @@ StatusOr<std::unique_ptr<Agent>> Agent::create(AgentOptions options) {
     }
 
     auto impl = std::make_unique<Impl>();
-    ASSIGN_OR_RETURN(impl->participant, wire::Participant::create(agent->options_.dds));
+    wire::DomainConfig dds = agent->options_.dds;
+    dds.writer_linger = kWriterLinger;
+    ASSIGN_OR_RETURN(impl->participant, wire::Participant::create(dds));
     impl->joined = Clock::now();
     ASSIGN_OR_RETURN(impl->info_topic, wire::Topic<facescan_wire_CameraInfo>::create(impl->participant));
     ASSIGN_OR_RETURN(impl->info_writer, wire::Writer<facescan_wire_CameraInfo>::create(impl->info_topic));
     ASSIGN_OR_RETURN(impl->frame_topic, wire::Topic<facescan_wire_RgbdFrame>::create(impl->participant));
-    const wire::Qos frame_qos = wire::frameWriterQos(agent->everyFrame());
+    wire::Qos frame_qos = wire::frameWriterQos(agent->everyFrame());
+    // Short blocks, retried: a write that waits on the owner looks at the stop flag and the claim in between.
+    dds_qset_reliability(frame_qos.get(), DDS_RELIABILITY_RELIABLE, DDS_MSECS(kFrameWriteBlocking.count()));
     ASSIGN_OR_RETURN(impl->frame_writer,
                      wire::Writer<facescan_wire_RgbdFrame>::create(impl->frame_topic, &frame_qos,
                                                                    wire::sessionPartition(agent->session_id_)));
@@ -165,7 +198,7 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
     // Nothing is read from the source until a server owns the session, so a recording loses no frame while we wait.
     const std::string where = options_.dds.describe();
     SessionStream stream(std::move(*s.link), s.frame_writer, session_id_, every_frame,
-                         static_cast<size_t>(options_.keep_frames), where, on_event);
+                         static_cast<size_t>(options_.keep_frames), options_.stalled_after_s, where, on_event);
     // After a moment with no server at all, say why none may answer (a secured domain, most often).
     stream.onNoServer([&] { return wire::noPeerHint(options_.dds, s.participant.otherParticipants()); });
     if (const Status served = stream.waitUntilServed(stop, options_.wait_for_server_s); !served.isOk()) {
@@ -317,22 +350,46 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
     }
     camera_thread.join();
     report(true);
+    // From the stop on, every wait below is cut to what is left of kStopBudgetS.
+    const auto stopped_at = Clock::now();
+    const bool stopped = stop;
+    auto budget_left_s = [&] {
+        return std::max(0.05f, kStopBudgetS - std::chrono::duration<float>(Clock::now() - stopped_at).count());
+    };
 
     // Tell the server the stream ended (also after Ctrl-C or a camera failure), and wait until it finished the
     // scan: a recording's kept frames are still needed if its owner dies before that.
     wire::EncodedFrame end;
-    end.seq = s.stats.captured;
+    end.seq = stream.nextSeq();
     end.capture_time_ns = wallClockNs();
     const std::atomic<bool> no_stop{false};
-    // After Ctrl-C: a few seconds to hand the end of the stream to an owner, not forever.
-    Status end_status = stream.send(end, /*end_of_stream=*/true, stop ? no_stop : stop, stop ? 5.0f : 0.0f);
-    if (end_status.isOk() && !stream.waitFinished(stop, stop ? 5.0f : options_.finish_timeout_s)) {
+    // After a stop: a moment to hand the end of the stream to an owner, not forever (the stop itself would
+    // interrupt the send at once).
+    Status end_status = stream.send(end, /*end_of_stream=*/true, stopped ? no_stop : stop,
+                                    stopped ? std::min(budget_left_s(), kEndAfterStopS) : 0.0f);
+    bool told_end = end_status.isOk();
+    if (stopped && !told_end) {
+        // A stuck or missing owner: it cannot finish the scan either, so nothing is waited for.
+        on_event("the server was not told that the stream ended: " + end_status.message());
+        end_status = Status::ok();
+    }
+    if (told_end && !stream.waitFinished(stop, options_.finish_timeout_s, budget_left_s())) {
         if (!stop) {
             end_status = deadlineExceeded("the server did not finish session " + session_id_ + " within " +
                                           std::to_string(static_cast<int>(options_.finish_timeout_s)) + " s");
         }
     }
     report(true);
+    if (every_frame && !stream.finished()) {
+        // The frames kept for the owner, then the captured ones still queued for the publisher.
+        std::vector<wire::EncodedFrame> kept = stream.unconfirmed();
+        std::vector<const CapturedFrame*> queued;
+        while (!s.ready->empty()) queued.push_back(&s.slots[static_cast<size_t>(s.ready->pop())]);
+        if (const Status saved = saveUnconfirmed(kept, queued, on_event); !saved.isOk()) {
+            on_event("could not save the frames no server confirmed: " + saved.toString());
+            if (end_status.isOk()) end_status = saved;
+        }
+    }
 
     if (!s.capture_status.isOk()) return s.capture_status;
     RETURN_IF_ERROR(result);

@@ -1,5 +1,6 @@
 #include "capture/owner_link.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <thread>
@@ -49,6 +50,12 @@ void ReplayBuffer::push(const wire::EncodedFrame& frame, bool end_of_stream) {
     bytes_ += frame.bytes();
 }
 
+void ReplayBuffer::popBack() {
+    if (frames_.empty()) return;
+    bytes_ -= frames_.back().frame.bytes();
+    frames_.pop_back();
+}
+
 void ReplayBuffer::dropBefore(uint32_t seq) {
     while (!frames_.empty() && frames_.front().frame.seq < seq) {
         bytes_ -= frames_.front().frame.bytes();
@@ -59,15 +66,30 @@ void ReplayBuffer::dropBefore(uint32_t seq) {
 namespace {
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
+
+std::string seconds(double s) {
+    char text[32];
+    std::snprintf(text, sizeof(text), "%g", s);
+    return text;
+}
+
+Clock::time_point deadlineAfter(float timeout_s) {
+    return timeout_s > 0
+               ? Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<float>(timeout_s))
+               : Clock::time_point::max();
+}
 }  // namespace
 
 SessionStream::SessionStream(OwnerLink link, wire::Writer<facescan_wire_RgbdFrame>& writer, std::string session_id,
-                             bool every_frame, size_t keep_frames, std::string where, Events on_event)
+                             bool every_frame, size_t keep_frames, float stalled_after_s, std::string where,
+                             Events on_event)
     : link_(std::move(link)),
       writer_(writer),
       session_id_(std::move(session_id)),
       every_frame_(every_frame),
       kept_(keep_frames),
+      stalled_after_(
+          std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<float>(stalled_after_s))),
       where_(std::move(where)),
       on_event_(std::move(on_event)) {}
 
@@ -77,7 +99,12 @@ void SessionStream::say(const std::string& waiting) {
     if (!waiting.empty()) on_event_(waiting);
 }
 
-bool SessionStream::follow(const std::atomic<bool>& stop) {
+bool SessionStream::ownerChanged() const {
+    const std::optional<OwnerInfo>& o = link_.owner();
+    return o && (o->data.owner_id != state_.owner || o->data.epoch != state_.epoch);
+}
+
+bool SessionStream::follow(const std::atomic<bool>& stop, Clock::time_point deadline) {
     link_.poll();
     state_.servers = link_.liveServers();
     const std::optional<OwnerInfo>& o = link_.owner();
@@ -108,7 +135,7 @@ bool SessionStream::follow(const std::atomic<bool>& stop) {
     state_.standby = d.standby_id;
     const bool new_owner = d.owner_id != state_.owner || d.epoch != state_.epoch;
     if (!new_owner && d.replay_request == replay_seen_) {
-        say("");
+        if (!stalled_) say("");
         return true;
     }
     if (new_owner && !state_.owner.empty()) {
@@ -122,51 +149,78 @@ bool SessionStream::follow(const std::atomic<bool>& stop) {
     state_.owner = d.owner_id;
     state_.epoch = d.epoch;
     replay_seen_ = d.replay_request;
+    stalled_ = false;
     say("");
     if (!every_frame_) return true;
     // The owner continues from resume_seq: everything kept from there goes again, in order.
-    Status sent;
-    kept_.forEachFrom(d.resume_seq, [&](const wire::EncodedFrame& f, bool eos) {
-        sent = write(f, eos, stop);
-        if (sent.isOk()) ++state_.replayed;
-        return sent.isOk();
+    const uint32_t resume_seq = d.resume_seq;  // `d` changes when write() polls the claim
+    bool complete = true;
+    kept_.forEachFrom(resume_seq, [&](const wire::EncodedFrame& f, bool eos) {
+        const StatusOr<bool> sent = write(f, eos, stop, deadline);
+        if (sent.isOk() && *sent) ++state_.replayed;
+        // A DDS error shows again on the caller's own write; a stop or another owner ends the resend here.
+        complete = !sent.isOk() || *sent;
+        return sent.isOk() && *sent;
     });
-    return true;
+    return complete;
 }
 
 Status SessionStream::waitUntilServed(const std::atomic<bool>& stop, float timeout_s) {
-    const auto deadline = Clock::now() + std::chrono::duration<float>(timeout_s);
-    while (!follow(stop)) {
+    const auto deadline = deadlineAfter(timeout_s);
+    while (!follow(stop, Clock::time_point::max())) {
         if (stop) return Status::ok();
         if (on_wait_) on_wait_();
-        if (timeout_s > 0 && Clock::now() > deadline) {
-            char seconds[32];
-            std::snprintf(seconds, sizeof(seconds), "%g", static_cast<double>(timeout_s));
+        if (Clock::now() > deadline) {
             return deadlineExceeded("no facescan-server took session " + session_id_ + " on " + where_ + " within " +
-                                    seconds + " s: start one with the same --profile and --domain");
+                                    seconds(timeout_s) + " s: start one with the same --profile and --domain");
         }
         std::this_thread::sleep_for(50ms);
     }
     return Status::ok();
 }
 
-Status SessionStream::write(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop) {
+StatusOr<bool> SessionStream::write(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop,
+                                    Clock::time_point deadline) {
     facescan_wire_RgbdFrame msg = wire::toMessage(session_id_, frame);
     msg.end_of_stream = end_of_stream;
-    Status written = writer_.write(msg);
-    // Back-pressure: a keep-all writer times out when the owner has not taken frames for a while (or died: its
-    // reader then lapses with its lease and the writer is free again).
-    while (written.code() == StatusCode::kDeadlineExceeded && !stop) written = writer_.write(msg);
-    return stop ? Status::ok() : written;
+    const auto first_try = Clock::now();
+    for (;;) {
+        if (stop || Clock::now() >= deadline) return false;
+        const Status written = writer_.write(msg);
+        if (written.isOk()) break;
+        // Back-pressure: a keep-all writer times out (within kFrameWriteBlocking) while the owner has not taken
+        // frames (or died: its reader then lapses with its lease and the writer is free again).
+        if (written.code() != StatusCode::kDeadlineExceeded) return written;
+        link_.poll();
+        if (ownerChanged()) return false;
+        if (!stalled_ && Clock::now() - first_try >= stalled_after_ && !state_.owner.empty()) {
+            stalled_ = true;
+            say("server '" + state_.owner + "' has stopped taking frames (none for " +
+                seconds(std::chrono::duration<double>(stalled_after_).count()) + " s" +
+                (every_frame_ ? ", " + std::to_string(kept_.size()) + " kept" : "") +
+                "): waiting for it or for another server to take the session over");
+        }
+        if (on_wait_) on_wait_();
+    }
+    if (!end_of_stream) next_seq_ = std::max(next_seq_, frame.seq + 1);
+    if (stalled_) {
+        stalled_ = false;
+        on_event_("server '" + state_.owner + "' takes frames again");
+        say("");
+    }
+    return true;
 }
 
 Status SessionStream::send(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop,
                            float timeout_s) {
-    const auto deadline = Clock::now() + std::chrono::duration<float>(timeout_s);
+    const auto deadline = deadlineAfter(timeout_s);
     for (;;) {
-        if (stop) return Status::ok();
-        if (timeout_s > 0 && Clock::now() > deadline) return deadlineExceeded("no server took the frame in time");
-        if (!follow(stop)) {
+        if (stop) {
+            if (every_frame_ && !end_of_stream) unsent_.push_back(frame);
+            return Status::ok();
+        }
+        if (Clock::now() > deadline) return deadlineExceeded("no server took the frame in time");
+        if (!follow(stop, deadline)) {
             if (on_wait_) on_wait_();
             std::this_thread::sleep_for(20ms);
             continue;
@@ -180,27 +234,53 @@ Status SessionStream::send(const wire::EncodedFrame& frame, bool end_of_stream, 
         }
         break;
     }
-    RETURN_IF_ERROR(write(frame, end_of_stream, stop));
+    // Kept before it is written: a write given up (a stop, another owner) leaves it where the next follow()
+    // resends it from, or where unconfirmed() finds it.
+    if (every_frame_) kept_.push(frame, end_of_stream);
+    state_.kept = kept_.size();
+    ASSIGN_OR_RETURN(const bool written, write(frame, end_of_stream, stop, deadline));
+    if (!written && !every_frame_) return Status::ok();  // a live frame: the next one matters more
+    if (!written && stop) {
+        kept_.popBack();  // never written: it goes with the unsent frames, after the end of the stream
+        if (!end_of_stream) unsent_.push_back(frame);
+        state_.kept = kept_.size();
+        return Status::ok();
+    }
+    if (!written && Clock::now() >= deadline && !stop) return deadlineExceeded("no server took the frame in time");
     if (!end_of_stream) {
         state_.digest = wire::frameDigest(state_.digest, frame.depth.data(), frame.depth.size(), frame.colour.data(),
                                           frame.colour.size());
     }
-    if (every_frame_) kept_.push(frame, end_of_stream);
-    state_.kept = kept_.size();
     return Status::ok();
 }
 
-bool SessionStream::waitFinished(const std::atomic<bool>& stop, float timeout_s) {
-    const auto start = Clock::now();
-    const auto deadline = start + std::chrono::duration<float>(timeout_s);
-    while (Clock::now() < deadline) {
-        (void)follow(stop);
-        const std::optional<OwnerInfo>& o = link_.owner();
-        if (o && o->finished()) return true;
-        if (stop && Clock::now() - start > 5s) return false;  // Ctrl-C: a short grace for the server to finish
-        std::this_thread::sleep_for(50ms);
+bool SessionStream::waitFinished(const std::atomic<bool>& stop, float timeout_s, float grace_after_stop_s) {
+    auto deadline = deadlineAfter(timeout_s);
+    bool stopped = false;
+    for (;;) {
+        if (stop && !stopped) {
+            // Ctrl-C: a short grace for the server to finish, not the whole timeout.
+            stopped = true;
+            deadline = std::min(deadline, deadlineAfter(grace_after_stop_s));
+        }
+        (void)follow(stop, deadline);
+        if (finished()) return true;
+        if (Clock::now() >= deadline) return false;
+        if (on_wait_) on_wait_();
+        std::this_thread::sleep_for(20ms);
     }
-    return false;
+}
+
+std::vector<wire::EncodedFrame> SessionStream::unconfirmed() {
+    link_.poll();
+    if (const std::optional<OwnerInfo>& o = link_.owner()) kept_.dropBefore(o->data.confirmed_seq);
+    std::vector<wire::EncodedFrame> frames;
+    kept_.forEachFrom(0, [&](const wire::EncodedFrame& f, bool eos) {
+        if (!eos) frames.push_back(f);
+        return true;
+    });
+    frames.insert(frames.end(), unsent_.begin(), unsent_.end());
+    return frames;
 }
 
 StreamState SessionStream::state() const { return state_; }

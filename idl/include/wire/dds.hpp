@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -34,6 +35,10 @@ struct DomainConfig {
     // An identity folder DIR/NAME of a site made by deploy/security/site.sh: enables OMG DDS Security
     // (authentication, access control, encryption) with it (wire/security.hpp). Empty: no DDS Security.
     std::string security;
+    // How long a writer deleted with unacknowledged samples keeps resending them before it goes (Cyclone's
+    // WriterLingerDuration, for the whole process, on top of the profile). Unset: Cyclone's default, 1 s. The
+    // agent sets it short: when it stops, a stuck server's unacknowledged frames are saved on disk instead.
+    std::optional<std::chrono::milliseconds> writer_linger;
     Status validate() const;
     // "domain 7 (profile lan, DDS Security identity DIR/NAME)": for messages.
     std::string describe() const;

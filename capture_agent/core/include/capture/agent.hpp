@@ -8,10 +8,12 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "capture/frame_source.hpp"
 #include "wire/dds.hpp"
 #include "wire/depth_codec.hpp"
+#include "wire/messages.hpp"
 
 namespace facescan::capture {
 
@@ -36,6 +38,12 @@ struct AgentOptions {
     // after a takeover. When full, the agent waits for the owner (nothing is lost).
     int keep_frames = 300;
     float finish_timeout_s = 120;  // seconds to wait, after the last frame, for the server to finish the scan
+    // An owner that has taken no frame for this long while the agent's writes wait is reported in the status
+    // line as having stopped taking frames.
+    float stalled_after_s = 10;
+    // Where frames that no server confirmed are saved, as a TUM folder, when the agent stops before its scan
+    // finished (a recording only: --rate max). Empty: defaultSaveDir().
+    std::string save_dir;
     // Read the whole recording into memory before streaming (preloadSource): the agent then costs only its
     // encoding, like a capture PC that does not share the server's cores. Recordings only.
     bool preload = false;
@@ -64,6 +72,10 @@ struct AgentStats {
     uint64_t digest = 0;     // of every frame sent (wire::frameDigest): the server's summary has the same
 };
 
+// Once `stop` is set, the agent ends within this: it tells the owner the stream ended, gives it what is left of
+// the budget to finish the scan, and saves the frames it has not confirmed (a stuck server costs no more).
+inline constexpr float kStopBudgetS = 1.0f;
+
 // A fresh session id: host-YYYYmmdd-HHMMSS-xxxx (unique per scan, valid as a DDS key and a file name).
 std::string newSessionId();
 
@@ -78,13 +90,17 @@ class Agent {
 
     // Publishes until the source ends, `stop` becomes true (Ctrl-C) or the source fails; in every case the
     // server is told the stream ended. `on_event` gets a one-line message for notable events (waiting for a
-    // server, server found or lost) and `on_stats` about once a second.
+    // server, server found or lost, where unconfirmed frames were saved) and `on_stats` about once a second.
     Status run(const std::atomic<bool>& stop, const std::function<void(const std::string&)>& on_event,
                const std::function<void(const AgentStats&)>& on_stats);
 
  private:
     struct Impl;
     explicit Agent(AgentOptions options);
+    // Saves `kept` (sent, not confirmed) and `queued` (captured, not sent) as a TUM folder under the save dir,
+    // and says where.
+    Status saveUnconfirmed(const std::vector<wire::EncodedFrame>& kept, const std::vector<const CapturedFrame*>& queued,
+                           const std::function<void(const std::string&)>& on_event);
 
     AgentOptions options_;
     std::string session_id_;

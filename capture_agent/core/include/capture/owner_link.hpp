@@ -6,15 +6,18 @@
 //   ReplayBuffer  every recording frame sent and not yet confirmed by the owner (replicated to its standby, or on
 //                 its disk): after a takeover, or when the owner asks, the agent sends them again from the frame
 //                 the owner names. Bounded: when full, the agent waits (a recording loses nothing).
+//   SessionStream writes with a bounded blocking time: a stuck owner is reported, never waited on blindly.
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <deque>
 #include <functional>
 #include <map>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "wire/cluster_codec.hpp"
 #include "wire/messages.hpp"
@@ -57,8 +60,10 @@ class ReplayBuffer {
     size_t size() const { return frames_.size(); }
     size_t bytes() const { return bytes_; }
     void push(const wire::EncodedFrame& frame, bool end_of_stream);
+    void popBack();
     // Drops the frames before `seq` (the owner confirmed them).
     void dropBefore(uint32_t seq);
+    bool empty() const { return frames_.empty(); }
     // Calls fn(frame, end_of_stream) for every kept frame from `seq` on, in order; stops when fn returns false.
     template <typename Fn>
     void forEachFrom(uint32_t seq, Fn&& fn) const {
@@ -90,23 +95,38 @@ struct StreamState {
     uint64_t digest = wire::kFrameDigestSeed;  // of every frame sent (the first time), as the server digests them
 };
 
+// How long the agent's frame writes may block before they look at `stop` and the owner again. The writer's
+// max_blocking_time: short, so that a stop is noticed and a stuck owner is seen within it. The write is then
+// tried again: a recording's back-pressure is unchanged (every frame waits for the owner; none is dropped).
+inline constexpr std::chrono::milliseconds kFrameWriteBlocking{250};
+
 // Sends a session's frames to its owner: waits while nobody serves the session (live frames meanwhile are
 // dropped by the caller's queue, recording frames wait), resends the kept frames to a new owner or when the
 // owner asks, and forgets the ones the owner confirmed.
 class SessionStream {
  public:
     using Events = std::function<void(const std::string&)>;
+    // stalled_after_s: an owner that has taken no frame for this long while writes wait is reported as having
+    // stopped taking frames (the stream keeps following its claim: a takeover resends as usual).
     SessionStream(OwnerLink link, wire::Writer<facescan_wire_RgbdFrame>& writer, std::string session_id,
-                  bool every_frame, size_t keep_frames, std::string where, Events on_event);
+                  bool every_frame, size_t keep_frames, float stalled_after_s, std::string where, Events on_event);
     // Until an owner serves the session; DeadlineExceeded after timeout_s (0: no limit). Ok (not served) on stop.
     Status waitUntilServed(const std::atomic<bool>& stop, float timeout_s);
     // One frame, or the end of the stream. Waits for an owner and, for a recording, for room to keep it
-    // (DeadlineExceeded after timeout_s; 0: no limit).
+    // (DeadlineExceeded after timeout_s; 0: no limit). A stop interrupts the wait: a recording's frame is then
+    // set aside, not sent, and unconfirmed() has it too.
     Status send(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop,
                 float timeout_s = 0);
     // After the end of the stream: until the owner reports the session finished (resending to a new owner
-    // meanwhile). False when it did not within timeout_s.
-    bool waitFinished(const std::atomic<bool>& stop, float timeout_s);
+    // meanwhile). False when it did not within timeout_s, or within grace_after_stop_s of `stop`.
+    bool waitFinished(const std::atomic<bool>& stop, float timeout_s, float grace_after_stop_s);
+    bool finished() const { return link_.owner() && link_.owner()->finished(); }
+    // The recording frames that no owner has confirmed (the latest claim's confirmed_seq read now), then the
+    // ones a stop kept from being sent, in order, without the end of the stream.
+    std::vector<wire::EncodedFrame> unconfirmed();
+    // The frame after the last one sent: the end of the stream's seq. A recording's owner takes frames in order
+    // only, so a larger one would make it ask for frames that will never come.
+    uint32_t nextSeq() const { return next_seq_; }
     StreamState state() const;
     // Called about every 20 ms while the stream waits (the agent reports its status line from it).
     void onWait(std::function<void()> tick) { on_wait_ = std::move(tick); }
@@ -114,9 +134,16 @@ class SessionStream {
     void onNoServer(std::function<std::string()> hint) { no_server_hint_ = std::move(hint); }
 
  private:
-    // Follows the owner: forgets confirmed frames, resends to a new owner or on request. False: not served.
-    bool follow(const std::atomic<bool>& stop);
-    Status write(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop);
+    using Clock = std::chrono::steady_clock;
+    // Follows the owner: forgets confirmed frames, resends to a new owner or on request. False: not served, or
+    // its resend was cut short (a stop, the deadline, another owner).
+    bool follow(const std::atomic<bool>& stop, Clock::time_point deadline);
+    // True: written. False: given up on a stop, at the deadline or because another owner claimed the session
+    // meanwhile (the next follow() resends the kept frames to it). An error: DDS failed.
+    StatusOr<bool> write(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop,
+                         Clock::time_point deadline);
+    // The claim now names another owner or epoch than the one the stream follows.
+    bool ownerChanged() const;
     void say(const std::string& waiting);
 
     OwnerLink link_;
@@ -124,6 +151,10 @@ class SessionStream {
     std::string session_id_;
     bool every_frame_;
     ReplayBuffer kept_;
+    std::chrono::nanoseconds stalled_after_;
+    bool stalled_ = false;                    // the owner was reported as having stopped taking frames
+    std::vector<wire::EncodedFrame> unsent_;  // recording frames a stop kept from being sent
+    uint32_t next_seq_ = 0;
     std::string where_;
     Events on_event_;
     StreamState state_;
