@@ -45,8 +45,9 @@ TEST(ServerParams, ConfigFileThenFlagsOverride) {
                            "icp.iterations0 = 7\n"
                            "max_sessions = 3\n"
                            "snapshot_hz = 2\n";
-    auto parsed = parseServerArgs({"--config", file.string(), "--snapshot-hz", "0.5", "--domain=42", "--profile",
-                                   "loopback", "--set", "filter.sigma_depth_m=0.03"});
+    auto parsed =
+        parseServerArgs({"--config", file.string(), "--snapshot-hz", "0.5", "--domain=42", "--profile", "loopback",
+                         "--set", "filter.sigma_depth_m=0.03", "--keep-finished", "3", "--keep-finished-s=30"});
     ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
     const ServerParams& p = parsed->params;
     EXPECT_EQ(p.recon.tsdf.resolution_vox, 128);
@@ -57,6 +58,8 @@ TEST(ServerParams, ConfigFileThenFlagsOverride) {
     EXPECT_EQ(p.domain.domain_id, 42u);
     EXPECT_EQ(p.domain.profile, "loopback");
     EXPECT_FLOAT_EQ(p.recon.filter.sigma_depth_m, 0.03f);
+    EXPECT_EQ(p.keep_finished, 3);
+    EXPECT_FLOAT_EQ(p.keep_finished_s, 30.0f);
 }
 
 TEST(ServerParams, SecurityIsAFlagAndAConfigKey) {
@@ -91,6 +94,10 @@ TEST(ServerParams, BadInputGivesClearErrors) {
     auto not_number = parseServerArgs({"--snapshot-hz", "fast"});
     ASSERT_FALSE(not_number.isOk());
     EXPECT_NE(not_number.status().message().find("snapshot_hz"), std::string::npos);
+
+    auto negative_keep = parseServerArgs({"--keep-finished", "-1"});
+    ASSERT_FALSE(negative_keep.isOk());
+    EXPECT_NE(negative_keep.status().message().find("--keep-finished"), std::string::npos);
 
     auto out_of_range = parseServerArgs({"--max-sessions", "0"});
     ASSERT_FALSE(out_of_range.isOk());

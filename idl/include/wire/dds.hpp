@@ -170,6 +170,12 @@ class Writer {
         const dds_return_t rc = dds_writedispose(entity_.handle(), &key_sample);
         return rc < 0 ? ddsStatus(rc, "writedispose") : Status::ok();
     }
+    // Forgets the instance (session): its last sample leaves the writer's history, so late-joining readers no
+    // longer get it; readers see it disposed when the writer auto-disposes (the default QoS).
+    Status unregister(const T& key_sample) {
+        const dds_return_t rc = dds_unregister_instance(entity_.handle(), &key_sample);
+        return rc < 0 ? ddsStatus(rc, "unregister instance") : Status::ok();
+    }
     // Number of matched readers (discovery).
     int matchedReaders() const {
         dds_publication_matched_status_t st{};

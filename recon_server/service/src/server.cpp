@@ -126,7 +126,7 @@ Status Server::join() {
     return Status::ok();
 }
 
-Server::Server(const ServerParams& params) : params_(params) {}
+Server::Server(const ServerParams& params) : params_(params), finished_(params.keep_finished, params.keep_finished_s) {}
 
 Server::~Server() { shutdown(); }
 
@@ -187,6 +187,7 @@ std::vector<SessionStats> Server::sessions() const {
     for (const auto& [id, o] : owned_) {
         if (o->session) out.push_back(o->session->stats());
     }
+    for (SessionStats& s : finished_.stats()) out.push_back(std::move(s));
     for (const auto& [id, r] : refused_) {
         SessionStats s;
         s.session_id = id;
@@ -354,9 +355,15 @@ void Server::takeCommands() {
             run.push_back(std::move(c));  // ours: only the owner answers
         } else if (o && steadyNowNs() - c.received_ns < kDeferNs) {
             deferred_.push_back(std::move(c));  // being claimed here: answer once it settled
+        } else if (answersFromFiles(c.session_id)) {
+            run.push_back(std::move(c));  // finished here and retired: its files answer
         } else if (responder == params_.server_id) {
             const auto view = cluster_->owner(c.session_id);
-            if (!view || !view->alive) run.push_back(std::move(c));  // nobody owns it: the responder says so
+            // A session finished on another live server: that one answers from its files.
+            const bool finished_elsewhere = view && view->data.state == wire::OwnerState::kFinished &&
+                                            view->data.owner_id != params_.server_id &&
+                                            cluster_->serverAlive(view->data.owner_id);
+            if ((!view || !view->alive) && !finished_elsewhere) run.push_back(std::move(c));  // nobody owns it
         }
     }
     if (run.empty()) return;
@@ -440,6 +447,7 @@ void Server::runCommand(const Command& c) {
             }
         }
     }
+    if (!session && answerFromFiles(c)) return;
     if (!session) {
         // Only the responder gets here for sessions it does not own: say why nobody answers for it.
         const auto view = cluster_->owner(c.session_id);
@@ -611,6 +619,8 @@ void Server::statusLoop() {
             publishStatus(st);
         }
         for (const auto& [id, r] : refused) publishRefused(id, r.detail);
+        all.clear();  // retireFinished frees the sessions it retires
+        retireFinished(final_sent);
     }
 }
 

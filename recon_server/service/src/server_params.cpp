@@ -128,6 +128,8 @@ const std::map<std::string, Setter>& setters() {
         FLOAT("status_hz", p.status_hz),
         INT("max_sessions", p.max_sessions),
         FLOAT("idle_timeout_s", p.idle_timeout_s),
+        INT("keep_finished", p.keep_finished),
+        FLOAT("keep_finished_s", p.keep_finished_s),
         FLOAT("replica_interval_s", p.replica_interval_s),
         INT("replica_full_every", p.replica_full_every),
         INT("replica_zstd_level", p.replica_zstd_level),
@@ -208,6 +210,10 @@ Status ServerParams::validate() const {
     if (!(idle_timeout_s >= 1 && idle_timeout_s <= 86400)) {
         return invalidArgument("--idle-timeout-s must be in [1, 86400] seconds");
     }
+    if (keep_finished < 0 || keep_finished > 10000) return invalidArgument("--keep-finished must be in [0, 10000]");
+    if (!(keep_finished_s >= 0 && keep_finished_s <= 30 * 86400)) {
+        return invalidArgument("--keep-finished-s must be in [0, 2592000] seconds (30 days)");
+    }
     if (queue_frames < 1 || queue_frames > 64) return invalidArgument("queue_frames must be in [1, 64]");
     if (data_dir.empty()) return invalidArgument("--data-dir must not be empty");
     if (Status s = wire::validateServerId(server_id); !s.isOk()) return invalidArgument("--server-id: " + s.message());
@@ -266,6 +272,8 @@ StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args) {
     static const std::map<std::string, std::string> kFlags = {{"--snapshot-hz", "snapshot_hz"},
                                                               {"--max-sessions", "max_sessions"},
                                                               {"--idle-timeout-s", "idle_timeout_s"},
+                                                              {"--keep-finished", "keep_finished"},
+                                                              {"--keep-finished-s", "keep_finished_s"},
                                                               {"--data-dir", "data_dir"},
                                                               {"--profile", "profile"},
                                                               {"--domain", "domain"},
@@ -339,6 +347,10 @@ std::string serverUsage() {
            "  --max-sessions N        open sessions at once (default 4); when every server is full, new ones are\n"
            "                          refused in their status until one frees up\n"
            "  --idle-timeout-s S      finish a session after S seconds without frames (default 60)\n"
+           "  --keep-finished N       finished sessions listed at most (default 16): their status stays on the domain\n"
+           "                          (facescan sessions) and the server keeps a small record of each\n"
+           "  --keep-finished-s S     a finished session is listed at most S seconds (default 600); its memory goes\n"
+           "                          as soon as its files are written, and its files answer its commands later\n"
            "  --data-dir DIR          sessions go to DIR/SESSION/ (default ./facescan-data): their replica while\n"
            "                          scanning, the results when finished; DIR/SESSION/owner.json names the owner\n"
            "  --server-id ID          this server's name on the domain, unique (default HOST-PID)\n"

@@ -90,6 +90,8 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     files.trajectory_tum = trajectoryTum();
     files.summary_json = summaryJson(s, result);
     files.frames_tsv = frameTimingsTsv();
+    files.preview_png = &png;
+    std::filesystem::path written;
     if (status.isOk()) {
         // The folder records its owner: a server that lost the session to another one (two servers that could
         // not see each other) writes beside the other's files, never over them.
@@ -97,7 +99,10 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         auto dir = claimSessionDir(params_.data_dir, id_, s.owner_id, s.epoch, &note);
         if (!note.empty()) std::fprintf(stderr, "facescan-server: %s\n", note.c_str());
         status = dir.isOk() ? writeSessionFiles(*dir, files) : dir.status();
-        if (status.isOk()) removeReplicaLog(*dir);
+        if (status.isOk()) {
+            removeReplicaLog(*dir);
+            written = *dir;
+        }
     }
     if (!status.isOk()) s.detail += " (not written: " + status.message() + ")";
 
@@ -111,6 +116,7 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         stats_.fps = fps;
         final_mesh_ = result;
         final_preview_png_ = std::move(png);
+        files_dir_ = written;
         recon_.reset();  // frees the volume; finished sessions answer from the cached results
         pending.swap(control_);
         finishing_ = false;
@@ -136,6 +142,11 @@ std::optional<SnapshotResult> Session::takeFinalSnapshot() {
     out.frames_integrated = stats_.frames_integrated;
     out.mesh = final_mesh_;
     return out;
+}
+
+std::filesystem::path Session::filesDir() const {
+    std::lock_guard lk(mutex_);
+    return files_dir_;
 }
 
 std::string Session::frameTimingsTsv() const {

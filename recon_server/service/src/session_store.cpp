@@ -76,6 +76,9 @@ Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& f
     }
     RETURN_IF_ERROR(writeFileAtomic(dir / "trajectory.txt", files.trajectory_tum));
     if (!files.frames_tsv.empty()) RETURN_IF_ERROR(writeFileAtomic(dir / "frames.tsv", files.frames_tsv));
+    if (files.preview_png && !files.preview_png->empty()) {
+        RETURN_IF_ERROR(writeFileAtomic(dir / "preview.png", files.preview_png->data(), files.preview_png->size()));
+    }
     return writeFileAtomic(dir / "summary.json", files.summary_json);
 }
 

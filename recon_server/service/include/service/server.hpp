@@ -9,7 +9,8 @@
 //   commands  replies to ScanCommand, for the sessions this server owns (and, on the one "responder" server,
 //             for sessions nobody owns).
 //   snapshots coarse meshes at --snapshot-hz, off the frame path, at a lower OS priority.
-//   status    ScanStatus per owned session at status_hz, the server's announcement; finishes idle sessions.
+//   status    ScanStatus per owned session at status_hz, the server's announcement; finishes idle sessions;
+//             retires finished sessions from memory (finished_sessions.hpp, server_finished.cpp).
 //   replicas  replication.hpp: every owned session's state to its standby and its data dir; replicas received
 //             as a standby.
 #pragma once
@@ -29,6 +30,7 @@
 #include <vector>
 
 #include "service/cluster.hpp"
+#include "service/finished_sessions.hpp"
 #include "service/retirer.hpp"
 #include "service/server_params.hpp"
 #include "service/session.hpp"
@@ -46,7 +48,7 @@ struct OwnedSession {
     enum class Phase { kClaiming, kReady, kActive, kFinished, kGivenUp };
     std::string id;
     uint32_t epoch = 1;
-    std::unique_ptr<Claim> claim;
+    std::shared_ptr<Claim> claim;  // shared with its FinishedSession record once retired
     std::atomic<Phase> phase{Phase::kClaiming};
     int64_t claimed_ns = 0;  // steady clock
     int64_t ready_ns = 0;
@@ -79,7 +81,8 @@ class Server {
     void shutdown();
 
     const ServerParams& params() const { return params_; }
-    // Current stats of every session this server owns or owned (open, finished) and of refused ones.
+    // Current stats of every session this server owns, of the finished ones it lists (--keep-finished) and of
+    // refused ones.
     std::vector<SessionStats> sessions() const;
     int openSessions() const;
     int standbySessions() const;
@@ -119,6 +122,15 @@ class Server {
     void publishStatus(const SessionStats& s);
     void publishSnapshot(const std::string& session_id, const SnapshotResult& snap);
     void publishRefused(const std::string& session_id, const std::string& detail);
+
+    // server_finished.cpp, on the status thread: finished sessions whose final status went out (final_sent) leave
+    // owned_ and memory for finished_; those beyond --keep-finished or older than --keep-finished-s are unlisted.
+    void retireFinished(std::map<std::string, bool>& final_sent);
+    void forgetFinished(const FinishedSession& f);
+    // A finished session that this server retired: listed, or its files in the data dir name this server.
+    bool answersFromFiles(const std::string& session_id) const;
+    // Answers a command of such a session from its files; false when this server has none.
+    bool answerFromFiles(const Command& c);
 
     // server_cluster.cpp: the cluster's decisions, on the intake thread.
     void clusterTick();
@@ -184,6 +196,9 @@ class Server {
     mutable std::mutex sessions_mutex_;  // guards owned_ and refused_
     std::map<std::string, std::shared_ptr<OwnedSession>> owned_;
     std::map<std::string, Refused> refused_;  // as the responder: sessions no server had room for
+    // Finished sessions once retired from owned_ (the status thread moves them under sessions_mutex_, so that a
+    // session is always in one of the two). Before the DDS entities below it in destruction: it holds claims.
+    FinishedSessions finished_;
 
     // Intake thread only.
     std::map<std::string, Candidate> candidates_;

@@ -25,7 +25,12 @@ struct ServerParams {
     float status_hz = 2.0f;                // Hz; ScanStatus rate per session
     int max_sessions = 4;                  // count; open (not finished) sessions at once; more are refused
     float idle_timeout_s = 60.0f;          // seconds; a session without frames for this long is finished
-    int queue_frames = 8;                  // frames; bounded per-session queue of a recording (every_frame) session
+    // A finished session leaves memory once its files are written and its final status and mesh are out; it stays
+    // listed (its status, `facescan sessions`) while it is among the newest keep_finished and younger than
+    // keep_finished_s, and its files in the data dir answer its commands after that too.
+    int keep_finished = 16;          // count; finished sessions listed at most
+    float keep_finished_s = 600.0f;  // seconds; a finished session is listed at most this long
+    int queue_frames = 8;            // frames; bounded per-session queue of a recording (every_frame) session
     std::filesystem::path data_dir = "facescan-data";  // finished sessions go to data_dir/SESSION/
     wire::DomainConfig domain{0, "lan"};
     std::string server_id;  // in every reply, status and announcement; default "<hostname>-<pid>"; [A-Za-z0-9._-]

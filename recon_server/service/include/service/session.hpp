@@ -8,6 +8,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -211,6 +212,10 @@ class Session {
     std::optional<SnapshotResult> makeSnapshot();
     // Once, after finishing: the final full-resolution mesh as the last snapshot (late subscribers get it).
     std::optional<SnapshotResult> takeFinalSnapshot();
+    // Once finished: the folder its files went to (empty when they could not be written).
+    std::filesystem::path filesDir() const;
+    // Sessions alive in this process: a finished one must not stay (the server's memory would grow with its scans).
+    static int liveCount() { return Live::count.load(); }
 
  private:
     struct Control {
@@ -236,6 +241,14 @@ class Session {
     std::string summaryJson(const SessionStats& s, const MeshResult& m) const;
     std::string frameTimingsTsv() const;
 
+    // First member, so last destroyed: a session counts as live until all of its memory is freed.
+    struct Live {
+        static inline std::atomic<int> count{0};
+        Live() { ++count; }
+        ~Live() { --count; }
+        Live(const Live&) = delete;
+        Live& operator=(const Live&) = delete;
+    } live_;
     const std::string id_;
     const ServerParams params_;
     std::function<void()> space_freed_;
@@ -272,6 +285,7 @@ class Session {
     uint64_t ms_count_ = 0;
     std::shared_ptr<recon::Reconstructor> recon_;  // null before the camera and after finishing
     MeshResult final_mesh_;
+    std::filesystem::path files_dir_;
     std::vector<uint8_t> final_preview_png_;
     bool final_snapshot_sent_ = false;
     std::atomic<int64_t> last_activity_ns_{0};

@@ -1,7 +1,8 @@
 // Writing a finished session to the data dir (--data-dir/SESSION/): mesh.ply (binary, normals and colours),
-// mesh.drc (Draco), trajectory.txt (TUM), summary.json, frames.tsv (each processed frame's timings). Every file goes to
-// NAME.tmp first, is fsync'ed and then renamed over NAME, so a crash leaves either the old file or the whole new one,
-// never a half file.
+// mesh.drc (Draco), trajectory.txt (TUM), preview.png (the last shaded view), summary.json, frames.tsv (each processed
+// frame's timings). Once a finished session has left the server's memory, these files answer its commands
+// (finished_sessions.hpp). Every file goes to NAME.tmp first, is fsync'ed and then renamed over NAME, so a crash
+// leaves either the old file or the whole new one, never a half file.
 #pragma once
 
 #include <cstdint>
@@ -25,11 +26,12 @@ inline Status writeFileAtomic(const std::filesystem::path& path, const std::stri
 StatusOr<std::string> meshToPly(const recon::IndexedMesh& mesh);
 
 struct SessionFiles {
-    const recon::IndexedMesh* mesh = nullptr;     // the final full-resolution mesh (may be empty: no faces)
-    const std::vector<uint8_t>* draco = nullptr;  // Draco bytes of mesh (empty when the mesh is empty)
-    std::string trajectory_tum;                   // TUM lines
-    std::string frames_tsv;                       // Session::frameTimingsTsv; not written when empty
-    std::string summary_json;                     // written last: its presence means the session is complete
+    const recon::IndexedMesh* mesh = nullptr;           // the final full-resolution mesh (may be empty: no faces)
+    const std::vector<uint8_t>* draco = nullptr;        // Draco bytes of mesh (empty when the mesh is empty)
+    std::string trajectory_tum;                         // TUM lines
+    std::string frames_tsv;                             // Session::frameTimingsTsv; not written when empty
+    const std::vector<uint8_t>* preview_png = nullptr;  // not written when empty (no model)
+    std::string summary_json;                           // written last: its presence means the session is complete
 };
 
 // Creates dir and writes the files that have content (mesh.ply and mesh.drc only for a non-empty mesh).

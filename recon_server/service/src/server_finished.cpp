@@ -1,0 +1,143 @@
+// Finished sessions leave the server's memory (finished_sessions.hpp): the status thread retires each one once it
+// is done with, and its commands are answered from its files in the data dir from then on.
+#include <malloc.h>
+
+#include <set>
+
+#include "service/server.hpp"
+
+namespace facescan::service {
+
+void Server::retireFinished(std::map<std::string, bool>& final_sent) {
+    const int64_t now = steadyNowNs();
+    std::set<std::string> owned_ids;
+    bool retired = false;
+    std::vector<std::shared_ptr<OwnedSession>> all = ownedSessions();
+    std::vector<std::shared_ptr<OwnedSession>> gone;
+    for (const std::shared_ptr<OwnedSession>& o : all) {
+        owned_ids.insert(o->id);
+        // Done with: the intake no longer reads its frames and its claim says FINISHED (releaseStale), its files
+        // are written (finalize does that before the session reports finished) and its final status went out.
+        const auto sent = final_sent.find(o->id);
+        if (o->phase != OwnedSession::Phase::kFinished || !o->session || sent == final_sent.end() || !sent->second) {
+            continue;
+        }
+        Session& session = *o->session;
+        // The final mesh as the last snapshot, unless the snapshot thread sent it already: the snapshot writer keeps
+        // it (durable) for late subscribers while the session is listed.
+        if (auto fin = session.takeFinalSnapshot()) publishSnapshot(o->id, *fin);
+        FinishedSession f;
+        f.stats = session.stats();
+        f.dir = session.filesDir();
+        if (auto mesh = session.mesh(); mesh.isOk()) {
+            f.vertex_count = mesh->vertex_count;
+            f.triangle_count = mesh->triangle_count;
+        }
+        f.claim = o->claim;
+        f.retired_ns = now;
+        {
+            std::lock_guard lk(sessions_mutex_);
+            const auto it = owned_.find(o->id);
+            if (it == owned_.end() || it->second != o) continue;  // given up meanwhile (yield)
+            finished_.add(std::move(f));
+            owned_.erase(it);
+        }
+        owned_ids.erase(o->id);
+        gone.push_back(o);
+        retired = true;
+    }
+    std::erase_if(final_sent, [&](const auto& entry) { return !owned_ids.count(entry.first); });
+    all.clear();
+    for (const FinishedSession& f : finished_.expire(now)) forgetFinished(f);
+    if (!retired) return;
+    // The retired sessions leave memory on the retiring thread, in the order of everything else given up there, and
+    // never on a session's own worker (a Session's destructor joins its worker). A session's buffers were allocated
+    // by its worker, in that thread's malloc arena; freed, they stay in the process (resident) until trimmed, and
+    // the next session's worker may get another arena: without the trim the server's resident memory grew by tens
+    // of megabytes a scan although the bytes in use stayed flat.
+    retirer_->retire([gone = std::move(gone)]() mutable {
+        gone.clear();
+        malloc_trim(0);
+    });
+}
+
+void Server::forgetFinished(const FinishedSession& f) {
+    // Unlisted: its last status and final mesh leave the writers' histories (late subscribers no longer get them,
+    // `facescan sessions` no longer shows it); its claim's writer goes with the record.
+    wire::ScanStatusData key;
+    key.session_id = f.stats.session_id;
+    (void)status_writer_->unregister(wire::toMessage(key));
+    facescan_wire_MeshSnapshot snap{};
+    snap.session_id = wire::stringView(f.stats.session_id);
+    (void)snapshot_writer_->unregister(snap);
+}
+
+bool Server::answersFromFiles(const std::string& session_id) const {
+    return finished_.find(session_id) || findFinishedSessionDir(params_.data_dir, session_id, params_.server_id);
+}
+
+bool Server::answerFromFiles(const Command& c) {
+    const std::optional<FinishedSession> record = finished_.find(c.session_id);
+    std::filesystem::path dir;
+    if (record) {
+        dir = record->dir;
+    } else if (auto found = findFinishedSessionDir(params_.data_dir, c.session_id, params_.server_id)) {
+        dir = *found;
+    } else {
+        return false;
+    }
+    const std::string& id = c.session_id;
+    const auto kind = static_cast<facescan_wire_CommandKind>(c.kind);
+    if (kind == facescan_wire_CMD_RESET) {
+        reply(c, invalidArgument("session '" + id + "' is finished: nothing to reset"));
+        return true;
+    }
+    if (kind == facescan_wire_CMD_GET_STATUS) {
+        reply(c, Status::ok());
+        return true;
+    }
+    if (dir.empty()) {
+        reply(c, unavailable("session '" + id + "' finished without its files: " + record->stats.detail));
+        return true;
+    }
+    switch (kind) {
+        case facescan_wire_CMD_FINISH: {
+            MeshResult counts;
+            if (record) {
+                counts.vertex_count = record->vertex_count;
+                counts.triangle_count = record->triangle_count;
+            } else if (auto m = readFinishedMesh(dir); m.isOk()) {
+                counts.vertex_count = m->vertex_count;
+                counts.triangle_count = m->triangle_count;
+            }
+            reply(c, Status::ok(), &counts);
+            break;
+        }
+        case facescan_wire_CMD_GET_MESH: {
+            auto m = readFinishedMesh(dir);
+            if (!m.isOk()) {
+                reply(c, m.status());
+            } else {
+                reply(c, Status::ok(), &*m, m->draco.get());
+            }
+            break;
+        }
+        case facescan_wire_CMD_GET_TRAJECTORY:
+        case facescan_wire_CMD_GET_PREVIEW: {
+            const bool trajectory = kind == facescan_wire_CMD_GET_TRAJECTORY;
+            auto bytes = readFinishedFile(dir, trajectory ? "trajectory.txt" : "preview.png");
+            if (!bytes.isOk()) {
+                reply(c, trajectory ? bytes.status()
+                                    : notFound("session '" + id + "' finished without a preview (" +
+                                               bytes.status().message() + ")"));
+            } else {
+                reply(c, Status::ok(), nullptr, &*bytes);
+            }
+            break;
+        }
+        default: reply(c, Status::ok()); break;
+    }
+    return true;
+}
+
+}  // namespace facescan::service
