@@ -42,6 +42,7 @@ StatusOr<std::unique_ptr<Server>> Server::create(const ServerParams& params) {
 
 Status Server::start() {
     RETURN_IF_ERROR(checkDataDir(params_.data_dir));
+    ASSIGN_OR_RETURN(data_dir_lock_, DataDirLock::acquire(params_.data_dir, params_.server_id));
     using wire::boxed;
     ASSIGN_OR_RETURN(participant_, boxed(wire::Participant::create(params_.domain)));
     const wire::Participant& p = *participant_;

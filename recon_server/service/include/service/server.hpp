@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "service/cluster.hpp"
+#include "service/data_dir_lock.hpp"
 #include "service/finished_sessions.hpp"
 #include "service/retirer.hpp"
 #include "service/server_params.hpp"
@@ -168,6 +169,7 @@ class Server {
     std::vector<std::shared_ptr<OwnedSession>> ownedSessions() const;
 
     ServerParams params_;
+    DataDirLock data_dir_lock_;  // held for the server's life (released last)
     std::unique_ptr<wire::Participant> participant_;
     std::unique_ptr<Cluster> cluster_;
     std::unique_ptr<Replicator> replicator_;
