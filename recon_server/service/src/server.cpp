@@ -68,7 +68,11 @@ Status Server::start() {
     }
     Watchdog::Options watch;
     watch.stall_limit_s = params_.stall_limit_s;
-    watchdog_ = std::make_unique<Watchdog>(watch, [this](const std::string& what) { onStall(what); });
+    watch.pause_gap_s = 0.5 * static_cast<double>(lease_ns_) * 1e-9;
+    watchdog_ = std::make_unique<Watchdog>(
+        watch, [this](const std::string& what) { onStall(what); },
+        [this](int64_t gap_ns, int64_t now_ns) { noticePause(gap_ns, now_ns); });
+    watchdog_->start();  // before the join: viewFresh() reads its checks
     intake_beat_ = watchdog_->add("the intake thread");
     retirer_ = std::make_unique<Retirer>(watchdog_->add("the retiring thread"));
     Cluster::Options cluster;
@@ -102,8 +106,6 @@ Status Server::start() {
     loadResumable();
     RETURN_IF_ERROR(join());
     joined_ = true;
-    intake_seen_ns_ = steadyNowNs();
-    watchdog_->start();
     replicator_->start();
     intake_ = std::thread([this] { intakeLoop(); });
     command_ = std::thread([this] { commandLoop(); });
@@ -226,7 +228,6 @@ std::vector<std::shared_ptr<OwnedSession>> Server::ownedSessions() const {
 void Server::intakeLoop() {
     recon::nameThisThread("fs-intake");
     bool duplicate_logged = false;
-    int64_t last_turn_ns = steadyNowNs();
     while (!stopping_) {
         intake_beat_->end();
         dds_attach_t triggered[16];
@@ -234,12 +235,7 @@ void Server::intakeLoop() {
         intake_beat_->begin();
         dds_set_guardcondition(wake_.handle(), false);
         if (stopping_) break;
-        // The loop turns at least every 100 ms: a longer gap is time this process did not run.
-        const int64_t now = steadyNowNs();
-        noticePause(now - last_turn_ns, now);
-        last_turn_ns = now;
-        intake_seen_ns_ = now;
-        assertProgress(now);
+        assertProgress(steadyNowNs());
         if (const Status s = cluster_->poll(); !s.isOk() && !duplicate_logged) {
             // After the join only a newer server can clash with our id, and that one refuses to start.
             std::fprintf(stderr, "facescan-server: %s\n", s.message().c_str());
@@ -255,7 +251,6 @@ void Server::intakeLoop() {
 }
 
 void Server::noticePause(int64_t gap_ns, int64_t now_ns) {
-    if (gap_ns < lease_ns_ / 2) return;
     view_stale_until_ns_ = now_ns + 2 * lease_ns_;
     std::fprintf(stderr,
                  "facescan-server: this server did not run for %.1f s (frozen, or the machine paused): its view of "
@@ -265,10 +260,10 @@ void Server::noticePause(int64_t gap_ns, int64_t now_ns) {
 }
 
 bool Server::viewFresh() const {
-    // The intake's own turn must be recent too: after a pause the other threads may wake before the intake has
-    // noticed it, and they must not act in the meantime.
+    // The watchdog's last check must be recent too: after a pause the other threads may wake before the watchdog
+    // has noticed it, and they must not act in the meantime.
     const int64_t now = steadyNowNs();
-    return now >= view_stale_until_ns_.load() && now - intake_seen_ns_.load() < lease_ns_ / 2;
+    return now >= view_stale_until_ns_.load() && now - watchdog_->lastCheckNs() < lease_ns_ / 2;
 }
 
 void Server::assertProgress(int64_t now_ns) {

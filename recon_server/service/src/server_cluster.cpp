@@ -14,6 +14,7 @@
 #include "service/replication.hpp"
 #include "service/server.hpp"
 #include "service/session_store.hpp"
+#include "service/takeover.hpp"
 
 namespace facescan::service {
 namespace {
@@ -273,35 +274,32 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         const bool stale_self = restart && view.data.owner_id == params_.server_id;
         const bool gone = !view.alive || stale_self || (restart && cluster_->diedOnThisHost(view.data.owner_id));
         if (!gone) continue;
-        std::optional<wire::ReplicaData> copy;
-        if (view.data.standby_id == params_.server_id) copy = replicator_->standbyCopy(id);
-        if (auto r = resumable_.find(id); r != resumable_.end()) {
-            if (!copy || r->second.epoch > copy->epoch ||
-                (r->second.epoch == copy->epoch && r->second.next_seq > copy->next_seq)) {
-                copy = r->second;
+        std::optional<wire::ReplicaData> standby;
+        if (view.data.standby_id == params_.server_id) standby = replicator_->standbyCopy(id);
+        const auto disk = resumable_.find(id);
+        const TakeoverChoice choice = chooseTakeover(view.data, standby ? &*standby : nullptr,
+                                                     disk != resumable_.end() ? &disk->second : nullptr);
+        if (choice.kind == TakeoverChoice::Kind::kFromFirstFrame) {
+            // Nobody holds a replica (the owner died before its first one reached a standby or its disk), and the
+            // agent still keeps every frame from the first: the scan starts over from there and loses nothing.
+            takeOverFromFirstFrame(id, view);
+            continue;
+        }
+        if (choice.kind == TakeoverChoice::Kind::kRefuse) {
+            if (refusals_logged_.insert(id + ":" + choice.why).second) {
+                std::fprintf(stderr, "facescan-server: %s\n", choice.why.c_str());
             }
-            resumable_.erase(r);
-        }
-        if (!copy) {
-            // Nobody holds a replica (the owner died before its first one reached a standby or its disk). While
-            // the agent still keeps every frame from the first, the scan starts over from there and loses
-            // nothing; otherwise it waits for a server that has its replica.
-            if (view.data.confirmed_seq == 0) takeOverFromFirstFrame(id, view);
             continue;
         }
-        if (copy->next_seq < view.data.confirmed_seq) {
-            std::fprintf(stderr,
-                         "facescan-server: session %s: this server's replica (frame %u) is older than what "
-                         "the agent still keeps (from frame %u): not taking it over\n",
-                         id.c_str(), copy->next_seq, view.data.confirmed_seq);
-            continue;
-        }
+        if (choice.kind == TakeoverChoice::Kind::kWait) continue;  // a server that has its replica continues it
+        std::optional<wire::ReplicaData> copy = *choice.copy;
+        if (disk != resumable_.end()) resumable_.erase(disk);
         auto o = std::make_shared<OwnedSession>();
         // The takeover time runs from the old owner's last sign of life (an announcement or a replica).
         const int64_t heard =
             std::max(replicator_->lastHeardFrom(view.data.owner_id), cluster_->lastHeard(view.data.owner_id));
         o->takeover_from_ns = heard > 0 ? heard : steadyNowNs();
-        const uint32_t epoch = std::max(view.data.epoch, copy->epoch) + 1;
+        const uint32_t epoch = choice.epoch;
         std::fprintf(stderr, "facescan-server: session %s: owner '%s' is gone; taking over at frame %u (epoch %u)\n",
                      id.c_str(), view.data.owner_id.c_str(), copy->next_seq, epoch);
         o->restore_from = std::move(copy);
@@ -327,6 +325,10 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                              s.toString().c_str());
             }
             it = resumable_.erase(it);
+            continue;
+        }
+        if (!view->second.alive && !view->second.disposed && holding(view->second.data.state)) {
+            ++it;  // its owner is gone: the takeover above decides (it may be waiting for its view to catch up)
             continue;
         }
         std::fprintf(stderr, "facescan-server: session %s is %s on server '%s': the replica in %s stays as it is\n",

@@ -12,8 +12,11 @@ namespace facescan::service {
 void Watchdog::Beat::begin() { since_ns_.store(steadyNowNs(), std::memory_order_relaxed); }
 void Watchdog::Beat::end() { since_ns_.store(0, std::memory_order_relaxed); }
 
-Watchdog::Watchdog(Options options, std::function<void(const std::string&)> on_stall)
-    : options_(options), on_stall_(std::move(on_stall)) {}
+Watchdog::Watchdog(Options options, std::function<void(const std::string&)> on_stall,
+                   std::function<void(int64_t, int64_t)> on_pause)
+    : options_(options), on_stall_(std::move(on_stall)), on_pause_(std::move(on_pause)) {
+    last_check_ns_ = steadyNowNs();
+}
 
 Watchdog::~Watchdog() { stop(); }
 
@@ -62,15 +65,20 @@ void Watchdog::stop() {
 void Watchdog::loop() {
     recon::nameThisThread("fs-watchdog");
     const auto period = std::chrono::duration<double>(options_.period_s);
-    // A tick this much later than planned: the whole process was frozen (every thread, this one too).
-    const auto pause_ns = static_cast<int64_t>(std::max(1.0, 4 * options_.period_s) * 1e9);
-    int64_t last_tick_ns = steadyNowNs();
+    // A check this much later than planned: the whole process was frozen (every thread, this one too).
+    const auto pause_ns = static_cast<int64_t>(options_.pause_gap_s * 1e9);
+    const auto period_ns = static_cast<int64_t>(options_.period_s * 1e9);
+    last_check_ns_ = steadyNowNs();
     std::unique_lock lk(mutex_);
     while (!cv_.wait_for(lk, period, [&] { return stopping_; })) {
         lk.unlock();
         const int64_t now_ns = steadyNowNs();
-        if (now_ns - last_tick_ns > pause_ns) resumed_ns_.store(now_ns, std::memory_order_relaxed);
-        last_tick_ns = now_ns;
+        const int64_t gap_ns = now_ns - last_check_ns_.load(std::memory_order_relaxed) - period_ns;
+        if (gap_ns >= pause_ns) {
+            resumed_ns_.store(now_ns, std::memory_order_relaxed);
+            if (on_pause_) on_pause_(gap_ns + period_ns, now_ns);
+        }
+        last_check_ns_.store(now_ns, std::memory_order_relaxed);
         if (const std::optional<std::string> what = stalled(steadyNowNs())) {
             on_stall_(*what);
             lk.lock();

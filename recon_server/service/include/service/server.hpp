@@ -25,6 +25,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -152,10 +153,11 @@ class Server {
     // `dispose_claim`: the claim says RELEASED first (nobody owns the session); else it is withdrawn, as if this
     // server had died, and a stronger claim stays the only one.
     void retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_claim);
-    // server.cpp: the cluster view. A server that was frozen (SIGSTOP, a paused VM, a stall) for half a lease or
-    // more saw the others' leases lapse only in its own eyes: for two leases after it wakes, it re-observes the
-    // cluster and takes nothing over, places nothing, and holds its own sessions' work and output (frames,
-    // finishes, replicas, status, snapshots, replies) until it knows whether it still owns them.
+    // server.cpp: the cluster view. A server that was frozen (SIGSTOP, a paused VM) for half a lease or more (its
+    // watchdog's thread notices it: noticePause) saw the others' leases lapse only in its own eyes: for two leases
+    // after it wakes, it re-observes the cluster and takes nothing over, places nothing, and holds its own sessions'
+    // work and output (frames, finishes, replicas, status, snapshots, replies) until it knows whether it still owns
+    // them.
     void noticePause(int64_t gap_ns, int64_t now_ns);
     bool viewFresh() const;
     void assertProgress(int64_t now_ns);    // the announcement's and claims' liveliness (wire::withProgressLiveliness)
@@ -188,7 +190,6 @@ class Server {
     std::shared_ptr<Watchdog::Beat> intake_beat_;
     std::unique_ptr<Retirer> retirer_;  // after the DDS entities: it ends readers and claims, so it goes first
     int64_t lease_ns_ = 10'000'000'000;
-    std::atomic<int64_t> intake_seen_ns_{0};       // steady clock of the intake loop's last turn
     std::atomic<int64_t> view_stale_until_ns_{0};  // steady clock: after a pause, the view is re-observed until then
     int64_t last_progress_ns_ = 0;                 // intake thread: when liveliness was last asserted
     std::filesystem::path stall_file_;             // FACESCAN_FAILPOINT; empty: none
@@ -206,6 +207,7 @@ class Server {
     std::map<std::string, Candidate> candidates_;
     std::map<std::string, wire::ReplicaData> resumable_;  // from the data dir, waiting for the join to end
     std::map<std::string, int64_t> orphaned_since_ns_;    // takeOverFromFirstFrame: when its owner was seen gone
+    std::set<std::string> refusals_logged_;               // takeovers refused: each reason said once
     std::deque<Command> deferred_;                        // commands for sessions being claimed here
 
     std::mutex command_mutex_;

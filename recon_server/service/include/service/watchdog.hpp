@@ -36,14 +36,22 @@ class Watchdog {
     struct Options {
         double stall_limit_s = 20.0;  // seconds one step may take before the process counts as stuck
         double period_s = 0.25;       // seconds between checks
+        // seconds: a check this late means the whole process did not run (SIGSTOP, a paused VM). The watchdog's
+        // thread does no work of its own, so unlike a busy loop its lateness is time the process was frozen.
+        double pause_gap_s = 1.0;
     };
-    Watchdog(Options options, std::function<void(const std::string& what)> on_stall);
+    // on_pause(gap_ns, now_ns) is called from the watchdog's thread when it wakes from such a pause.
+    Watchdog(Options options, std::function<void(const std::string& what)> on_stall,
+             std::function<void(int64_t gap_ns, int64_t now_ns)> on_pause = nullptr);
     ~Watchdog();  // stop()
     Watchdog(const Watchdog&) = delete;
     Watchdog& operator=(const Watchdog&) = delete;
 
     // A beat for one loop; it is watched while anybody holds it.
     std::shared_ptr<Beat> add(std::string name);
+    // Steady clock of the watchdog's last check. Older than pause_gap_s: the process may have just woken from a
+    // pause that the watchdog has not seen yet.
+    int64_t lastCheckNs() const { return last_check_ns_.load(std::memory_order_relaxed); }
     // The first loop that has been in one step beyond the limit ("the intake thread has been in one step for
     // 21.3 s"), else nullopt.
     std::optional<std::string> stalled(int64_t now_ns) const;
@@ -56,6 +64,8 @@ class Watchdog {
 
     Options options_;
     std::function<void(const std::string&)> on_stall_;
+    std::function<void(int64_t, int64_t)> on_pause_;
+    std::atomic<int64_t> last_check_ns_{0};
     mutable std::mutex mutex_;
     std::vector<std::weak_ptr<Beat>> beats_;
     // When this process last woke from a pause (SIGSTOP, a VM paused): the watchdog's own thread was frozen too, so
