@@ -69,13 +69,16 @@ TEST(Cluster, SixSessionsOnThreeServersAreEachProcessedOnceAndSpreadTwoTwoTwo) {
     }
 
     for (const std::string& id : servers) EXPECT_EQ(per_server[id], 2) << id << " owned " << per_server[id];
-    // Ctrl-C on every agent: each tells its owner the stream ended and waits until the scan is finished.
+    // Ctrl-C on every agent: each tells its owner the stream ended and stops within its grace (2 s), whether or
+    // not the owner has finished the scan by then; on a loaded machine the owner takes longer to write it.
     for (const auto& [session, owner] : owner_of) rig.agent(session).signal(SIGINT);
     for (const auto& [session, owner] : owner_of) EXPECT_EQ(rig.agent(session).wait(60s), 0) << session;
     // Exactly once: each session lives in its owner's data dir only, finished there, recorded as its owner's.
     for (const auto& [session, owner] : owner_of) {
+        const fs::path summary_path = rig.dataDir(owner) / session / "summary.json";
+        EXPECT_TRUE(waitUntil([&] { return fs::exists(summary_path); }, 60s)) << session << " never finished";
         EXPECT_EQ(holders(rig, servers, session), std::vector<std::string>{owner}) << session;
-        const std::string summary = readText(rig.dataDir(owner) / session / "summary.json");
+        const std::string summary = readText(summary_path);
         EXPECT_NE(summary.find("\"state\": \"finished\""), std::string::npos) << summary;
         EXPECT_EQ(lastMatch(summary, "\"owner\": \\{\"server_id\": \"([^\"]+)\""), owner);
         EXPECT_EQ(jsonField(readText(rig.dataDir(owner) / session / "owner.json"), "server_id"), owner);

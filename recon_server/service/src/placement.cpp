@@ -1,6 +1,7 @@
 #include "service/placement.hpp"
 
 #include <algorithm>
+#include <set>
 
 #include "wire/cluster_codec.hpp"
 
@@ -23,16 +24,50 @@ std::map<std::string, std::string> assignSessions(std::vector<Candidate> candida
     std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
         return a.order_key != b.order_key ? a.order_key < b.order_key : a.session_id < b.session_id;
     });
+    // Room is judged on everything held now (every claim and each session given here); the ranking on what came
+    // before the session in the order, so that it does not depend on which later claims this view has seen.
+    std::map<std::string, int> held;
+    for (const ServerLoad& s : servers) held[s.server_id] = s.open;
+    for (const Candidate& c : candidates) {
+        if (c.claimed_by.empty()) continue;
+        const auto s = std::find_if(servers.begin(), servers.end(),
+                                    [&](const ServerLoad& l) { return l.server_id == c.claimed_by; });
+        if (s != servers.end()) s->open = std::max(0, s->open - 1);
+    }
     std::map<std::string, std::string> out;
     for (const Candidate& c : candidates) {
+        if (!c.claimed_by.empty()) {
+            for (ServerLoad& s : servers) s.open += s.server_id == c.claimed_by ? 1 : 0;
+            continue;
+        }
         ServerLoad* best = nullptr;
         for (ServerLoad& s : servers) {
-            if (s.open >= s.capacity) continue;
+            if (held[s.server_id] >= s.capacity) continue;
             if (!best || lessLoaded(s, *best, c.session_id)) best = &s;
         }
         if (!best) continue;
         ++best->open;
+        ++held[best->server_id];
         out[c.session_id] = best->server_id;
+    }
+    return out;
+}
+
+std::map<std::string, std::string> placeSessions(const std::vector<Candidate>& candidates,
+                                                 const std::vector<ServerLoad>& servers, int64_t patience_ns) {
+    std::map<std::string, std::string> out = assignSessions(candidates, servers);
+    std::vector<ServerLoad> left = servers;
+    for (int64_t round = 1; round <= static_cast<int64_t>(servers.size()); ++round) {
+        std::set<std::string> late;
+        for (const Candidate& c : candidates) {
+            const auto given = out.find(c.session_id);
+            if (c.claimed_by.empty() && given != out.end() && c.overdue_ns >= round * patience_ns) {
+                late.insert(given->second);
+            }
+        }
+        if (late.empty()) break;
+        std::erase_if(left, [&](const ServerLoad& s) { return late.count(s.server_id) > 0; });
+        for (const auto& [session, server] : assignSessions(candidates, left)) out[session] = server;
     }
     return out;
 }

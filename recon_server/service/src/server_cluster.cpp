@@ -20,7 +20,7 @@ namespace facescan::service {
 namespace {
 
 constexpr int64_t kClaimBatchNs = 150'000'000;    // CameraInfos that arrive together are placed together
-constexpr int64_t kFallbackNs = 2'000'000'000;    // the next server in line claims after this per rank
+constexpr int64_t kFallbackNs = 2'000'000'000;    // a takeover: the next server in line claims after this per rank
 constexpr int64_t kReplayRepeatNs = 300'000'000;  // at most this often a new request to resend frames
 
 bool holding(wire::OwnerState s) {
@@ -51,6 +51,7 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
     // waits until the previous one received frames or was released. A real agent writes one session.
     std::map<dds_instance_handle_t, const std::string*> next_of_writer;
     std::set<dds_instance_handle_t> busy_writers;
+    std::vector<service::Candidate> eligible;
     for (const auto& [id, c] : candidates_) {
         const auto view = owners.find(id);
         if (view != owners.end()) {
@@ -58,21 +59,34 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
             if (view->second.alive && (st == wire::OwnerState::kClaiming || st == wire::OwnerState::kReady)) {
                 busy_writers.insert(c.writer);
             }
-            continue;  // claimed once: never placed again (a dead owner's session waits for its standby)
+            // Claimed once: never placed again (a dead owner's session waits for its standby). A live claim
+            // keeps its place in the order, so that this server places the sessions around it as every other
+            // server does, whether or not they have seen the claim yet.
+            if (view->second.alive && holding(st)) eligible.push_back({id, c.order_key, view->second.data.owner_id});
+            continue;
         }
         if (owned(id) || resumable_.count(id)) continue;
         const std::string*& first = next_of_writer[c.writer];
         if (!first || c.order_key < candidates_.at(*first).order_key) first = &id;
     }
-    std::vector<service::Candidate> eligible;
+    const int64_t now = steadyNowNs();
+    bool unclaimed = false;
     for (const auto& [writer, id] : next_of_writer) {
-        if (!busy_writers.count(writer)) eligible.push_back({*id, candidates_.at(*id).order_key});
+        if (busy_writers.count(writer)) continue;
+        eligible.push_back(
+            {*id, candidates_.at(*id).order_key, {}, now - candidates_.at(*id).first_seen_ns - kClaimBatchNs});
+        unclaimed = true;
     }
-    if (eligible.empty()) return;
+    if (!unclaimed) return;
     const std::vector<ServerLoad> loads = cluster_->liveLoads();
-    const std::map<std::string, std::string> assigned = assignSessions(eligible, loads);
+    // A chosen server that lives claims within three leases: it may have stalled for up to one (longer, and its
+    // liveliness lapses: it leaves the view, and its sessions are placed again without it at once), then it
+    // re-observes the cluster for two before it places anything. Only past that is it passed over: sooner, a
+    // server that was descheduled for a moment on a loaded machine would lose its turn, and the spread its balance.
+    const std::map<std::string, std::string> assigned = placeSessions(eligible, loads, 3 * lease_ns_);
     const bool responder = cluster_->responder() == params_.server_id;
     for (const service::Candidate& e : eligible) {
+        if (!e.claimed_by.empty()) continue;
         const Candidate& c = candidates_.at(e.session_id);
         const auto target = assigned.find(e.session_id);
         if (target == assigned.end()) {
@@ -89,17 +103,13 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
             }
             continue;
         }
-        bool claim_now = false;
-        if (target->second == params_.server_id) {
-            claim_now = steadyNowNs() - c.first_seen_ns >= kClaimBatchNs;
-        } else {
-            // The chosen server did not claim it (dead but not yet noticed, or busy): the next in line does.
-            const std::vector<std::string> order = claimOrder(e.session_id, loads);
-            const auto me = std::find(order.begin(), order.end(), params_.server_id);
-            const int64_t rank = me == order.end() ? -1 : static_cast<int64_t>(me - order.begin());
-            claim_now = rank > 0 && steadyNowNs() - c.first_seen_ns >= rank * kFallbackNs;
+        if (target->second != params_.server_id || e.overdue_ns < 0) continue;
+        if (e.overdue_ns >= 3 * lease_ns_) {
+            std::fprintf(stderr,
+                         "facescan-server: session %s: the server it was placed on has not claimed it within %.0f s: "
+                         "claiming it here\n",
+                         e.session_id.c_str(), static_cast<double>(3 * lease_ns_) * 1e-9);
         }
-        if (!claim_now) continue;
         auto o = std::make_shared<OwnedSession>();
         o->camera = c.camera;
         o->camera_writer = c.writer;
@@ -342,7 +352,7 @@ void Server::takeOverFromFirstFrame(const std::string& session_id, const OwnerVi
     const auto c = candidates_.find(session_id);
     if (c == candidates_.end()) return;  // its agent is gone too: nothing to start from
     // One server takes it: its named standby while that one lives (its replica may be on the way), else the
-    // first in claim order, and the next in line after kFallbackNs per rank (as in placement).
+    // first in claim order, and the next in line after kFallbackNs per rank.
     const int64_t now = steadyNowNs();
     const std::string& standby = view.data.standby_id;
     if (!standby.empty() && cluster_->serverAlive(standby)) {
