@@ -202,6 +202,7 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
     // After a moment with no server at all, say why none may answer (a secured domain, most often).
     stream.onNoServer([&] { return wire::noPeerHint(options_.dds, s.participant.otherParticipants()); });
     if (const Status served = stream.waitUntilServed(stop, options_.wait_for_server_s); !served.isOk()) {
+        if (served.code() != StatusCode::kDeadlineExceeded) return served;
         char seconds[32];
         std::snprintf(seconds, sizeof(seconds), "%g", options_.wait_for_server_s);
         return deadlineExceeded("no facescan-server appeared on " + where + " within " + seconds +

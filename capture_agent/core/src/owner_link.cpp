@@ -169,6 +169,13 @@ Status SessionStream::waitUntilServed(const std::atomic<bool>& stop, float timeo
     const auto deadline = deadlineAfter(timeout_s);
     while (!follow(stop, Clock::time_point::max())) {
         if (stop) return Status::ok();
+        // A finished claim for a session this agent never streamed: the id names a scan that is over (its files
+        // are on that server), and a new scan under it would be mixed up with that one.
+        if (const std::optional<OwnerInfo>& o = link_.owner(); o && o->finished() && state_.owner.empty()) {
+            return invalidArgument("session " + session_id_ + " already finished on server '" + o->data.owner_id +
+                                   "': a session id names one scan; start the agent with another --session (or "
+                                   "without one, for a fresh id)");
+        }
         if (on_wait_) on_wait_();
         if (Clock::now() > deadline) {
             return deadlineExceeded("no facescan-server took session " + session_id_ + " on " + where_ + " within " +

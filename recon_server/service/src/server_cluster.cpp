@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "recon/parallel.hpp"
+#include "service/finished_sessions.hpp"
 #include "service/frame_load.hpp"
 #include "service/replica_log.hpp"
 #include "service/replication.hpp"
@@ -47,6 +48,7 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
     for (auto it = candidates_.begin(); it != candidates_.end();) {
         it = it->second.writer_alive ? std::next(it) : candidates_.erase(it);
     }
+    std::erase_if(tombstones_, [&](const auto& t) { return !candidates_.count(t.first); });
     // Flood control: one agent writer (a CameraInfo publication) gets one session placed at a time; its next one
     // waits until the previous one received frames or was released. A real agent writes one session.
     std::map<dds_instance_handle_t, const std::string*> next_of_writer;
@@ -66,6 +68,7 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
             continue;
         }
         if (owned(id) || resumable_.count(id)) continue;
+        if (refuseReusedId(id)) continue;
         const std::string*& first = next_of_writer[c.writer];
         if (!first || c.order_key < candidates_.at(*first).order_key) first = &id;
     }
@@ -117,6 +120,29 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
             std::fprintf(stderr, "facescan-server: cannot claim %s: %s\n", e.session_id.c_str(), s.toString().c_str());
         }
     }
+}
+
+bool Server::refuseReusedId(const std::string& session_id) {
+    if (tombstones_.count(session_id)) return true;
+    const std::optional<std::filesystem::path> dir =
+        findFinishedSessionDir(params_.data_dir, session_id, params_.server_id);
+    if (!dir) return false;
+    // A claim that says FINISHED, as the scan's owner once wrote it: no server places the new one, and its agent
+    // says why and stops, instead of a second scan under the same id next to (or over) this one.
+    wire::SessionOwnerData record;
+    record.session_id = session_id;
+    record.owner_id = params_.server_id;
+    const auto previous = readSessionOwner(*dir);
+    record.epoch = previous ? previous->second + 1 : 1;
+    record.state = wire::OwnerState::kFinished;
+    auto claim = cluster_->claim(record);
+    if (!claim.isOk()) return false;
+    tombstones_[session_id] = std::move(*claim);
+    std::fprintf(stderr,
+                 "facescan-server: session %s: refused: the id names a scan that finished here (%s); a new scan needs "
+                 "a new --session id, and that scan's files stay as they are\n",
+                 session_id.c_str(), dir->c_str());
+    return true;
 }
 
 Status Server::claimSession(const std::string& session_id, uint32_t epoch, std::shared_ptr<OwnedSession> o,

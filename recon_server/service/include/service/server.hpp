@@ -143,6 +143,9 @@ class Server {
     void takeOverFromFirstFrame(const std::string& session_id, const OwnerView& view);
     void requestReplays();
     void releaseStale();
+    // A new scan under the id of one that finished in this server's data dir: refused with a FINISHED claim (true),
+    // so that no server places it and its agent says why.
+    bool refuseReusedId(const std::string& session_id);
     Status claimSession(const std::string& session_id, uint32_t epoch, std::shared_ptr<OwnedSession> owned,
                         const wire::SessionOwnerData& previous);
     void buildEngine(OwnedSession& owned);  // starts the build of owned.engine
@@ -205,10 +208,11 @@ class Server {
 
     // Intake thread only.
     std::map<std::string, Candidate> candidates_;
-    std::map<std::string, wire::ReplicaData> resumable_;  // from the data dir, waiting for the join to end
-    std::map<std::string, int64_t> orphaned_since_ns_;    // takeOverFromFirstFrame: when its owner was seen gone
-    std::set<std::string> refusals_logged_;               // takeovers refused: each reason said once
-    std::deque<Command> deferred_;                        // commands for sessions being claimed here
+    std::map<std::string, wire::ReplicaData> resumable_;        // from the data dir, waiting for the join to end
+    std::map<std::string, int64_t> orphaned_since_ns_;          // takeOverFromFirstFrame: when its owner was seen gone
+    std::map<std::string, std::unique_ptr<Claim>> tombstones_;  // refuseReusedId, while the candidate lasts
+    std::set<std::string> refusals_logged_;                     // takeovers refused: each reason said once
+    std::deque<Command> deferred_;                              // commands for sessions being claimed here
 
     std::mutex command_mutex_;
     std::condition_variable command_cv_;
