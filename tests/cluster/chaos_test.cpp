@@ -313,19 +313,25 @@ class ChaosRun {
             if (!any) break;
             std::printf("    %3d %s\n", minute, row.c_str());
         }
-        // Growth of the server that was never killed (s1): from its sample at 5 min to its highest after.
-        long at5 = 0, highest = 0, last = 0;
-        for (const MemorySample& m : memory_) {
-            if (m.server != "s1") continue;
-            if (m.at_s >= 300 && at5 == 0) at5 = m.rss_kb;
-            if (m.at_s >= 300) highest = std::max(highest, m.rss_kb), last = m.rss_kb;
-        }
-        if (at5 > 0) {
-            memory_growth_ = static_cast<double>(highest - at5) / static_cast<double>(at5);
+        // Growth of each server process that lived for more than 10 minutes (s1 is never killed by the schedule,
+        // but a server that exits by itself is restarted): from its sample 5 min after its start to its highest.
+        std::map<pid_t, std::vector<const MemorySample*>> by_pid;
+        for (const MemorySample& m : memory_) by_pid[m.pid].push_back(&m);
+        for (const auto& [pid, samples] : by_pid) {
+            const double start = samples.front()->at_s;
+            if (samples.back()->at_s - start < 600) continue;
+            long at5 = 0, highest = 0;
+            for (const MemorySample* m : samples) {
+                if (m->at_s - start >= 300 && at5 == 0) at5 = m->rss_kb;
+                if (m->at_s - start >= 300) highest = std::max(highest, m->rss_kb);
+            }
+            const double growth = static_cast<double>(highest - at5) / static_cast<double>(std::max(1L, at5));
+            memory_growth_ = std::max(memory_growth_, growth);
             std::printf(
-                "  s1 (never killed): %ld MB at 5 min, %ld MB at the end, highest after 5 min %ld MB: growth "
-                "%.1f %%\n",
-                at5 / 1024, last / 1024, highest / 1024, 100 * memory_growth_);
+                "  %s (pid %d, %.0f to %.0f s): %ld MB 5 min in, %ld MB at its end, highest after %ld MB: "
+                "growth %.1f %%\n",
+                samples.front()->server.c_str(), static_cast<int>(pid), start, samples.back()->at_s, at5 / 1024,
+                samples.back()->rss_kb / 1024, highest / 1024, 100 * growth);
         }
     }
 
