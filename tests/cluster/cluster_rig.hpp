@@ -87,9 +87,10 @@ class ClusterRig {
     ChildProcess& server(const std::string& id) { return *servers_.at(id); }
 
     // An agent streaming the synthetic head: `rate` "max" is a recording (every frame), a number a live stream.
-    // `motion` adds synthetic source options (e.g. ",period=1200" for a slower head).
+    // `motion` adds synthetic source options (e.g. ",period=1200" for a slower head); `extra` adds flags (e.g.
+    // "--finish-timeout", "150").
     ChildProcess& startAgent(const std::string& session, int frames, const std::string& rate,
-                             const std::string& motion = "") {
+                             const std::string& motion = "", std::vector<std::string> extra = {}) {
         std::vector<std::string> args = {
             FACESCAN_AGENT_BIN,
             "--profile",
@@ -104,6 +105,7 @@ class ClusterRig {
             rate,
             "--wait-for-server",
             "60"};
+        args.insert(args.end(), extra.begin(), extra.end());
         auto& slot = agents_[session];
         slot = std::make_unique<ChildProcess>(args, agentLog(session));
         return *slot;
