@@ -31,6 +31,15 @@ int summaryNumber(const fs::path& summary, const std::string& key) {
     return v.empty() ? -1 : std::stoi(v);
 }
 
+// A recording on srv-a and srv-b, 20 frames in: which server owns it and which does not.
+void startRecording(ClusterRig& rig, std::string& owner, std::string& other) {
+    rig.startAgent("rec", kFrames, "max", ",period=900");
+    owner = rig.waitForOwner("rec", 30s);
+    ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("rec"));
+    other = owner == "srv-a" ? "srv-b" : "srv-a";
+    ASSERT_TRUE(waitUntil([&] { return rig.published("rec") >= 20; }, 60s));
+}
+
 void expectFinishedOnceWhole(const ClusterRig& rig, const std::string& session, const std::string& where) {
     const fs::path summary = rig.dataDir(where) / session / "summary.json";
     ASSERT_TRUE(waitUntil([&] { return fs::exists(summary); }, 30s)) << summary;
@@ -44,11 +53,8 @@ TEST(StuckServer, AFrozenOwnerWakesActsOnNothingItMissedAndWritesNothingForWhatW
     rig.startServer("srv-a");
     rig.startServer("srv-b");
     ASSERT_TRUE(rig.waitForServers(2, 30s));
-    rig.startAgent("rec", kFrames, "max", ",period=900");
-    const std::string owner = rig.waitForOwner("rec", 30s);
-    ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("rec"));
-    const std::string other = owner == "srv-a" ? "srv-b" : "srv-a";
-    ASSERT_TRUE(waitUntil([&] { return rig.published("rec") >= 20; }, 60s));
+    std::string owner, other;
+    ASSERT_NO_FATAL_FAILURE(startRecording(rig, owner, other));
     rig.server(owner).signal(SIGSTOP);
     // Frozen well past the lease (3 s): the other server takes the session over meanwhile.
     const bool taken = waitUntil(
@@ -85,11 +91,8 @@ TEST(StuckServer, AnOwnerWhoseIntakeStallsLosesItsSessionWithinTheLeaseAndItsWat
     }
     ::unsetenv("FACESCAN_FAILPOINT");
     ASSERT_TRUE(rig.waitForServers(2, 30s));
-    rig.startAgent("rec", kFrames, "max", ",period=900");
-    const std::string owner = rig.waitForOwner("rec", 30s);
-    ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("rec"));
-    const std::string other = owner == "srv-a" ? "srv-b" : "srv-a";
-    ASSERT_TRUE(waitUntil([&] { return rig.published("rec") >= 20; }, 60s));
+    std::string owner, other;
+    ASSERT_NO_FATAL_FAILURE(startRecording(rig, owner, other));
     std::ofstream(rig.dir() / ("stall-" + owner)).put('\n');
     ASSERT_TRUE(waitUntil(
         [&] { return readText(rig.serverLog(owner)).find("failpoint: the intake thread stops") != std::string::npos; },

@@ -13,6 +13,7 @@
 #include <regex>
 #include <thread>
 
+#include "server_rig.hpp"
 #include "service/server.hpp"
 #include "test_agent.hpp"
 #include "wire/mesh_codec.hpp"
@@ -71,25 +72,6 @@ bool eventually(const std::function<bool()>& pred, std::chrono::milliseconds tim
         std::this_thread::sleep_for(20ms);
     }
     return true;
-}
-
-struct Rig {
-    std::unique_ptr<Server> server;
-    std::unique_ptr<TestClient> client;
-};
-
-Rig makeRig(const ServerParams& params) {
-    Rig rig;
-    auto server = Server::create(params);
-    EXPECT_TRUE(server.isOk()) << server.status().toString();
-    if (server.isOk()) rig.server = std::move(server).value();
-    auto client = TestClient::create(params.domain.domain_id);
-    EXPECT_TRUE(client.isOk()) << client.status().toString();
-    if (client.isOk()) rig.client = std::move(client).value();
-    if (rig.client) {
-        EXPECT_TRUE(rig.client->waitForServer(10s));
-    }
-    return rig;
 }
 
 // One recording of the sequence, to its end of stream; the client sees it finished and takes what it was sent

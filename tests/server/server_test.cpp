@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "recon/indexed_mesh.hpp"
+#include "server_rig.hpp"
 #include "service/frame_load.hpp"
 #include "test_agent.hpp"
 #include "wire/mesh_codec.hpp"
@@ -115,25 +116,6 @@ void expectSessionWritten(const std::filesystem::path& dir, bool with_mesh) {
 const EncodedSequence& sequence() {
     static const EncodedSequence seq = testing::renderSequence(45);
     return seq;
-}
-
-struct Rig {
-    std::unique_ptr<Server> server;
-    std::unique_ptr<TestClient> client;
-};
-
-Rig makeRig(const ServerParams& params) {
-    Rig rig;
-    auto server = Server::create(params);
-    EXPECT_TRUE(server.isOk()) << server.status().toString();
-    if (server.isOk()) rig.server = std::move(server).value();
-    auto client = TestClient::create(params.domain.domain_id);
-    EXPECT_TRUE(client.isOk()) << client.status().toString();
-    if (client.isOk()) rig.client = std::move(client).value();
-    if (rig.client) {
-        EXPECT_TRUE(rig.client->waitForServer(10s));
-    }
-    return rig;
 }
 
 std::unique_ptr<TestAgent> makeAgent(uint32_t domain, const std::string& session, bool every_frame,
