@@ -35,8 +35,9 @@ bool deadLocalProcess(const wire::ServerAnnounceData& a) {
 
 }  // namespace
 
-Claim::Claim(wire::Writer<facescan_wire_SessionOwner> writer, wire::SessionOwnerData record)
-    : writer_(std::move(writer)), record_(std::move(record)) {
+Claim::Claim(wire::Writer<facescan_wire_SessionOwner> writer, wire::SessionOwnerData record,
+             std::function<bool()> progressing)
+    : writer_(std::move(writer)), record_(std::move(record)), progressing_(std::move(progressing)) {
     std::lock_guard lk(mutex_);
     publishLocked();
 }
@@ -54,6 +55,7 @@ bool Claim::changed(const wire::SessionOwnerData& b) const {
 }
 
 void Claim::publishLocked() {
+    if (progressing_ && !progressing_()) return;  // the record keeps the change; a later update publishes it
     record_.updated_ns = realtimeNowNs();
     if (const Status s = writer_.write(wire::toMessage(record_)); !s.isOk()) {
         std::fprintf(stderr, "facescan-server: publishing the owner of '%s': %s\n", record_.session_id.c_str(),
@@ -295,7 +297,7 @@ StatusOr<std::unique_ptr<Claim>> Cluster::claim(const wire::SessionOwnerData& in
         wire::claimWriterQos(wire::claimStrength(initial.epoch, options_.server_id, initial.session_id)),
         options_.lease_s);
     ASSIGN_OR_RETURN(auto writer, wire::Writer<facescan_wire_SessionOwner>::create(*owner_topic_, &qos));
-    return std::make_unique<Claim>(std::move(writer), initial);
+    return std::make_unique<Claim>(std::move(writer), initial, options_.progressing);
 }
 
 }  // namespace facescan::service

@@ -17,6 +17,7 @@ namespace {
 
 // A server that found itself stuck exits with this (EX_SOFTWARE): systemd's Restart=on-failure starts it again.
 constexpr int kExitStalled = 70;
+constexpr double kRetirerStallLimitS = 120.0;  // seconds; see Retirer
 
 constexpr int kBatch = 16;  // samples per take; also the reader's per-instance limit (wire::frameReaderQos)
 
@@ -74,10 +75,17 @@ Status Server::start() {
         [this](int64_t gap_ns, int64_t now_ns) { noticePause(gap_ns, now_ns); });
     watchdog_->start();  // before the join: viewFresh() reads its checks
     intake_beat_ = watchdog_->add("the intake thread");
-    retirer_ = std::make_unique<Retirer>(watchdog_->add("the retiring thread"));
+    // Deleting a DDS reader waits for Cyclone's garbage collector, which waits for every reliable write under way in
+    // the process (each up to its max_blocking_time): with peers frozen or cut off, seconds. Only memory waits on
+    // the retiring thread meanwhile, so it gets longer before it counts as stuck.
+    retirer_ = std::make_unique<Retirer>(watchdog_->add("the retiring thread", kRetirerStallLimitS));
     Cluster::Options cluster;
     cluster.server_id = params_.server_id;
     cluster.lease_s = static_cast<double>(lease_ns_) * 1e-9;
+    cluster.progressing = [this] {
+        const int64_t since = intake_beat_->busySinceNs();
+        return since == 0 || steadyNowNs() - since < lease_ns_ / 3;
+    };
     cluster.max_sessions = params_.max_sessions;
     cluster.join_settle_s = params_.join_settle_s;
     cluster.domain = params_.domain;
@@ -150,7 +158,8 @@ void Server::shutdown() {
             promise->set_value();
         });
     }
-    for (auto& f : done) f.wait();
+    // Bounded: a session given up meanwhile (another server owns it now) is not finished here and never answers.
+    for (auto& f : done) (void)f.wait_for(std::chrono::seconds(120));
 
     stopping_ = true;
     if (wake_.valid()) dds_set_guardcondition(wake_.handle(), true);

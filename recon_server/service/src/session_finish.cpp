@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
+#include <thread>
 
 #include "service/session.hpp"
 #include "service/session_store.hpp"
@@ -44,6 +45,17 @@ StatusOr<MeshResult> encodeMesh(const recon::IndexedMesh& mesh, const wire::Mesh
                       static_cast<uint32_t>(cleaned.triangleCount())};
     if (encoded) *encoded = std::move(cleaned);
     return result;
+}
+
+bool Session::mayWrite() {
+    for (;;) {
+        {
+            std::lock_guard lk(mutex_);
+            if (stop_) return false;
+            if (!hold_ || !hold_()) return true;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
 }
 
 void Session::finalize(const std::string& why, const FinishCallback& done) {
@@ -92,6 +104,13 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     files.frames_tsv = frameTimingsTsv();
     files.preview_png = &png;
     std::filesystem::path written;
+    // Meshing takes seconds: a server frozen meanwhile may have lost the session. Nothing is written while its view
+    // of the cluster is stale, and nothing at all once it gave the session up: the new owner writes it.
+    if (!mayWrite()) {
+        std::fprintf(stderr, "facescan-server: session %s: given up while finishing: nothing written here\n",
+                     id_.c_str());
+        return;
+    }
     if (status.isOk()) {
         // The folder records its owner: a server that lost the session to another one (two servers that could
         // not see each other) writes beside the other's files, never over them.

@@ -20,8 +20,8 @@ Watchdog::Watchdog(Options options, std::function<void(const std::string&)> on_s
 
 Watchdog::~Watchdog() { stop(); }
 
-std::shared_ptr<Watchdog::Beat> Watchdog::add(std::string name) {
-    auto beat = std::make_shared<Beat>(std::move(name));
+std::shared_ptr<Watchdog::Beat> Watchdog::add(std::string name, double limit_s) {
+    auto beat = std::make_shared<Beat>(std::move(name), limit_s);
     std::lock_guard lk(mutex_);
     std::erase_if(beats_, [](const std::weak_ptr<Beat>& b) { return b.expired(); });
     beats_.push_back(beat);
@@ -29,7 +29,6 @@ std::shared_ptr<Watchdog::Beat> Watchdog::add(std::string name) {
 }
 
 std::optional<std::string> Watchdog::stalled(int64_t now_ns) const {
-    const auto limit_ns = static_cast<int64_t>(options_.stall_limit_s * 1e9);
     std::lock_guard lk(mutex_);
     for (const std::weak_ptr<Beat>& weak : beats_) {
         const std::shared_ptr<Beat> beat = weak.lock();
@@ -37,10 +36,11 @@ std::optional<std::string> Watchdog::stalled(int64_t now_ns) const {
         int64_t since = beat->busySinceNs();
         if (since == 0) continue;
         since = std::max(since, resumed_ns_.load(std::memory_order_relaxed));
-        if (now_ns - since <= limit_ns) continue;
+        const double limit_s = beat->limitS() > 0 ? beat->limitS() : options_.stall_limit_s;
+        if (now_ns - since <= static_cast<int64_t>(limit_s * 1e9)) continue;
         char what[256];
         std::snprintf(what, sizeof what, "%s has been in one step for %.1f s (the limit is %.1f s)",
-                      beat->name().c_str(), static_cast<double>(now_ns - since) * 1e-9, options_.stall_limit_s);
+                      beat->name().c_str(), static_cast<double>(now_ns - since) * 1e-9, limit_s);
         return std::string(what);
     }
     return std::nullopt;

@@ -10,6 +10,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -43,7 +44,12 @@ struct PeerView {
 // readers see NOT_ALIVE_NO_WRITERS, as if this server had died) unless release() disposed it first.
 class Claim {
  public:
-    Claim(wire::Writer<facescan_wire_SessionOwner> writer, wire::SessionOwnerData record);
+    // `progressing`, when set, says whether the server's work makes progress: a write asserts the liveliness of every
+    // claim and the announcement of the participant (MANUAL_BY_PARTICIPANT), so a claim's change made by another
+    // thread (replication's confirmed frames, the status's counters) while the intake is stuck waits unpublished
+    // instead of keeping a stuck server's sessions alive.
+    Claim(wire::Writer<facescan_wire_SessionOwner> writer, wire::SessionOwnerData record,
+          std::function<bool()> progressing = nullptr);
     wire::SessionOwnerData record() const;
     // Applies `change` to the record and publishes it when something changed (or always when forced).
     template <typename Fn>
@@ -62,6 +68,7 @@ class Claim {
     mutable std::mutex mutex_;
     wire::Writer<facescan_wire_SessionOwner> writer_;
     wire::SessionOwnerData record_;
+    std::function<bool()> progressing_;
 };
 
 class Cluster {
@@ -73,7 +80,8 @@ class Cluster {
         // seconds: the DDS profile's lease. The announcement and the claims lose their liveliness this long after
         // the server last asserted its progress (Server::intakeLoop), as they would if the process had died.
         double lease_s = 10.0;
-        wire::DomainConfig domain;  // for messages
+        std::function<bool()> progressing;  // for the claims (Claim)
+        wire::DomainConfig domain;          // for messages
     };
     static StatusOr<std::unique_ptr<Cluster>> create(const wire::Participant& participant, const Options& options);
     ~Cluster();

@@ -236,6 +236,9 @@ class Session {
     char processFrame(PendingFrame& pending);  // the frame's FrameTiming::outcome
     void copySnapshotIfAsked();
     void finalize(const std::string& why, const FinishCallback& done);
+    // finalize, before it writes: waits while the server's view is stale (hold_); false once the session was given up
+    // (abandon) or is closing.
+    bool mayWrite();
     void noteLoad();  // after a frame: the worker's load and recent skips into stats_
     void recordLatency(float ms);
     std::string summaryJson(const SessionStats& s, const MeshResult& m) const;

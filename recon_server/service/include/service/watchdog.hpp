@@ -22,14 +22,16 @@ class Watchdog {
  public:
     class Beat {
      public:
-        explicit Beat(std::string name) : name_(std::move(name)) {}
+        Beat(std::string name, double limit_s) : name_(std::move(name)), limit_s_(limit_s) {}
         void begin();  // a step starts now: it must end within the stall limit
         void end();    // back to waiting for work: not expected to progress
         int64_t busySinceNs() const { return since_ns_.load(std::memory_order_relaxed); }
         const std::string& name() const { return name_; }
+        double limitS() const { return limit_s_; }  // 0: the watchdog's stall limit
 
      private:
         std::string name_;
+        double limit_s_ = 0;
         std::atomic<int64_t> since_ns_{0};  // steady clock; 0 while waiting
     };
 
@@ -47,8 +49,9 @@ class Watchdog {
     Watchdog(const Watchdog&) = delete;
     Watchdog& operator=(const Watchdog&) = delete;
 
-    // A beat for one loop; it is watched while anybody holds it.
-    std::shared_ptr<Beat> add(std::string name);
+    // A beat for one loop; it is watched while anybody holds it. `limit_s` (0: the stall limit) for a loop whose
+    // steps may take longer without holding up the server's work.
+    std::shared_ptr<Beat> add(std::string name, double limit_s = 0);
     // Steady clock of the watchdog's last check. Older than pause_gap_s: the process may have just woken from a
     // pause that the watchdog has not seen yet.
     int64_t lastCheckNs() const { return last_check_ns_.load(std::memory_order_relaxed); }
