@@ -1,0 +1,61 @@
+// Whether this server may act on its view of the cluster, and whether it is alive in a sense that matters: its
+// liveliness on the domain is asserted by the loop that does its work (a stuck server loses its claims within the
+// lease, as a dead one does), its watchdog ends it when a loop stays stuck, and a server that was frozen re-observes
+// the cluster before it acts on anything (server.hpp says what it holds meanwhile).
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <thread>
+
+#include "service/server.hpp"
+
+namespace facescan::service {
+namespace {
+
+// A server that found itself stuck exits with this (EX_SOFTWARE): systemd's Restart=on-failure starts it again.
+constexpr int kExitStalled = 70;
+
+}  // namespace
+
+void Server::noticePause(int64_t gap_ns, int64_t now_ns) {
+    view_stale_until_ns_ = now_ns + 2 * lease_ns_;
+    std::fprintf(stderr,
+                 "facescan-server: this server did not run for %.1f s (frozen, or the machine paused): its view of "
+                 "the cluster is stale; re-observing it for %.1f s before taking anything over, and holding its "
+                 "own sessions until it knows it still owns them\n",
+                 static_cast<double>(gap_ns) * 1e-9, 2 * static_cast<double>(lease_ns_) * 1e-9);
+}
+
+bool Server::viewFresh() const {
+    // The watchdog's last check must be recent too: after a pause the other threads may wake before the watchdog
+    // has noticed it, and they must not act in the meantime.
+    const int64_t now = steadyNowNs();
+    return now >= view_stale_until_ns_.load() && now - watchdog_->lastCheckNs() < lease_ns_ / 2;
+}
+
+void Server::assertProgress(int64_t now_ns) {
+    // A few times a lease is enough for the readers' lease, and cheap (one small message per peer).
+    if (now_ns - last_progress_ns_ < lease_ns_ / 6) return;
+    last_progress_ns_ = now_ns;
+    if (const dds_return_t rc = dds_assert_liveliness(participant_->handle()); rc < 0) {
+        std::fprintf(stderr, "facescan-server: %s\n", wire::ddsStatus(rc, "assert liveliness").toString().c_str());
+    }
+}
+
+void Server::failpoint() {
+    std::error_code ec;
+    if (!std::filesystem::exists(stall_file_, ec)) return;
+    std::fprintf(stderr, "facescan-server: failpoint: the intake thread stops (%s exists)\n", stall_file_.c_str());
+    while (!stopping_) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+}
+
+void Server::onStall(const std::string& what) {
+    std::fprintf(stderr,
+                 "facescan-server: stuck: %s. Exiting with status %d so that the service manager restarts this "
+                 "server; the cluster takes its sessions over from their standbys and data dir.\n",
+                 what.c_str(), kExitStalled);
+    std::fflush(stderr);
+    std::_Exit(kExitStalled);
+}
+
+}  // namespace facescan::service
