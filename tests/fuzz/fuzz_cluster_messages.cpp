@@ -72,7 +72,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
             if (!o.isOk()) continue;
             auto back = wire::fromMessage(wire::toMessage(*o));
             if (!back.isOk() || back->owner_id != o->owner_id || back->epoch != o->epoch) __builtin_trap();
-            candidates.push_back({o->session_id, in.ConsumeIntegral<int64_t>()});
+            candidates.push_back({o->session_id, in.ConsumeIntegral<int64_t>(), std::string(), 0});
             owners[o->session_id] = o->owner_id;
         }
     }
