@@ -82,11 +82,6 @@ double meanMeshDistanceMm(const fs::path& mesh_path, const fs::path& reference_p
     return sum_m / static_cast<double>(mesh->n_vertices()) * 1e3;
 }
 
-int summaryNumber(const std::string& summary, const std::string& key) {
-    const std::string v = lastMatch(summary, "\"" + key + "\": ([0-9]+)");
-    return v.empty() ? -1 : std::stoi(v);
-}
-
 // Every server log of the run (a restarted server's logs are server-ID.log.2, .3, ...).
 std::vector<fs::path> serverLogs(const ClusterRig& rig) {
     std::vector<fs::path> logs;

@@ -37,6 +37,12 @@ inline std::string jsonField(const std::string& line, const std::string& key) {
     return lastMatch(line, "\"" + key + "\"\\s*:\\s*\"?([^\",}]*)\"?");
 }
 
+// A number of summary.json ("key": N), -1 when it has none.
+inline int summaryNumber(const std::string& summary, const std::string& key) {
+    const std::string v = lastMatch(summary, "\"" + key + "\": ([0-9]+)");
+    return v.empty() ? -1 : std::stoi(v);
+}
+
 inline bool waitUntil(const std::function<bool()>& done, std::chrono::milliseconds timeout) {
     const auto deadline = std::chrono::steady_clock::now() + timeout;
     while (!done()) {

@@ -32,10 +32,7 @@ struct Finished {
 Finished finishedSession(const fs::path& dir) {
     Finished f;
     f.summary = readText(dir / "summary.json");
-    const auto num = [&](const std::string& key) {
-        const std::string v = lastMatch(f.summary, "\"" + key + "\": ([0-9]+)");
-        return v.empty() ? -1 : std::stoi(v);
-    };
+    const auto num = [&](const std::string& key) { return summaryNumber(f.summary, key); };
     f.integrated = num("integrated");
     f.tracked_only = num("tracked_only");
     f.rejected = num("rejected");

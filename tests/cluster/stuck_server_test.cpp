@@ -27,11 +27,6 @@ bool processRuns(pid_t pid) {
     return paren != std::string::npos && paren + 2 < stat.size() && stat[paren + 2] != 'Z';
 }
 
-int summaryNumber(const fs::path& summary, const std::string& key) {
-    const std::string v = lastMatch(readText(summary), "\"" + key + "\": ([0-9]+)");
-    return v.empty() ? -1 : std::stoi(v);
-}
-
 // A recording on srv-a and srv-b, 20 frames in: which server owns it and which does not.
 void startRecording(ClusterRig& rig, std::string& owner, std::string& other) {
     rig.startAgent("rec", kFrames, "max", ",period=900");
@@ -44,7 +39,8 @@ void startRecording(ClusterRig& rig, std::string& owner, std::string& other) {
 void expectFinishedOnceWhole(const ClusterRig& rig, const std::string& session, const std::string& where) {
     const fs::path summary = rig.dataDir(where) / session / "summary.json";
     ASSERT_TRUE(waitUntil([&] { return fs::exists(summary); }, 30s)) << summary;
-    EXPECT_EQ(summaryNumber(summary, "integrated") + summaryNumber(summary, "rejected"), kFrames) << readText(summary);
+    const std::string text = readText(summary);
+    EXPECT_EQ(summaryNumber(text, "integrated") + summaryNumber(text, "rejected"), kFrames) << text;
     EXPECT_EQ(lastMatch(readText(summary), "\"frames_digest\": \"([0-9a-f]+)\""),
               lastMatch(readText(rig.agentLog(session)), "frames digest ([0-9a-f]{16})"));
 }

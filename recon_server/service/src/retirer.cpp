@@ -17,11 +17,6 @@ Retirer::~Retirer() {
     if (thread_.joinable()) thread_.join();
 }
 
-size_t Retirer::pending() const {
-    std::lock_guard lk(mutex_);
-    return jobs_.size();
-}
-
 void Retirer::retire(std::function<void()> job) {
     {
         std::lock_guard lk(mutex_);

@@ -29,7 +29,6 @@ class Retirer {
     // Runs `end` on the retiring thread, after everything handed over before it. `end` and whatever it captured
     // are destroyed there too.
     void retire(std::function<void()> end);
-    size_t pending() const;
 
  private:
     void loop();

@@ -156,8 +156,8 @@ class Server {
     // `dispose_claim`: the claim says RELEASED first (nobody owns the session); else it is withdrawn, as if this
     // server had died, and a stronger claim stays the only one.
     void retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_claim);
-    // server.cpp: the cluster view. A server that was frozen (SIGSTOP, a paused VM) for half a lease or more (its
-    // watchdog's thread notices it: noticePause) saw the others' leases lapse only in its own eyes: for two leases
+    // server_health.cpp: the cluster view. A server that was frozen (SIGSTOP, a paused VM) for half a lease or more
+    // (its watchdog's thread notices it: noticePause) saw the others' leases lapse only in its own eyes: for two leases
     // after it wakes, it re-observes the cluster and takes nothing over, places nothing, and holds its own sessions'
     // work and output (frames, finishes, replicas, status, snapshots, replies) until it knows whether it still owns
     // them.
