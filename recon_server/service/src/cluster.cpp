@@ -227,6 +227,25 @@ void Cluster::takeOwners() {
     if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
 }
 
+int Cluster::othersAlive() const {
+    std::lock_guard lk(mutex_);
+    int n = 0;
+    for (const auto& [id, p] : peers_) n += p.alive && id != options_.server_id ? 1 : 0;
+    return n;
+}
+
+bool Cluster::seesMajority() const {
+    constexpr int64_t kForgetNs = 600'000'000'000;  // a server gone this long is no longer counted
+    std::lock_guard lk(mutex_);
+    const int64_t now = steadyNowNs();
+    int alive = 0, known = 0;
+    for (const auto& [id, p] : peers_) {
+        if (p.alive) ++alive;
+        if (p.alive || now - p.seen_ns < kForgetNs) ++known;
+    }
+    return 2 * alive > known;
+}
+
 std::vector<PeerView> Cluster::peers() const {
     std::lock_guard lk(mutex_);
     std::vector<PeerView> out;

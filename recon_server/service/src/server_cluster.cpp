@@ -37,7 +37,7 @@ void Server::clusterTick() {
     const std::map<std::string, OwnerView> owners = cluster_->owners();
     settleClaims(owners);  // while the view is stale, only to give up what another server owns now
     if (!viewFresh()) return;
-    takeOverOrphans(owners);
+    if (!rejoining()) takeOverOrphans(owners);
     placeNewSessions(owners);
     requestReplays();
     releaseStale();
@@ -53,10 +53,20 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
     // waits until the previous one received frames or was released. A real agent writes one session.
     std::map<dds_instance_handle_t, const std::string*> next_of_writer;
     std::set<dds_instance_handle_t> busy_writers;
+    // Its sessions claimed here count at once, before this server's own claim is back in its view.
+    for (const auto& o : ownedSessions()) {
+        const OwnedSession::Phase phase = o->phase;
+        if (phase == OwnedSession::Phase::kClaiming || phase == OwnedSession::Phase::kReady) {
+            busy_writers.insert(o->camera_writer);
+        }
+    }
     std::vector<service::Candidate> eligible;
     for (const auto& [id, c] : candidates_) {
         const auto view = owners.find(id);
-        if (view != owners.end()) {
+        // A released claim (no frame came in time) is placed again while its agent lives, at a higher epoch.
+        const bool released =
+            view != owners.end() && !view->second.alive && view->second.data.state == wire::OwnerState::kReleased;
+        if (view != owners.end() && !released) {
             const wire::OwnerState st = view->second.data.state;
             if (view->second.alive && (st == wire::OwnerState::kClaiming || st == wire::OwnerState::kReady)) {
                 busy_writers.insert(c.writer);
@@ -116,7 +126,10 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
         auto o = std::make_shared<OwnedSession>();
         o->camera = c.camera;
         o->camera_writer = c.writer;
-        if (const Status s = claimSession(e.session_id, 1, o, {}); !s.isOk()) {
+        const auto before = owners.find(e.session_id);
+        const wire::SessionOwnerData previous = before != owners.end() ? before->second.data : wire::SessionOwnerData{};
+        const uint32_t epoch = before != owners.end() ? before->second.data.epoch + 1 : 1;
+        if (const Status s = claimSession(e.session_id, epoch, o, previous); !s.isOk()) {
             std::fprintf(stderr, "facescan-server: cannot claim %s: %s\n", e.session_id.c_str(), s.toString().c_str());
         }
     }
@@ -175,16 +188,19 @@ void Server::buildEngine(OwnedSession& o) {
     // done (the future's destructor waits for it) and activate() has taken it.
     const dds_entity_t wake = wake_.valid() ? wake_.handle() : 0;
     try {
-        o.engine = std::async(
-            std::launch::async, [params = params_, camera = replica ? replica->camera : *o.camera, replica, wake] {
-                recon::nameThisThread("fs-engine");
-                // The build (cascade parsed, buffers touched: 30-45 ms of CPU) lands as a session joins busy
-                // ones; the claim settles for claim_settle_s meanwhile, so it is rarely waited for.
-                runThisThreadInBackground();
-                StatusOr<SessionEngine> engine = SessionEngine::build(params, camera, replica);
-                if (wake > 0) (void)dds_set_guardcondition(wake, true);  // activate() on the intake thread's next turn
-                return engine;
-            });
+        const bool takeover = o.takeover_from_ns != 0;
+        o.engine = std::async(std::launch::async, [params = params_, camera = replica ? replica->camera : *o.camera,
+                                                   replica, wake, takeover] {
+            recon::nameThisThread("fs-engine");
+            // The build (cascade parsed, buffers touched: 30-45 ms of CPU) lands as a session joins busy
+            // ones; the claim settles for claim_settle_s meanwhile, so it is rarely waited for. A takeover's
+            // build is what its live scan waits for (it also restores the model from the replica): at the
+            // priority of frames, or a loaded machine starves it for seconds.
+            if (!takeover) runThisThreadInBackground();
+            StatusOr<SessionEngine> engine = SessionEngine::build(params, camera, replica);
+            if (wake > 0) (void)dds_set_guardcondition(wake, true);  // activate() on the intake thread's next turn
+            return engine;
+        });
     } catch (const std::system_error&) {
         // No thread to be had: activate() builds it on the intake thread, as before.
     }
@@ -199,6 +215,16 @@ void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
             view && view->alive && view->data.owner_id == params_.server_id && view->data.epoch == o->epoch;
         const bool beaten =
             view && view->alive && !ours && (view->data.owner_id != params_.server_id || view->data.epoch > o->epoch);
+        // Our own claim, current, that reads as not alive: a weaker writer of the same instance (an old owner back
+        // from a partition, which then withdraws) can leave readers with no live writer although ours still
+        // writes. The agent would wait for a standby, and this server would never settle the claim. Writing it
+        // again makes the instance alive for every reader; a stronger claim still wins on ownership strength.
+        const bool unseen = view && !view->alive && !view->disposed && view->data.owner_id == params_.server_id &&
+                            view->data.epoch == o->epoch && o->phase != OwnedSession::Phase::kFinished;
+        if (unseen && viewFresh() && steadyNowNs() - o->last_reassert_ns >= lease_ns_ / 2) {
+            o->last_reassert_ns = steadyNowNs();
+            if (o->claim) o->claim->update([](wire::SessionOwnerData&) {}, /*force=*/true);
+        }
         if (o->phase == OwnedSession::Phase::kClaiming) {
             if (beaten) {
                 yield(o->id, "server '" + view->data.owner_id + "' claimed it too (epoch " +
@@ -257,8 +283,9 @@ Status Server::activate(OwnedSession& o) {
         r.confirmed_seq = next;
     });
     o.restore_from.reset();  // the state lives in the session now
-    std::fprintf(stderr, "facescan-server: owns session %s (epoch %u%s)\n", o.id.c_str(), o.epoch,
-                 next > 0 ? (", resuming at frame " + std::to_string(next)).c_str() : "");
+    std::fprintf(stderr, "facescan-server: owns session %s (epoch %u%s, %.0f ms after the claim)\n", o.id.c_str(),
+                 o.epoch, next > 0 ? (", resuming at frame " + std::to_string(next)).c_str() : "",
+                 static_cast<double>(steadyNowNs() - o.claimed_ns) * 1e-6);
     return Status::ok();
 }
 
@@ -269,8 +296,34 @@ void Server::yield(const std::string& session_id, const std::string& why) {
     // confirmed, so nothing is lost if this server stops here. Writing what it integrated would split the scan
     // (two results for one session), so it writes, replicates and answers nothing more for it.
     const uint32_t integrated = o->session ? o->session->stats().frames_integrated : 0;
+    // Finished here while this server was frozen or cut off, and taken over meanwhile: the new owner finishes it
+    // again from the replica and the frames the agent keeps (an agent follows the strongest claim, so it waits for
+    // that owner's result, not this one's). This server's files would be a second result for one scan: they go.
+    // Without the agent, the new owner has only the replica, and these files may be the whole scan: they stay.
+    const std::filesystem::path written = o->session ? o->session->filesDir() : std::filesystem::path();
+    const auto agent = candidates_.find(session_id);
+    const bool agent_lives = agent != candidates_.end() && agent->second.writer_alive;
     if (o->session) o->session->abandon();
     retireOwned(o, /*dispose_claim=*/false);
+    unlist(session_id);
+    if (!written.empty() && agent_lives) {
+        retirer_->retire([written] {
+            std::error_code ec;
+            std::filesystem::remove_all(written, ec);
+        });
+        std::fprintf(stderr,
+                     "facescan-server: session %s: gave it up, %s; it had finished here meanwhile: the files written "
+                     "for it in %s are removed (the new owner writes the scan, with every frame from its agent)\n",
+                     session_id.c_str(), why.c_str(), written.c_str());
+        return;
+    }
+    if (!written.empty()) {
+        std::fprintf(stderr,
+                     "facescan-server: session %s: gave it up, %s; it had finished here meanwhile, and its files in %s "
+                     "stay (its agent is gone: they may hold frames the new owner never gets)\n",
+                     session_id.c_str(), why.c_str(), written.c_str());
+        return;
+    }
     std::fprintf(
         stderr, "facescan-server: session %s: gave it up, %s; nothing written for it here%s\n", session_id.c_str(),
         why.c_str(),
@@ -309,7 +362,12 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         const bool restart = resumable_.count(id) > 0;
         const bool stale_self = restart && view.data.owner_id == params_.server_id;
         const bool gone = !view.alive || stale_self || (restart && cluster_->diedOnThisHost(view.data.owner_id));
-        if (!gone) continue;
+        if (!gone) {
+            owner_gone_since_ns_.erase(id);
+            continue;
+        }
+        const int64_t gone_since_ns = owner_gone_since_ns_.try_emplace(id, steadyNowNs()).first->second;
+        if (!witnessed(id, steadyNowNs() - gone_since_ns)) continue;
         std::optional<wire::ReplicaData> standby;
         if (view.data.standby_id == params_.server_id) standby = replicator_->standbyCopy(id);
         const auto disk = resumable_.find(id);
@@ -336,8 +394,12 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             std::max(replicator_->lastHeardFrom(view.data.owner_id), cluster_->lastHeard(view.data.owner_id));
         o->takeover_from_ns = heard > 0 ? heard : steadyNowNs();
         const uint32_t epoch = choice.epoch;
-        std::fprintf(stderr, "facescan-server: session %s: owner '%s' is gone; taking over at frame %u (epoch %u)\n",
-                     id.c_str(), view.data.owner_id.c_str(), copy->next_seq, epoch);
+        std::fprintf(
+            stderr,
+            "facescan-server: session %s: owner '%s' is gone; taking over at frame %u (epoch %u, %.0f ms after "
+            "its last sign of life)\n",
+            id.c_str(), view.data.owner_id.c_str(), copy->next_seq, epoch,
+            static_cast<double>(steadyNowNs() - o->takeover_from_ns) * 1e-6);
         o->restore_from = std::move(copy);
         if (const Status s = claimSession(id, epoch, o, view.data); !s.isOk()) {
             std::fprintf(stderr, "facescan-server: cannot take over %s: %s\n", id.c_str(), s.toString().c_str());
@@ -372,6 +434,44 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                      view->second.data.owner_id.c_str(), params_.data_dir.c_str());
         it = resumable_.erase(it);
     }
+}
+
+bool Server::rejoining() {
+    // A server that sees no other server and no agent any more, after it had seen other servers, is cut off from
+    // the network. When it comes back, its view of the others' claims lags behind its view of the agents for a
+    // moment: every owner still looks gone while the agents look alive again, and a takeover then would be a split.
+    // So it takes nothing over until it has re-observed the cluster for two leases after the cut, as a server that
+    // was frozen does. (A server whose peers died keeps seeing its agents, and takes their sessions over.)
+    const int64_t now = steadyNowNs();
+    const int others = cluster_->othersAlive();
+    bool agents = false;
+    for (const auto& [id, c] : candidates_) agents = agents || c.writer_alive;
+    if (others > 0) had_peers_ = true;
+    if (had_peers_ && others == 0 && !agents) {
+        if (cut_off_since_ns_ == 0) cut_off_since_ns_ = now;
+        rejoin_until_ns_ = now + 2 * lease_ns_;
+    } else if (cut_off_since_ns_ != 0) {
+        std::fprintf(stderr,
+                     "facescan-server: this server saw no other server and no agent for %.1f s (cut off from the "
+                     "network): re-observing the cluster for %.1f s before taking anything over\n",
+                     static_cast<double>(now - cut_off_since_ns_) * 1e-9,
+                     static_cast<double>(rejoin_until_ns_ - now) * 1e-9);
+        cut_off_since_ns_ = 0;
+    }
+    return now < rejoin_until_ns_;
+}
+
+bool Server::witnessed(const std::string& session_id, int64_t owner_gone_for_ns) const {
+    // A server cut off from the network sees every other server and every agent go at once. A takeover on that
+    // view would win when the network heals (its epoch is higher) over the owner that went on scanning, and would
+    // ask the agent for frames that it dropped once that owner had them confirmed: the scan would stall for good.
+    // So a takeover needs a witness that the owner, not this server, is the one gone: the session's agent still
+    // heard, or most of the servers this one knows. The grace covers an agent's lease that lapses a little after
+    // the owner's claim (the claim is asserted every lease/12, the agent's lease renewed by whatever it sends).
+    if (owner_gone_for_ns < lease_ns_ / 8) return false;
+    const auto agent = candidates_.find(session_id);
+    if (agent != candidates_.end() && agent->second.writer_alive) return true;
+    return cluster_->seesMajority();
 }
 
 void Server::takeOverFromFirstFrame(const std::string& session_id, const OwnerView& view) {
@@ -423,8 +523,15 @@ void Server::requestReplays() {
 void Server::releaseStale() {
     const int64_t first_frame_ns = static_cast<int64_t>(params_.first_frame_timeout_s * 1e9);
     for (const auto& o : ownedSessions()) {
+        // A takeover from the first frame waits for as long as its agent lives: that agent streamed before, and its
+        // writes may be held up by the old owner's reader until that one's lease lapses everywhere. Releasing it
+        // would leave the scan with no owner. A new session that gets no frame is released (a flood of bogus
+        // sessions must not hold places), and placed again while its agent lives.
+        const auto agent = candidates_.find(o->id);
+        const bool agent_lives = agent != candidates_.end() && agent->second.writer_alive;
         if (o->phase == OwnedSession::Phase::kReady && steadyNowNs() - o->ready_ns > first_frame_ns && o->session &&
-            o->session->stats().frames_received == 0 && o->session->nextSeq() == 0) {
+            o->session->stats().frames_received == 0 && o->session->nextSeq() == 0 &&
+            !(o->takeover_from_ns != 0 && agent_lives)) {
             std::fprintf(stderr, "facescan-server: session %s: released, no frame came within %.0f s\n", o->id.c_str(),
                          static_cast<double>(params_.first_frame_timeout_s));
             retireOwned(o, /*dispose_claim=*/true);

@@ -61,14 +61,17 @@ void Server::retireFinished(std::map<std::string, bool>& final_sent) {
     });
 }
 
-void Server::forgetFinished(const FinishedSession& f) {
-    // Unlisted: its last status and final mesh leave the writers' histories (late subscribers no longer get them,
-    // `facescan sessions` no longer shows it); its claim's writer goes with the record.
+void Server::forgetFinished(const FinishedSession& f) { unlist(f.stats.session_id); }
+
+void Server::unlist(const std::string& session_id) {
+    // Its last status and mesh from this server leave the writers' histories: late subscribers no longer get them,
+    // and `facescan sessions` no longer shows this server's last word on it (after a yield, a stale one: the new
+    // owner's statuses say where the scan is).
     wire::ScanStatusData key;
-    key.session_id = f.stats.session_id;
+    key.session_id = session_id;
     (void)status_writer_->unregister(wire::toMessage(key));
     facescan_wire_MeshSnapshot snap{};
-    snap.session_id = wire::stringView(f.stats.session_id);
+    snap.session_id = wire::stringView(session_id);
     (void)snapshot_writer_->unregister(snap);
 }
 

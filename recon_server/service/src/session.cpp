@@ -212,6 +212,7 @@ FrameFate Session::pushFrame(const facescan_wire_RgbdFrame& msg) {
     if (msg.seq > next_seq_) stats_.frames_dropped += msg.seq - next_seq_;  // live: lost on the way
     next_seq_ = msg.seq + 1;
     if (!msg.end_of_stream) ++stats_.frames_received;
+    if (takeover_from_ns_ != 0 && takeover_received_ns_ == 0) takeover_received_ns_ = steadyNowNs();
     if (camera_ && !camera_->every_frame && !msg.end_of_stream) {
         // Live: anything still waiting is older than this frame and will never be worth processing.
         while (!queue_.empty() && !queue_.back().end_of_stream) {

@@ -54,23 +54,34 @@ void Session::applyReplicaLocked(const wire::ReplicaData& r, int64_t takeover_fr
     replica_generation_ = r.state.generation;
     replica_trajectory_ = r.state.trajectorySize();
     takeover_from_ns_ = takeover_from_ns;
+    takeover_started_ns_ = steadyNowNs();
+    takeover_received_ns_ = 0;
 }
 
 void Session::noteTakeoverFromFirstFrame(uint32_t failovers_before, int64_t takeover_from_ns) {
     std::lock_guard lk(mutex_);
     stats_.failovers = failovers_before + 1;
     takeover_from_ns_ = takeover_from_ns;
+    takeover_started_ns_ = steadyNowNs();
+    takeover_received_ns_ = 0;
 }
 
 void Session::noteFirstFrameAfterTakeover(uint32_t seq, int64_t now_ns) {
     stats_.last_takeover_ms = static_cast<float>(static_cast<double>(now_ns - takeover_from_ns_) * 1e-6);
-    takeover_from_ns_ = 0;
+    // Where the time went: noticing the owner gone and settling the claim (started here), then the agent finding
+    // this server's reader (first frame here), then the pipeline finding the face again.
+    const auto since_ms = [&](int64_t t_ns) {
+        return t_ns > 0 ? static_cast<double>(t_ns - takeover_from_ns_) * 1e-6 : -1.0;
+    };
+    const double started_ms = since_ms(takeover_started_ns_), received_ms = since_ms(takeover_received_ns_);
+    takeover_from_ns_ = takeover_started_ns_ = takeover_received_ns_ = 0;
     // The wall clock too: tests/bench/cluster.sh measures from the moment it killed the old owner.
     std::fprintf(stderr,
                  "facescan-server: session %s: first frame integrated after the takeover (frame %u, %.0f ms after the "
-                 "old owner's last sign of life, at realtime_ns %lld)\n",
+                 "old owner's last sign of life, at realtime_ns %lld; started here after %.0f ms, first frame here "
+                 "after %.0f ms)\n",
                  id_.c_str(), seq, static_cast<double>(stats_.last_takeover_ms),
-                 static_cast<long long>(realtimeNowNs()));
+                 static_cast<long long>(realtimeNowNs()), started_ms, received_ms);
 }
 
 void Session::setOwnership(const std::string& owner_id, uint32_t epoch) {

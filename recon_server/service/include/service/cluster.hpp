@@ -109,6 +109,10 @@ class Cluster {
     bool diedOnThisHost(const std::string& server_id) const;
     // Steady clock of the last announcement heard from a server (0: never).
     int64_t lastHeard(const std::string& server_id) const;
+    // Whether more than half of the servers known (alive now, or seen within the last minutes) are alive in this
+    // server's view, itself included: false for a server cut off from the others.
+    bool seesMajority() const;
+    int othersAlive() const;  // other servers alive in this server's view
     // Live, joined, compatible servers with their load: self included once joined. Open counts come from the
     // claims (the same on every server), capacities and standbys from the announcements.
     std::vector<ServerLoad> liveLoads() const;

@@ -64,6 +64,7 @@ struct OwnedSession {
     dds_entity_t frame_condition = 0;
     bool ahead = false;  // a recording frame after a gap arrived: the agent must resend
     int64_t last_replay_request_ns = 0;
+    int64_t last_reassert_ns = 0;             // the claim last written again because it looked gone (settleClaims)
     dds_instance_handle_t camera_writer = 0;  // the CameraInfo writer (flood control)
     // The session's engine, built on a thread of its own from the claim on (Server::buildEngine): activate() waits
     // for it. Last, so that its destructor, which waits for the build, runs before camera and restore_from go.
@@ -129,6 +130,7 @@ class Server {
     // owned_ and memory for finished_; those beyond --keep-finished or older than --keep-finished-s are unlisted.
     void retireFinished(std::map<std::string, bool>& final_sent);
     void forgetFinished(const FinishedSession& f);
+    void unlist(const std::string& session_id);  // this server's status and mesh of it leave the writers
     // A finished session that this server retired: listed, or its files in the data dir name this server.
     bool answersFromFiles(const std::string& session_id) const;
     // Answers a command of such a session from its files; false when this server has none.
@@ -143,6 +145,10 @@ class Server {
     void takeOverFromFirstFrame(const std::string& session_id, const OwnerView& view);
     void requestReplays();
     void releaseStale();
+    // Whether a takeover may go ahead: the owner gone for a moment, seen so by the agent or most servers.
+    bool witnessed(const std::string& session_id, int64_t owner_gone_for_ns) const;
+    // Whether this server is cut off, or back from it and re-observing the cluster before it takes anything over.
+    bool rejoining();
     // A new scan under the id of one that finished in this server's data dir: refused with a FINISHED claim (true),
     // so that no server places it and its agent says why.
     bool refuseReusedId(const std::string& session_id);
@@ -208,7 +214,11 @@ class Server {
 
     // Intake thread only.
     std::map<std::string, Candidate> candidates_;
-    std::map<std::string, wire::ReplicaData> resumable_;        // from the data dir, waiting for the join to end
+    std::map<std::string, wire::ReplicaData> resumable_;  // from the data dir, waiting for the join to end
+    int64_t cut_off_since_ns_ = 0;  // steady clock: since when this server sees no other server and no agent
+    int64_t rejoin_until_ns_ = 0;   // steady clock: re-observing the cluster until then (rejoining)
+    bool had_peers_ = false;
+    std::map<std::string, int64_t> owner_gone_since_ns_;        // takeOverOrphans: when its owner was first seen gone
     std::map<std::string, int64_t> orphaned_since_ns_;          // takeOverFromFirstFrame: when its owner was seen gone
     std::map<std::string, std::unique_ptr<Claim>> tombstones_;  // refuseReusedId, while the candidate lasts
     std::set<std::string> refusals_logged_;                     // takeovers refused: each reason said once

@@ -272,7 +272,9 @@ class Session {
     uint32_t processed_next_seq_ = 0;
     uint64_t replica_generation_ = 0;
     size_t replica_trajectory_ = 0;
-    int64_t takeover_from_ns_ = 0;                             // steady clock; 0 = no takeover pending
+    int64_t takeover_from_ns_ = 0;      // steady clock; 0 = no takeover pending
+    int64_t takeover_started_ns_ = 0;   // steady clock: when this server started the taken-over session
+    int64_t takeover_received_ns_ = 0;  // steady clock: its first frame here (0: none yet)
     std::vector<std::pair<int64_t, recon::Pose>> trajectory_;  // copy of the recon core's, for other threads
     recon::Pose last_pose_ = recon::Pose::Identity();
     std::vector<float> latency_ms_;  // ring of the last kLatencyWindow
