@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The server's real-time figures (issue 8): facescan-server and N synthetic agents at 30 Hz over loopback DDS in a
+# The server's real-time figures: facescan-server and N synthetic agents at 30 Hz over loopback DDS in a
 # private domain, every process on this machine. Prints each session's summary (fps, integrated / skipped frames,
 # capture-to-pose latency p50/p95, per-stage ms, snapshot timings) from the server's --data-dir.
 #   usage: tests/bench/server_realtime.sh [--preload] [SESSIONS (default 1)] [FRAMES (default 300)] [SUBJECT (scan)]

@@ -347,7 +347,7 @@ RgbdFrame sphereBeforeWall(int i, cv::Mat& head_mask) {
 }
 
 TEST(FrameLoop, ReconstructorDoesNotAllocateAfterWarmUp) {
-    // DESIGN.md s4 and issue 4: filter, ICP, integration and ray casting allocate nothing per frame after warm-up.
+    // docs/design.md (memory): filter, ICP, integration and ray casting allocate nothing per frame after warm-up.
     std::vector<RgbdFrame> frames(12);
     std::vector<cv::Mat> masks(frames.size());
     for (size_t i = 0; i < frames.size(); ++i) frames[i] = sphereBeforeWall(static_cast<int>(i), masks[i]);
@@ -370,7 +370,7 @@ TEST(FrameLoop, FacePipelineAndReconstructorDoNotAllocateAfterWarmUp) {
     // Issue 16: the server's whole per-frame path (recon::scanFrame, as the session worker runs it), detection and
     // segmentation included. Frames without colour, so the detector is the depth-only head finder; it re-detects
     // every 3rd frame (redetect_every_frames) and the tracked model's prediction seeds the segmentation in between
-    // (ModelSegmenter, issue 18), so both paths run after the warm-up.
+    // (ModelSegmenter), so both paths run after the warm-up.
     std::vector<RgbdFrame> frames(12);
     std::vector<cv::Mat> unused(frames.size());
     for (size_t i = 0; i < frames.size(); ++i) frames[i] = sphereBeforeWall(static_cast<int>(i), unused[i]);

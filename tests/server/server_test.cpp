@@ -196,7 +196,7 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
     for (const char* name : {"fs-s live-1", "fs-intake", "fs-command", "fs-snapshot", "fs-status", "fs-replicate"}) {
         EXPECT_EQ(nices.count(name), 1u) << "no thread named '" << name << "'";
     }
-    // Work that can wait (snapshots, replication) yields the cores to the sessions' frames (issue 16).
+    // Work that can wait (snapshots, replication) yields the cores to the sessions' frames.
     if (nices.count("fs-s live-1")) {
         const int worker = nices.at("fs-s live-1");
         for (const char* name : {"fs-snapshot", "fs-replicate"}) {

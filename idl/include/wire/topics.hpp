@@ -12,7 +12,7 @@ Qos rgbdFrameQos();     // reliable, volatile, keep-last 8: live streams; the se
 Qos scanStatusQos();    // reliable, transient-local, keep-last 1: `facescan sessions` sees current state at once
 Qos meshSnapshotQos();  // reliable, transient-local, keep-last 1: late subscribers get the latest mesh
 Qos commandQos();       // reliable, volatile, keep-all: no request or reply is ever dropped
-// The cluster (issue 13). Writers of announcements and claims do not auto-dispose: a writer that dies leaves its
+// The cluster. Writers of announcements and claims do not auto-dispose: a writer that dies leaves its
 // instance NOT_ALIVE_NO_WRITERS (a lapsed liveliness), a deliberate end disposes (NOT_ALIVE_DISPOSED).
 Qos serverAnnounceQos();  // reliable, transient-local, keep-last 1
 Qos sessionOwnerQos();    // reliable, transient-local, keep-last 1, EXCLUSIVE ownership

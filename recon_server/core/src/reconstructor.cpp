@@ -329,7 +329,7 @@ bool Reconstructor::registerFrame(int valid, float motion_scale, FrameResult& re
     if (!params_.reacquire.enabled) return result.tracking.ok();
     if (consecutive_failures_ > 0 || verify_next_) {
         // After a loss (or hidden frames) nothing is fused before a fit is verified: the plain fit, else the best
-        // verified hypothesis (issue 18).
+        // verified hypothesis.
         const bool icp_ok = result.tracking.ok();
         if (reacquire(icp_ok, estimate, valid, result)) {
             estimate = T_world_camera_;

@@ -3,7 +3,7 @@
 // depth (metres) and colour registered to depth, with the Kinect v1 noise model of DESIGN.md s6 (Nguyen, Izadi,
 // Lovell 2012), plus ground truth (pose, labels, noise-free depth, face box). Events for robustness tests: a nod
 // onto the chest, a gap in which the subject walks out of view and comes back turned, and a hand-sized occluder
-// crossing in front of the face (issue 18).
+// crossing in front of the face.
 #pragma once
 
 #include <cstdint>

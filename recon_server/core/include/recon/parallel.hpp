@@ -25,7 +25,7 @@ void parallelForErased(int begin, int end, ChunkFn fn, void* body);
 
 }  // namespace detail
 
-// Per-thread control and accounting (issue 16, "bad input": one session's slow frames must not monopolise the
+// Per-thread control and accounting (bad input: one session's slow frames must not monopolise the
 // pool that every session shares). Both act on the calling thread's own calls only.
 // Serial: its parallelFor calls run on itself alone, leaving the pool's workers to the other threads.
 void setParallelSerial(bool serial);

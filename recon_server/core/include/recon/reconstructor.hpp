@@ -42,7 +42,7 @@ struct ReconParams {
     // the ray cast -59 % and a frame's serial cost 12.0 -> 9.0 ms; the default sequence keeps its accuracy (mean
     // 0.0954 -> 0.0944 mm, ATE 1.61 -> 1.68 mm), but the wide turn loses some (mean +0.017 mm, ATE 1.76 -> 1.95 mm;
     // with the renderer's mask instead, ATE improves: the loss is in the model-based segmentation, cause not yet
-    // found). So full resolution stays the default, and a loaded server casts coarse (issue 16 note).
+    // found). So full resolution stays the default, and a loaded server casts coarse.
     // Must be below filter.levels.
     int model_level = 0;
     // The model is ray cast after one integrated frame in model_cast_every (1 = after every frame, as in the
@@ -51,7 +51,7 @@ struct ReconParams {
     // pipeline --cast-every 2, the default and the five scenarios): a frame's serial cost 10.3 -> 8.0 ms, and the
     // accuracy kept: mean distance within -0.007..+0.008 mm of every frame's, ATE 1.63-1.92 mm against 1.55-1.90.
     // The model at half resolution (model_level 1) saves more (7.1 ms) but tracks worse (ATE 2.04-2.84 mm), so a
-    // loaded server casts every 2nd frame first (issue 16). A cast still follows the first frames, a re-acquisition
+    // loaded server casts every 2nd frame first. A cast still follows the first frames, a re-acquisition
     // and a change of model level. Must be in [1, kMaxModelCastEvery].
     int model_cast_every = 1;
     static constexpr int kMaxModelCastEvery = 4;
@@ -59,7 +59,7 @@ struct ReconParams {
     // as in the thesis); the frames between are registered (their pose is known and in the trajectory) but leave
     // the model alone, and so are not ray cast after either (model_cast_every counts fused frames). Integration is
     // a loaded server's largest stage once the model is cast coarse and every other frame; fusing every other
-    // frame of a 30 Hz stream halves it and still averages each surface over many views (issue 16 note). The first
+    // frame of a 30 Hz stream halves it and still averages each surface over many views. The first
     // two frames and every frame after a rejected or held one (a re-acquisition, a verified fit) are always fused.
     // Must be in [1, kMaxFuseEvery].
     int fuse_every = 1;

@@ -139,7 +139,7 @@ class SurfaceDistance {
 
 // How many vertices of `mesh` lie farther than max_distance_m from `reference`'s surface, or nearest to a reference
 // vertex that `allowed` (per reference vertex, when given) marks 0: what a scan holds that is not the reference
-// (a fused torso or occluder, issue 18). Both meshes in the same frame, metres.
+// (a fused torso or occluder). Both meshes in the same frame, metres.
 int countVerticesFarFrom(const recon::Mesh& mesh, const recon::Mesh& reference, float max_distance_m,
                          const std::vector<uint8_t>* allowed = nullptr);
 
