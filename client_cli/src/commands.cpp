@@ -9,6 +9,7 @@
 #include "client/mesh_file.hpp"
 #include "client/status_json.hpp"
 #include "command_util.hpp"
+#include "facescan/version.hpp"
 #include "wire/mesh_codec.hpp"
 
 namespace facescan::client {
@@ -295,7 +296,7 @@ int runSimpleCommand(const CliOptions& options, facescan_wire_CommandKind kind) 
 
 int runCommand(const CliOptions& options) {
     if (options.version) {
-        std::printf("facescan 0.1.0\n");
+        printVersion("facescan");
         return kExitOk;
     }
     if (options.help) {
