@@ -1,4 +1,4 @@
-// facescan-bench recon: the reconstruction core on every frame of a sequence, as fast as it runs (DESIGN.md s6).
+// facescan-bench recon: the reconstruction core on every frame of a sequence, as fast as it runs (docs/design.md s6).
 // Frames are loaded (or rendered) before timing, so only recon_core is on the clock: filter, ICP, integration and
 // ray casting together, wall clock over the whole loop. With --gt-accuracy on synthetic input the final mesh is
 // measured against the ground-truth head with the accuracy ruler, next to a single-frame baseline; completeness

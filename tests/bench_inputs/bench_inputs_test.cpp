@@ -1,4 +1,4 @@
-// facescan-bench reads recordings (DESIGN.md s6): detect and codecs take `--input tum:DIR` (they once answered
+// facescan-bench reads recordings (docs/design.md s6): detect and codecs take `--input tum:DIR` (they once answered
 // "unknown source" and "no frames"), detect's --boxes writes one line per frame and detector, and recon refuses a
 // mask-less recording much deeper than its volume with a message that says what to do, instead of rejecting
 // nearly every frame. The recording: 5 frames of the Lee Perry-Smith head at 0.7 m with a wall behind, written as a

@@ -1,5 +1,5 @@
 // recon::parallelFor: every index exactly once for any range, concurrent and nested callers, work really shared
-// with the pool, fork safety, and no heap allocation per call after warm-up (the frame loop's contract, DESIGN.md
+// with the pool, fork safety, and no heap allocation per call after warm-up (the frame loop's contract, docs/design.md
 // s4); and the whole Reconstructor frame loop allocating nothing after warm-up (FrameLoop). Allocations are
 // counted by replacing the global operator new in this executable only (allocation_counter.hpp).
 #include "recon/parallel.hpp"

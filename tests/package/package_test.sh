@@ -74,6 +74,7 @@ expected=(
     /etc/facescan/server.conf /etc/facescan/agent.conf
     /lib/systemd/system/facescan-server.service /lib/systemd/system/facescan-agent@.service
     /usr/lib/sysusers.d/facescan.conf /usr/lib/sysctl.d/60-facescan.conf /usr/share/doc/facescan/README.md
+    /usr/share/doc/facescan/docs/deployment.md
     /usr/bin/facescan-site /usr/share/facescan/web/index.html /usr/share/facescan/web/viewer.js
 )
 # three.js comes from npm (deploy/install-deps.sh runs npm ci); without it the viewer is not installed whole.

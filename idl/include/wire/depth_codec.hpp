@@ -1,4 +1,4 @@
-// Lossless depth codecs for RgbdFrame.depth (DESIGN.md section 3). Depth must arrive bit-exact: fusion accuracy
+// Lossless depth codecs for RgbdFrame.depth (docs/design.md section 3). Depth must arrive bit-exact: fusion accuracy
 // starts at the raw sensor value, so every codec here is lossless and round-trips every uint16 image.
 //
 // Every payload starts with a 16-byte self-describing header (magic "FSD", version, codec, width, height, body

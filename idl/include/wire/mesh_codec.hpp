@@ -1,7 +1,7 @@
 // Mesh codec for MeshSnapshot.draco and ScanReply.payload: Draco (edgebreaker) with positions in metres and 8-bit
 // vertex colours; no normals (receivers recompute them from the triangles, as three.js does). Positions
 // are quantised on a grid derived from the mesh's bounding box and the allowed error (default 0.05 mm, well under
-// the 1.51 mm voxel of DESIGN.md section 1). The encoder cleans the mesh on that grid before encoding, so the
+// the 1.51 mm voxel of docs/design.md section 1). The encoder cleans the mesh on that grid before encoding, so the
 // decoded mesh has no zero-area or duplicate triangle and no unreferenced vertex (recon::MeshDefects::clean).
 //
 // Draco's own decoder sizes its tables from counts in the bitstream; decodeMeshDraco reads and caps those counts

@@ -1,4 +1,4 @@
-// Allocation-free parallel loop for the per-frame path (DESIGN.md s4: "no allocation in the per-frame path after
+// Allocation-free parallel loop for the per-frame path (docs/design.md s4: "no allocation in the per-frame path after
 // warm-up"). cv::parallel_for_ wraps every body in std::function copies (three heap allocations a call, ~57 a
 // frame), so the recon core uses this instead.
 //

@@ -96,7 +96,7 @@ struct ReconParams {
     float source_fps = 30.0f;       // frames per second; 0 = every frame counts as the next one
     float max_motion_scale = 4.0f;  // ratio
 
-    // Meyer's values (DESIGN.md section 1): 256^3 voxels over 0.386 m, mu 5 mm, W max 256, bilateral 1 px / 50 mm,
+    // Meyer's values (docs/design.md section 1): 256^3 voxels over 0.386 m, mu 5 mm, W max 256, bilateral 1 px / 50 mm,
     // 3 levels, ICP 20/15/10 iterations, gates 50-200 mm and 30-45 deg, re-acquire after 5 failed frames.
     static ReconParams faceDefaults();
     // Faster: fewer ICP iterations, a looser convergence test, coarser ray steps. Same volume and accuracy class.
@@ -273,7 +273,7 @@ class Reconstructor {
     mutable std::mutex volume_mutex_;  // guards volume_ between processFrame and snapshot/preview callers
 };
 
-// One line of a TUM trajectory (DESIGN.md section 7): "timestamp tx ty tz qx qy qz qw", timestamp in seconds.
+// One line of a TUM trajectory (docs/design.md section 7): "timestamp tx ty tz qx qy qz qw", timestamp in seconds.
 std::string toTumLine(int64_t timestamp_ns, const Pose& T_world_camera);
 
 }  // namespace facescan::recon
