@@ -26,6 +26,8 @@
 
 namespace facescan::recon {
 
+class Stopwatch;  // recon/timing.hpp
+
 struct ReconParams {
     FilterParams filter;
     IcpParams icp;
@@ -219,7 +221,30 @@ class Reconstructor {
     const TsdfVolume& volume() const { return volume_; }  // not thread-safe: the frame thread only
 
  private:
+    // What a frame needs before it is filtered: whether it follows a gap, how many frame periods after the last
+    // tracked one it comes, and the finest pyramid level registration will read.
+    struct FramePlan {
+        bool after_gap = false;
+        float motion_scale = 1.0f;
+        int coarse_level = 0;
+    };
+    // processFrame's steps (Figure 1.1), in order.
     bool checkInput(const RgbdFrame& frame, const cv::Mat& head_mask, FrameResult& result) const;
+    FramePlan planFrame(int64_t timestamp_ns) const;
+    // A frame not aligned (thesis 4.1: discarded): counted towards re-acquisition; returns a copy of result.
+    FrameResult rejectFrame(FrameResult& result, TrackingStatus status, const char* why);
+    void restartOneFrameModelIfLost(FrameResult& result);
+    // The first frame: places the volume and defines the world; false when no head point places it.
+    bool startModel(int valid_px, FrameResult& result);
+    // Surface alignment with the robustness policies: false when the frame is held or rejected (result says why);
+    // `fuse` says whether a tracked frame is fused.
+    bool trackFrame(const FramePlan& plan, int valid_px, Stopwatch& watch, FrameResult& result, bool& fuse);
+    // Registration on the coarse levels alone; false (the finer levels prepared) when the full path must follow.
+    bool registerCoarse(int coarse_level, FrameResult& result, Pose& estimate);
+    static const char* whyNotRegistered(TrackingStatus status);
+    void recordPose(int64_t timestamp_ns, FrameResult& result);
+    void integrateFrame(const RgbdFrame& frame, FrameResult& result);
+    void castModelIfDue(FrameResult& result);
     void raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_m);
     // Robust integration's pre-filter (ReconParams::occluder_prefilter_m) over the frame's pyramid from `level` on,
     // at the predicted pose (result.occluding_pixels: what it removed); at level 0 it also refreshes the next
