@@ -110,6 +110,9 @@ for (const file of files) {
       checkCode(file, lineNo, line.replace(/\s#\s.*$/, ''));
       return;
     }
+    if ((line.match(/`/g) ?? []).length % 2 === 1) {
+      problem(file, lineNo, 'a code span runs across lines: keep it on one line (this check reads spans by line)');
+    }
     for (const m of line.matchAll(/`([^`]+)`/g)) checkCode(file, lineNo, m[1]);
     const text = line.replace(/`[^`]*`/g, '');
     for (const m of text.matchAll(/!?\[[^\]]*\]\(([^)\s]+)\)/g)) {
