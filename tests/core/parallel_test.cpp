@@ -121,7 +121,7 @@ TEST(ParallelFor, WorkersShareTheWork) {
     EXPECT_TRUE(shared) << "no chunk ever ran off the calling thread";
 }
 
-// Issue 16: a serial thread runs its calls alone, covering everything, while the pool stays with the others.
+// A serial thread runs its calls alone, covering everything, while the pool stays with the others.
 TEST(ParallelFor, SerialThreadRunsItsCallsAloneAndOthersKeepThePool) {
     std::thread t([] {
         setParallelSerial(true);
@@ -139,7 +139,7 @@ TEST(ParallelFor, SerialThreadRunsItsCallsAloneAndOthersKeepThePool) {
     EXPECT_EQ(firstWrong(cover(0, 1000)), -1);
 }
 
-// Issue 16: with accounting on, the CPU pool workers spend on a thread's calls is charged to that thread (what a
+// With accounting on, the CPU pool workers spend on a thread's calls is charged to that thread (what a
 // session worker's frames cost, whoever ran them); off, or serial, nothing is charged.
 TEST(ParallelFor, PoolWorkersChargeTheirCpuToTheCallingThread) {
     if (parallelThreadCount() < 2) GTEST_SKIP() << "one hardware thread: no pool workers";
@@ -367,7 +367,7 @@ TEST(FrameLoop, ReconstructorDoesNotAllocateAfterWarmUp) {
 }
 
 TEST(FrameLoop, FacePipelineAndReconstructorDoNotAllocateAfterWarmUp) {
-    // Issue 16: the server's whole per-frame path (recon::scanFrame, as the session worker runs it), detection and
+    // The server's whole per-frame path (recon::scanFrame, as the session worker runs it), detection and
     // segmentation included. Frames without colour, so the detector is the depth-only head finder; it re-detects
     // every 3rd frame (redetect_every_frames) and the tracked model's prediction seeds the segmentation in between
     // (ModelSegmenter), so both paths run after the warm-up.

@@ -81,7 +81,7 @@ struct SessionStats {
     float last_takeover_ms = 0;  // the owner's last sign of life to the first frame integrated after the takeover
     uint32_t next_seq = 0;       // the next frame the session takes (the agent resends from here)
     uint64_t frames_digest = wire::kFrameDigestSeed;  // of the frames processed, in order
-    // Issue 16, bad input: the worker's load (service/frame_load.hpp). A live session that is throttled or skips
+    // Bad input: the worker's load (service/frame_load.hpp). A live session that is throttled or skips
     // more than kBehindSkipFraction of its recent frames is behind; stats() then says so in the detail, first
     // unless the face is lost (the advice to the person comes first then).
     bool behind = false;
