@@ -1,5 +1,5 @@
-// The watch panel and log line carry every figure the issue asks for: frames integrated, fps, tracking state,
-// triangles and snapshot age.
+// The watch panel and log line carry every figure a person watching a scan needs: frames integrated, fps, tracking
+// state, triangles and snapshot age.
 #include "client/watch_panel.hpp"
 
 #include <gtest/gtest.h>
