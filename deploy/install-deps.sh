@@ -32,6 +32,8 @@ PACKAGES=(
     iproute2 nftables
     # the .deb and its test: dpkg-shlibdeps (dependencies), systemd-analyze and systemd-sysusers (units, user)
     dpkg-dev systemd
+    # the man pages: made from each program's --help at build time and installed by the .deb
+    help2man
 )
 
 # The viewer's three.js comes from npm (client_cli/web/package-lock.json): node and npm, from Debian unless the

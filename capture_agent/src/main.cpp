@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "capture/agent.hpp"
+#include "facescan/version.hpp"
 #include "wire/dds_options.hpp"
 
 namespace {
@@ -77,7 +78,8 @@ options:
                         (default: $XDG_STATE_HOME/facescan/unconfirmed, else
                         ~/.local/state/facescan/unconfirmed)
 )";
-constexpr const char* kUsageEnd = R"(  --help                this text
+constexpr const char* kUsageEnd = R"(  --version             print the version and the git commit it was built from
+  --help                this text
 
 exit codes: 0 done, 1 error (source, network, DDS Security), 2 bad usage)";
 
@@ -104,6 +106,9 @@ int main(int argc, char** argv) {
         long n = 0;
         if (arg == "--help" || arg == "-h") {
             std::printf("%s%s%s\n", kUsage, wire::ddsOptionsHelp(24).c_str(), kUsageEnd);
+            return 0;
+        } else if (arg == "--version") {
+            printVersion("facescan-agent");
             return 0;
         } else if (arg == "--no-colour" || arg == "--no-color") {
             options.source_options.colour = false;

@@ -28,6 +28,7 @@ std::string globalOptions() {
     return "Options shared by every command (the DDS ones also by facescan-agent and facescan-server):\n" +
            wire::ddsOptionsHelp(24) +
            "  --timeout S           seconds to wait for a server before giving up (default 10)\n"
+           "  --version             the version and the git commit it was built from\n"
            "  -h, --help            this help\n";
 }
 

@@ -9,6 +9,7 @@
 #include "client/mesh_file.hpp"
 #include "client/status_json.hpp"
 #include "command_util.hpp"
+#include "facescan/version.hpp"
 #include "wire/mesh_codec.hpp"
 
 namespace facescan::client {
@@ -95,7 +96,7 @@ int runSessions(const CliOptions& options) {
     for (const SessionStatus& s : *sessions) {
         const Ownership o = ownershipOf(s, *owners);
         const std::string owner = o.alive ? o.owner : o.owner + " (gone)";
-        // A session that cannot keep up (issue 16) is named as such; `facescan status` says by how much.
+        // A session that cannot keep up is named as such; `facescan status` says by how much.
         std::printf("%-24s %-9s %10u %10u %8u %6.1f  %-20s %s%s\n", s.session_id.c_str(), scanStateName(s.state),
                     s.frames_integrated, s.frames_received, s.frames_rejected, s.fps, owner.c_str(),
                     o.standby.empty() ? "-" : o.standby.c_str(), s.behind ? "  BEHIND" : "");
@@ -295,7 +296,7 @@ int runSimpleCommand(const CliOptions& options, facescan_wire_CommandKind kind) 
 
 int runCommand(const CliOptions& options) {
     if (options.version) {
-        std::printf("facescan 0.1.0\n");
+        printVersion("facescan");
         return kExitOk;
     }
     if (options.help) {

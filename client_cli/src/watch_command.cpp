@@ -153,7 +153,7 @@ int runWatch(const CliOptions& options) {
             confirmed = true;
         }
         const bool finished = view.have_status && view.status.state == facescan_wire_STATE_FINISHED;
-        // A dead owner with a standby: the standby takes over within the lease (issue 13); wait for it a while.
+        // A dead owner with a standby: the standby takes over within the lease; wait for it a while.
         if (view.have_status && !view.status.alive && !owner_lost) {
             owner_lost = Clock::now();
             if (!view.status.standby_id.empty()) {

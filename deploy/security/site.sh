@@ -14,6 +14,9 @@ DEFAULT_DAYS=365   # an identity's certificate and permissions
 DOMAINS_MIN=0
 DOMAINS_MAX=230    # the highest domain id DDS Security documents may name (Cyclone refuses more)
 ROLES="agent server client viewer"
+# Written by the build into the installed copy (deploy/CMakeLists.txt); empty in the source tree, where
+# --version asks the checkout instead.
+VERSION_LINE=""
 
 usage() {
     cat <<EOF
@@ -21,6 +24,7 @@ usage: $PROG init DIR [--name SITE] [--days N]
        $PROG add DIR ROLE NAME [--days N] [--from DATE] [--until DATE]
        $PROG revoke DIR NAME
        $PROG list DIR
+       $PROG --version
        $PROG --help
 
 Makes and runs a facescan DDS Security site in DIR with openssl: only enrolled machines join the DDS domain,
@@ -372,8 +376,21 @@ cmd_list() {
     done
 }
 
+# "facescan-site VERSION (commit HASH)", as the programs print it.
+print_version() {
+    if [ -z "$VERSION_LINE" ]; then
+        local src version commit
+        src=$(cd "$(dirname "$0")/../.." && pwd)
+        version=$(sed -n 's/^project(facescan VERSION \([0-9.]*\).*/\1/p' "$src/CMakeLists.txt" 2>/dev/null || true)
+        commit=$(git -C "$src" rev-parse --short=12 HEAD 2>/dev/null || echo unknown)
+        VERSION_LINE="${version:-unknown} (commit $commit)"
+    fi
+    echo "$PROG $VERSION_LINE"
+}
+
 case ${1:-} in
     -h | --help | help) usage ;;
+    --version) print_version ;;
     init) shift; cmd_init "$@" ;;
     add) shift; cmd_add "$@" ;;
     revoke) shift; cmd_revoke "$@" ;;

@@ -72,7 +72,7 @@ namespace {
 // Draco's quantiser (AttributeQuantizationTransform + Quantizer, float arithmetic): per axis the minimum, one
 // range for all axes (the largest extent), max = 2^bits - 1 steps, q = floor((v - min) * max / range + 0.5),
 // decoded v' = q * (range / max) + min. Reproduced here so that the encoder sees the positions the receiver will
-// get, and cleans the mesh on them (issue 16: close vertices collapsed and left zero-area triangles).
+// get, and cleans the mesh on them (without it, close vertices collapsed and left zero-area triangles).
 struct DracoGrid {
     float min[3] = {0, 0, 0};
     float inverse_delta = 1.0f;

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "facescan/version.hpp"
 #include "service/server.hpp"
 #include "service/session_store.hpp"
 #include "wire/dds.hpp"
@@ -14,6 +15,10 @@
 int main(int argc, char** argv) {
     using namespace facescan;
     const std::vector<std::string> args(argv + 1, argv + argc);
+    if (!args.empty() && args[0] == "--version") {
+        printVersion("facescan-server");
+        return 0;
+    }
     auto parsed = service::parseServerArgs(args);
     if (!parsed.isOk()) {
         std::fprintf(stderr, "facescan-server: %s\n(see facescan-server --help)\n", parsed.status().message().c_str());

@@ -1,5 +1,5 @@
 // facescan-bench accuracy: the ruler. Rigidly aligns a mesh to the ground-truth head and reports point-to-surface
-// distances over the face region, completeness and outliers (DESIGN.md s6). --baseline-frame measures one raw
+// distances over the face region, completeness and outliers (docs/design.md s6). --baseline-frame measures one raw
 // noisy synthetic frame, back-projected, against the truth: the baseline that fusion must beat by far; its
 // completeness_observed is taken over what that frame measured (eval/observed_region.hpp). A mesh measured with
 // --mesh comes without sensor views, so its completeness_observed is the whole-region completeness.

@@ -2,7 +2,7 @@
 // Depth: every lossless codec (and zstd levels) per data set: ratio, encode and decode ms (mean per frame after a
 // warm-up; thread CPU ms, see Clock), checked bit-exact. Colour: TurboJPEG against OpenCV's imencode at the same
 // quality. Mesh: Draco on a ~200k-triangle head (Lee Perry-Smith scan, metres, Loop + sqrt(3) subdivision, texture
-// colours). JSON keys (DESIGN.md s6): depth{codec,ratio,encode_ms,decode_ms} colour{...}
+// colours). JSON keys (docs/design.md s6): depth{codec,ratio,encode_ms,decode_ms} colour{...}
 // mesh{bytes,encode_ms,decode_ms}; per-codec detail under depth_sets{set:{codec:{ratio,encode_ms,decode_ms}}}.
 #include <draco/compression/decode.h>
 

@@ -1,6 +1,6 @@
 // facescan-bench sub-commands register themselves here; main.cpp dispatches by name.
 // Each sub-command prints a human-readable table and, with --json, one JSON object as its LAST line
-// (keys in DESIGN.md section 6; scripts read them).
+// (keys in docs/design.md section 6; scripts read them).
 #pragma once
 
 #include <functional>

@@ -1,4 +1,4 @@
-// facescan-bench mesh: the meshes the service delivers (issue 16), on the demo's scan (the synthetic Kinect
+// facescan-bench mesh: the meshes the service delivers, on the demo's scan (the synthetic Kinect
 // filming the Lee Perry-Smith head at 0.7 m, seed 1, 150 frames, through the server's FacePipeline).
 //  - Live snapshots at 1 Hz (every 30th frame of a 30 Hz stream): volume copy, marching cubes at the snapshot
 //    stride (incremental: only blocks changed since the last snapshot, against a full re-mesh in the same run),
@@ -36,7 +36,7 @@ double threadMs() {
 struct SnapshotFigures {
     int count = 0;
     double copy_ms = 0, mesh_ms = 0, full_mesh_ms = 0, encode_ms = 0, max_total_ms = 0;
-    double old_mesh_ms = 0, old_encode_ms = 0;  // before issue 16: OpenMesh with gradient normals, normals sent
+    double old_mesh_ms = 0, old_encode_ms = 0;  // the old wire: OpenMesh with gradient normals, normals sent
     double blocks = 0, changed = 0, remeshed = 0, triangles = 0, bytes = 0;
     bool equal_to_full = true;  // the incremental mesh had the full re-mesh's triangle and vertex counts
 };
@@ -105,7 +105,8 @@ bool measureFinal(const recon::IndexedMesh& mesh, const wire::MeshCodecParams& p
     if (!wire::encodeMeshDraco(mesh, unaligned, bytes).isOk()) return false;
     f.unaligned_bytes = bytes.size();
 
-    // Baseline: the wire before issue 16 (10-bit normals; decoded into OpenMesh's half-edge mesh).
+    // Baseline: the old wire, before normals were left to the receiver (10-bit normals; decoded into OpenMesh's
+    // half-edge mesh).
     wire::MeshCodecParams old_params;
     old_params.normal_bits = 10;
     recon::IndexedMesh with_normals = mesh;
@@ -174,7 +175,7 @@ int runMesh(const std::vector<std::string>& args) {
                 "The meshes facescan delivers, on the demo's scan (default SRC %s, 150 frames):\n"
                 "live snapshots every F frames (30 = 1 Hz at 30 Hz; copy, incremental marching cubes at stride 2,\n"
                 "Draco at 0.2 mm) and their share of a core per session; the final mesh's Draco size, encode and\n"
-                "decode ms (mean of R), position error, defects, and the pre-issue-16 wire as a baseline.\n"
+                "decode ms (mean of R), position error, defects, and the old wire (normals sent) as a baseline.\n"
                 "--sweep: the final mesh's size and times at every Draco speed, with and without colours.\n",
                 input.c_str());
             return a == "--help" ? 0 : 2;
@@ -217,7 +218,7 @@ int runMesh(const std::vector<std::string>& args) {
         const recon::IndexedMesh full = recon::extractTriangles(scratch, snap_params);
         sf.full_mesh_ms += threadMs() - t0;
         sf.equal_to_full &= full.triangleCount() == m.triangleCount() && full.vertexCount() == m.vertexCount();
-        {  // the snapshot path before issue 16, on the same volume
+        {  // the old snapshot path (normals sent), on the same volume
             wire::MeshCodecParams old_codec;
             old_codec.max_position_error_m = snapshot_error_m;
             old_codec.normal_bits = 10;
@@ -250,7 +251,8 @@ int runMesh(const std::vector<std::string>& args) {
     std::printf("  blocks %.0f, changed %.0f, re-meshed %.0f; %.0f triangles, %.1f KB\n", sf.blocks / n, sf.changed / n,
                 sf.remeshed / n, sf.triangles / n, sf.bytes / n / 1024.0);
     std::printf(
-        "  before issue 16 (same volumes): mesh %.2f ms (OpenMesh, gradient normals), encode %.2f ms (normals)\n",
+        "  old wire, normals sent (same volumes): mesh %.2f ms (OpenMesh, gradient normals), encode %.2f ms "
+        "(normals)\n",
         sf.old_mesh_ms / n, sf.old_encode_ms / n);
     std::printf("  copy+mesh+encode %.2f ms per snapshot (max %.2f) = %.2f %% of a core per session%s\n", total_ms,
                 sf.max_total_ms, 100.0 * cpu_share, sf.equal_to_full ? "" : "  (INCREMENTAL != FULL)");

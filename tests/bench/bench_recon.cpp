@@ -1,4 +1,4 @@
-// facescan-bench recon: the reconstruction core on every frame of a sequence, as fast as it runs (DESIGN.md s6).
+// facescan-bench recon: the reconstruction core on every frame of a sequence, as fast as it runs (docs/design.md s6).
 // Frames are loaded (or rendered) before timing, so only recon_core is on the clock: filter, ICP, integration and
 // ray casting together, wall clock over the whole loop. With --gt-accuracy on synthetic input the final mesh is
 // measured against the ground-truth head with the accuracy ruler, next to a single-frame baseline; completeness
@@ -357,7 +357,7 @@ int runRecon(const std::vector<std::string>& args) {
                 "       [--volume-m M] [--trunc-m M] [--mask input|pipeline|none] [--twin] [--serial] [--verbose]\n"
                 "       [--model-level L] [--cast-every N] [--fuse-every N] [--unfused-level L] [--json]\n"
                 "SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR\n"
-                "Synthetic input also reports the robustness figures of issue 18 (tracked share, re-acquisition,\n"
+                "Synthetic input also reports robustness figures (tracked share, re-acquisition,\n"
                 "wrong poses, foreign surface). --twin (implies --gt-accuracy) also scans the same motion without the\n"
                 "scenario's event (the gap's subject turns in view; no occluder) and prints the difference of means.\n"
                 "--mask pipeline: find the head per frame with the server's FacePipeline (timed in the loop)\n"
@@ -545,7 +545,7 @@ int runRecon(const std::vector<std::string>& args) {
             base_json = eval::accuracyJson(*base);
         }
     }
-    // Robustness figures (issue 18) and, with --twin, the same motion without the scenario's event.
+    // Robustness figures and, with --twin, the same motion without the scenario's event.
     std::string scenario_json, twin_json;
     if (seq.sim) {
         const eval::ScenarioFigures figures =

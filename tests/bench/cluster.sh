@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The cluster's figures (issue 13), with the real programs over loopback DDS in a private domain:
+# The cluster's figures, with the real programs over loopback DDS in a private domain:
 #   takeover   two servers, a recording (--rate max); the owner is killed with SIGKILL half way; the time from the
 #              kill to the first frame the standby integrates (its log stamps it with the wall clock), and the
 #              frames lost (received, integrated + rejected vs sent; the owner's frame digest vs the agent's)

@@ -3,7 +3,7 @@
 # recordings (--rate max: every frame must be kept), and one owner
 #   kill   killed with SIGKILL 2 s in (before or just after its first replica), or
 #   stop   frozen with SIGSTOP for 8 s and woken with SIGCONT (a paused VM, a stalled disk).
-# Each run checks what the issue asks: no agent gives up, every session finishes once (its summary.json in exactly
+# Each run checks what a failover must keep: no agent gives up, every session finishes once (its summary.json in exactly
 # one data dir, every frame integrated or rejected once), no server is left alive with open sessions, no frozen
 # server acts on what it missed; and it prints the takeover time (the fault to the agent's "taken over" line).
 #   usage: tests/bench/faults.sh [kill|stop|both (default both)] [RUNS (default 5)] [FRAMES (default 300)]

@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "bench_command.hpp"
+#include "facescan/version.hpp"
 
 namespace facescan::bench {
 std::map<std::string, Command>& commands() {
@@ -20,13 +21,19 @@ static void printUsage(std::FILE* out) {
     for (const auto& [name, command] : facescan::bench::commands()) {
         std::fprintf(out, "  %-10s %s\n", name.c_str(), command.summary.c_str());
     }
-    std::fprintf(out, "\n'facescan-bench COMMAND --help' describes a command's options.\n");
+    std::fprintf(out,
+                 "\n'facescan-bench COMMAND --help' describes a command's options; 'facescan-bench --version'\n"
+                 "prints the version and the git commit it was built from.\n");
 }
 
 int main(int argc, char** argv) {
     if (argc < 2 || std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h") {
         printUsage(argc < 2 ? stderr : stdout);
         return argc < 2 ? 2 : 0;
+    }
+    if (std::string(argv[1]) == "--version") {
+        facescan::printVersion("facescan-bench");
+        return 0;
     }
     const auto& registry = facescan::bench::commands();
     const auto it = registry.find(argv[1]);

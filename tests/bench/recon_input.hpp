@@ -1,4 +1,4 @@
-// Inputs of facescan-bench recon (DESIGN.md s6): synthetic[:OPTIONS] rendered by the project's synthetic Kinect
+// Inputs of facescan-bench recon (docs/design.md s6): synthetic[:OPTIONS] rendered by the project's synthetic Kinect
 // (with its ground truth), TUM RGB-D folders and 7-Scenes folders (with their reference poses). Everything is
 // loaded before the timed loop.
 #pragma once

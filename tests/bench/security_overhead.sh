@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# What DDS Security costs (issue 14): the same live scan with and without it, in one run, alternating the two
+# What DDS Security costs: the same live scan with and without it, in one run, alternating the two
 # (plain then secure, secure then plain, ...) so that the machine's load falls on both alike. facescan-server and
 # one agent streaming a TUM folder at 30 Hz (RATE; like a real camera's capture PC, it only decodes PNGs) over
 # loopback DDS in a private domain; the secured runs use a fresh site from deploy/security/site.sh.

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The server's real-time figures (issue 8): facescan-server and N synthetic agents at 30 Hz over loopback DDS in a
+# The server's real-time figures: facescan-server and N synthetic agents at 30 Hz over loopback DDS in a
 # private domain, every process on this machine. Prints each session's summary (fps, integrated / skipped frames,
 # capture-to-pose latency p50/p95, per-stage ms, snapshot timings) from the server's --data-dir.
 #   usage: tests/bench/server_realtime.sh [--preload] [SESSIONS (default 1)] [FRAMES (default 300)] [SUBJECT (scan)]
@@ -120,8 +120,9 @@ echo "server_realtime: $sessions session(s) x $frames frames at 30 Hz from $what
 echo "host check: the serial frame loop (facescan-bench recon --serial --frames 100) took $host_check"
 # The machine's CPU time while the agents streamed (/proc/stat's first line: user nice system idle iowait irq softirq
 # steal). Steal is time the hypervisor gave other guests: on this shared host it went from 0.0 % to 35 % between
-# runs a minute apart, and four sessions missed the issue's bars in all 5 runs at 4-35 % and in 1 of 9 under 1 %
-# (15 runs, 2026-11-24 22:15-22:35 UTC). The issue's figures are for a quiet machine, so the line says when it was not.
+# runs a minute apart, and four sessions missed the bars (3 % skipped, p95 50 ms) in all 5 runs at 4-35 % and in 1
+# of 9 under 1 % (15 runs, 2026-11-24 22:15-22:35 UTC). The bars are for a quiet machine, so the line says when it
+# was not.
 paste "$work/host_cpu_start" "$work/host_cpu_end" | awk '{ n = NF / 2; for (i = 2; i <= 9 && i <= n; ++i) { d[i] = $(i + n) - $i; t += d[i] }
     if (t <= 0) exit
     steal = 100 * d[9] / t

@@ -1,4 +1,4 @@
-// The web viewer's figures (issue 15), every process on this machine over loopback DDS in a private domain:
+// The web viewer's figures, every process on this machine over loopback DDS in a private domain:
 //  1. a live scan (30 Hz synthetic Kinect) watched by one headless chromium: snapshot-to-screen latency (the
 //     snapshot's created_ns, stamped by the server when it publishes, to the browser's next animation frame after
 //     drawing it), split into wire (to the WebSocket message) and decode + draw; Draco decode ms in the browser;

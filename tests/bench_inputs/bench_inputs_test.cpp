@@ -1,4 +1,4 @@
-// facescan-bench reads recordings (DESIGN.md s6): detect and codecs take `--input tum:DIR` (they once answered
+// facescan-bench reads recordings (docs/design.md s6): detect and codecs take `--input tum:DIR` (they once answered
 // "unknown source" and "no frames"), detect's --boxes writes one line per frame and detector, and recon refuses a
 // mask-less recording much deeper than its volume with a message that says what to do, instead of rejecting
 // nearly every frame. The recording: 5 frames of the Lee Perry-Smith head at 0.7 m with a wall behind, written as a
@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -43,7 +44,9 @@ class BenchTumInput : public ::testing::Test {
  protected:
     void SetUp() override {
         FACESCAN_REQUIRE_DATA(head_data, "leeperrysmith");
-        (void)head_data;
+        // The bench looks for the scan by itself (beside its own binary); hand it the data this test found, so
+        // that the two never disagree (a build folder outside the checkout would otherwise fail, not skip).
+        ::setenv("FACESCAN_DATA_DIR", head_data.parent_path().c_str(), 1);
         const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
         scratch_ =
             fs::temp_directory_path() / ("facescan-bench-inputs-" + std::to_string(::getpid()) + "-" + info->name());

@@ -1,5 +1,5 @@
-// The watch panel and log line carry every figure the issue asks for: frames integrated, fps, tracking state,
-// triangles and snapshot age.
+// The watch panel and log line carry every figure a person watching a scan needs: frames integrated, fps, tracking
+// state, triangles and snapshot age.
 #include "client/watch_panel.hpp"
 
 #include <gtest/gtest.h>
@@ -54,7 +54,7 @@ TEST(WatchPanel, LogLineIsOneLineWithTheSameFigures) {
     }
 }
 
-// Issue 16: frames a loaded server tracked but did not fuse are shown apart from the integrated ones, and only
+// Frames a loaded server tracked but did not fuse are shown apart from the integrated ones, and only
 // when there are any.
 TEST(WatchPanel, ShowsFramesTrackedButNotFusedApart) {
     WatchView view = scanningView();
@@ -66,7 +66,7 @@ TEST(WatchPanel, ShowsFramesTrackedButNotFusedApart) {
     EXPECT_TRUE(contains(logLine(view), "tracked only 1234"));
 }
 
-// Issue 18: the server puts what the person should do first in the detail; panel and log line show it whole.
+// The server puts what the person should do first in the detail; panel and log line show it whole.
 TEST(WatchPanel, ShowsWhatThePersonShouldDo) {
     WatchView view = scanningView();
     view.status.state = facescan_wire_STATE_LOST;

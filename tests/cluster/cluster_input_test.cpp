@@ -1,4 +1,4 @@
-// Bad input to a cluster member (issue 13), over real DDS with the service in process:
+// Bad input to a cluster member, over real DDS with the service in process:
 //   - replicas that are truncated, corrupt, of another format version or out of order are refused, with a
 //     reason, and a full replica is requested; good ones are acknowledged round by round;
 //   - a flood of bogus session ids cannot take a real scan's place, and --max-sessions holds throughout.

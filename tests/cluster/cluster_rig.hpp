@@ -1,5 +1,5 @@
 // Real facescan-server, facescan-agent and facescan processes on the loopback profile in a private domain, for
-// the cluster tests (issue 13): start, kill -9, restart, and read what they logged and wrote.
+// the cluster tests: start, kill -9, restart, and read what they logged and wrote.
 #pragma once
 
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// Many servers on one domain (issue 13), with the real programs: sessions spread over the servers and processed
+// Many servers on one domain, with the real programs: sessions spread over the servers and processed
 // exactly once, a server that joins later takes the next session, every client sees the same owner, and a second
 // server with a taken --server-id refuses to start.
 #include <gtest/gtest.h>

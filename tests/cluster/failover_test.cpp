@@ -1,4 +1,4 @@
-// Failover and restart without loss (issue 13), with the real programs and SIGKILL:
+// Failover and restart without loss, with the real programs and SIGKILL:
 //   - the owner of a recording killed mid-scan: its standby takes over, every frame is integrated exactly once,
 //     the mesh matches an uninterrupted run's, the trajectory has no jump, the frames arrive bit-exact;
 //   - a lone server killed and restarted on the same data dir resumes the scan without losing a frame;
@@ -203,7 +203,7 @@ TEST(Failover, LiveScanCarriesOnAfterATakeoverAndItsStatusReportsIt) {
     // A nearly still head: the live frames of the takeover gap (~4 s) are lost by design and tracking goes on from
     // where the head is then; a head that turned further than registration follows in that time is lost like
     // after any gap (tests/core/recon_state_test.cpp shows the restore itself costs nothing; re-acquiring a head
-    // that moved far is issue 18's).
+    // that moved far is the re-acquisition tests' job).
     rig.startAgent("live", 90, "10", ",period=4000");
     const std::string owner = rig.waitForOwner("live", 30s);
     ASSERT_FALSE(owner.empty());

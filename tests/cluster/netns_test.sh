@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Across machines (issue 13): two servers, two agents and a client, each in its own Linux network namespace, joined
+# Across machines: two servers, two agents and a client, each in its own Linux network namespace, joined
 # by a bridge that lives in a namespace of its own; the `lan` profile with multicast discovery, as on a real
 # network. The agents' namespace drops 2 % of its packets both ways (an nftables `numgen random` rule: this kernel
 # has no netem). Checked: the recording arrives complete and bit-exact (the owner's frame digest is the agent's),

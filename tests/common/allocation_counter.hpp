@@ -1,4 +1,4 @@
-// Counts heap allocations of the whole process (DESIGN.md s4: the frame loop allocates nothing after warm-up;
+// Counts heap allocations of the whole process (docs/design.md s4: the frame loop allocates nothing after warm-up;
 // tests and the bench check that). Include this header in exactly ONE source file of an executable: it defines the
 // replacement functions. Executables that include it count every allocation, so keep it out of test programs that
 // do not need it.

@@ -1,4 +1,4 @@
-// Colour on demand (recon::ColourSource, issue 16): the server decodes a frame's JPEG only where a stage reads it.
+// Colour on demand (recon::ColourSource): the server decodes a frame's JPEG only where a stage reads it.
 // A scan whose colour comes from a source must be the scan with the colour given up front, bit for bit, even when
 // the source leaves every pixel outside the region asked for wrong; a frame only tracked asks for none; and colour
 // that cannot be had is the same as none.

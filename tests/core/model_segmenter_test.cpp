@@ -1,4 +1,4 @@
-// Issue 16: the model segmenter's fast paths (growth from the seeds' frontier only, the mask and its figures in
+// The model segmenter's fast paths (growth from the seeds' frontier only, the mask and its figures in
 // parallel stripes) against a plain statement of what it computes: seeds where the frame confirms the ray-cast
 // model's prediction inside the head region, then Algorithm 1's depth-continuity growth from every seed within the
 // predicted box widened by the band, inside the region.

@@ -1,5 +1,5 @@
 // recon::parallelFor: every index exactly once for any range, concurrent and nested callers, work really shared
-// with the pool, fork safety, and no heap allocation per call after warm-up (the frame loop's contract, DESIGN.md
+// with the pool, fork safety, and no heap allocation per call after warm-up (the frame loop's contract, docs/design.md
 // s4); and the whole Reconstructor frame loop allocating nothing after warm-up (FrameLoop). Allocations are
 // counted by replacing the global operator new in this executable only (allocation_counter.hpp).
 #include "recon/parallel.hpp"
@@ -121,7 +121,7 @@ TEST(ParallelFor, WorkersShareTheWork) {
     EXPECT_TRUE(shared) << "no chunk ever ran off the calling thread";
 }
 
-// Issue 16: a serial thread runs its calls alone, covering everything, while the pool stays with the others.
+// A serial thread runs its calls alone, covering everything, while the pool stays with the others.
 TEST(ParallelFor, SerialThreadRunsItsCallsAloneAndOthersKeepThePool) {
     std::thread t([] {
         setParallelSerial(true);
@@ -139,7 +139,7 @@ TEST(ParallelFor, SerialThreadRunsItsCallsAloneAndOthersKeepThePool) {
     EXPECT_EQ(firstWrong(cover(0, 1000)), -1);
 }
 
-// Issue 16: with accounting on, the CPU pool workers spend on a thread's calls is charged to that thread (what a
+// With accounting on, the CPU pool workers spend on a thread's calls is charged to that thread (what a
 // session worker's frames cost, whoever ran them); off, or serial, nothing is charged.
 TEST(ParallelFor, PoolWorkersChargeTheirCpuToTheCallingThread) {
     if (parallelThreadCount() < 2) GTEST_SKIP() << "one hardware thread: no pool workers";
@@ -347,7 +347,7 @@ RgbdFrame sphereBeforeWall(int i, cv::Mat& head_mask) {
 }
 
 TEST(FrameLoop, ReconstructorDoesNotAllocateAfterWarmUp) {
-    // DESIGN.md s4 and issue 4: filter, ICP, integration and ray casting allocate nothing per frame after warm-up.
+    // docs/design.md (memory): filter, ICP, integration and ray casting allocate nothing per frame after warm-up.
     std::vector<RgbdFrame> frames(12);
     std::vector<cv::Mat> masks(frames.size());
     for (size_t i = 0; i < frames.size(); ++i) frames[i] = sphereBeforeWall(static_cast<int>(i), masks[i]);
@@ -367,10 +367,10 @@ TEST(FrameLoop, ReconstructorDoesNotAllocateAfterWarmUp) {
 }
 
 TEST(FrameLoop, FacePipelineAndReconstructorDoNotAllocateAfterWarmUp) {
-    // Issue 16: the server's whole per-frame path (recon::scanFrame, as the session worker runs it), detection and
+    // The server's whole per-frame path (recon::scanFrame, as the session worker runs it), detection and
     // segmentation included. Frames without colour, so the detector is the depth-only head finder; it re-detects
     // every 3rd frame (redetect_every_frames) and the tracked model's prediction seeds the segmentation in between
-    // (ModelSegmenter, issue 18), so both paths run after the warm-up.
+    // (ModelSegmenter), so both paths run after the warm-up.
     std::vector<RgbdFrame> frames(12);
     std::vector<cv::Mat> unused(frames.size());
     for (size_t i = 0; i < frames.size(); ++i) frames[i] = sphereBeforeWall(static_cast<int>(i), unused[i]);

@@ -446,7 +446,7 @@ TEST(Tum, LineHasTimestampTranslationAndUnitQuaternion) {
               "1.500000000 0.1000000 -0.2000000 0.3000000 0.0000000 0.0000000 0.0000000 1.0000000");
 }
 
-// Issue 16: live snapshots re-mesh only the blocks whose voxels changed, and the result is the full re-mesh.
+// Live snapshots re-mesh only the blocks whose voxels changed, and the result is the full re-mesh.
 TEST_F(SphereTest, IncrementalMesherEqualsAFullRemeshAndSkipsUnchangedBlocks) {
     MeshParams coarse;
     coarse.stride_vox = 2;

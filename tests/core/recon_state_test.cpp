@@ -1,4 +1,4 @@
-// Replication of the reconstructor's state (issue 13): deltas merged on a "standby" equal the owner's full state
+// Replication of the reconstructor's state: deltas merged on a "standby" equal the owner's full state
 // bit for bit, a reconstructor restored from it continues the scan like the original, and states that do not
 // fit (another volume, a gap, a bad value) are refused.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// Issue 18, one seeded sequence per row of its target table, run as facescan-server runs frames
+// One seeded sequence per robustness case, run as facescan-server runs frames
 // (recon/scan_step.hpp: model-based segmentation while tracking, detection otherwise, re-acquisition with
 // verification after a loss, robust integration): the share of frames tracked, that no wrong pose is ever fused,
 // and that nothing but the head ends up in the model. Plus the pieces on their own: a deliberately wrong

@@ -202,7 +202,7 @@ TEST(Reconstructor, FollowsTheTrueTrajectoryOfANoisyTurningHead) {
     EXPECT_GT(mesh.n_faces(), 10000u);
 }
 
-// A live server that is behind skips frames (issue 16): the frame after the first fused one may come 11 frames
+// A live server that is behind skips frames: the frame after the first fused one may come 11 frames
 // later, the head turned by ~9 deg, the camera ~0.1 m from where it was (it turns about the head), further than
 // one frame's motion limit. The limits scale with the frame periods between the two timestamps, and the fit,
 // beyond one frame's limits, is verified against the single fused frame before it is fused. With the frames taken

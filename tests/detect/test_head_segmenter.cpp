@@ -101,7 +101,7 @@ TEST(HeadFinder, SegmentsTheProfileHeadInThePclFrameByDepthAlone) {
     HeadSegmentation out;
     finder.find(depth, k, out);
     ASSERT_TRUE(out.found) << out.reason;
-    // Head-sized in metres (DESIGN.md s1: 80-250 mm wide, 100-300 mm tall).
+    // Head-sized in metres (docs/design.md s1: 80-250 mm wide, 100-300 mm tall).
     EXPECT_GE(out.extent_m.x(), 0.08f);
     EXPECT_LE(out.extent_m.x(), 0.25f);
     EXPECT_GE(out.extent_m.y(), 0.10f);

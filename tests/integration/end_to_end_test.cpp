@@ -95,7 +95,7 @@ TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
     ASSERT_GT(mesh.n_faces(), 1000u);
     EXPECT_TRUE(opts.check(OpenMesh::IO::Options::VertexColor)) << "the agent sends colour: the mesh has colours";
 
-    // Issue 16: what a client fetches is clean, in every format, after the Draco round trip. Each file is read
+    // What a client fetches is clean, in every format, after the Draco round trip. Each file is read
     // back by OpenMesh (an independent reader) and checked by position: no zero-area or duplicate triangle, no
     // unreferenced vertex. Non-manifold edges and vertices are reported, not forbidden (a scan's rim can pinch).
     auto expectClean = [](const recon::Mesh& read_back, const std::string& what) {
@@ -185,7 +185,7 @@ TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
     fs::remove_all(dir);
 }
 
-// Issue 18, live: the subject walks out of view for a second and comes back turned by 20 deg. The server's status
+// Live: the subject walks out of view for a second and comes back turned by 20 deg. The server's status
 // tells the person what to do while the face is lost, `facescan watch` shows it the moment the scan is lost, and
 // the scan comes back by itself after the gap (re-acquisition), in real time at 30 Hz.
 TEST(EndToEnd, WatchShowsTheAdviceWhileTheFaceIsLostAndTheScanComesBack) {

@@ -74,6 +74,7 @@ expected=(
     /etc/facescan/server.conf /etc/facescan/agent.conf
     /lib/systemd/system/facescan-server.service /lib/systemd/system/facescan-agent@.service
     /usr/lib/sysusers.d/facescan.conf /usr/lib/sysctl.d/60-facescan.conf /usr/share/doc/facescan/README.md
+    /usr/share/doc/facescan/docs/deployment.md
     /usr/bin/facescan-site /usr/share/facescan/web/index.html /usr/share/facescan/web/viewer.js
 )
 # three.js comes from npm (deploy/install-deps.sh runs npm ci); without it the viewer is not installed whole.
@@ -83,6 +84,15 @@ if [ -f "$root_dir/client_cli/web/node_modules/three/build/three.module.js" ]; t
     expected+=(/usr/share/facescan/web/node_modules/three/build/three.module.js)
 fi
 [ -x "$build/tests/bench/facescan-bench" ] && expected+=(/usr/bin/facescan-bench)
+# Man pages: made by help2man at build time, when it is installed (deploy/install-deps.sh installs it).
+man_pages=0
+if [ -f "$build/man/facescan-server.1.gz" ]; then
+    man_pages=1
+    for page in facescan-server facescan-agent facescan facescan-site; do
+        expected+=("/usr/share/man/man1/$page.1.gz")
+    done
+    [ -x "$build/tests/bench/facescan-bench" ] && expected+=(/usr/share/man/man1/facescan-bench.1.gz)
+fi
 for path in "${expected[@]}"; do
     grep -qx "$path" "$work/contents.txt" || fail "$path is not in the package"
 done
@@ -139,6 +149,22 @@ export FACESCAN_SHARE_DIR="" FACESCAN_PROFILE_DIR=""
 "$R/usr/bin/facescan-server" --help >"$work/help.txt" || fail "installed facescan-server --help failed"
 grep -q -- '--config FILE' "$work/help.txt" || fail "--help does not describe --config"
 for prog in facescan-agent facescan; do "$R/usr/bin/$prog" --help >/dev/null || fail "installed $prog --help failed"; done
+# --version: the version and the commit the package was built from, the same line from every program.
+commit=$(git -C "$root_dir" rev-parse --short=12 HEAD 2>/dev/null || echo unknown)
+for prog in facescan-server facescan-agent facescan facescan-site; do
+    line=$("$R/usr/bin/$prog" --version) || fail "installed $prog --version failed"
+    grep -qE "^$prog [0-9]+\.[0-9]+\.[0-9]+ \(commit ([0-9a-f]{12}|unknown)\)$" <<<"$line" ||
+        fail "$prog --version printed '$line', not 'PROGRAM VERSION (commit HASH)'"
+done
+echo "--version: $("$R/usr/bin/facescan-server" --version) (checkout at $commit)"
+if [ "$man_pages" -eq 1 ] && command -v man >/dev/null; then
+    # What `man facescan-server` shows once the package is installed: the page from the package's man1.
+    MANPATH="$R/usr/share/man" MANWIDTH=100 man facescan-server 2>/dev/null >"$work/man.txt" ||
+        fail "man facescan-server found no page in the installed package"
+    grep -q -- '--data-dir' "$work/man.txt" || fail "man facescan-server does not describe --data-dir"
+    grep -q 'facescan-server' "$work/man.txt" || fail "man facescan-server names no program"
+    echo "man facescan-server: $(wc -l <"$work/man.txt") lines"
+fi
 
 # The unit's own command line, its absolute paths moved into the scratch root, checked with the shipped config
 # (data dir moved too: /var/lib/facescan belongs to the real machine).

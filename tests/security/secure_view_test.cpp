@@ -1,4 +1,4 @@
-// `facescan view` on a secured site (issue 15 with issue 14's DDS Security): with the read-only viewer identity it
+// `facescan view` on a secured site (DDS Security): with the read-only viewer identity it
 // follows a secured scan (sessions, pushed snapshots that decode) and, since that role may not send commands, its
 // downloads are the session's latest snapshot: the final mesh once the scan is finished. The same viewer without
 // an identity sees nothing of the secured domain (the check can fail).

@@ -1,4 +1,4 @@
-// Issue 16, bad input: a session worker whose frames cost more CPU than its share is throttled (its parallelFor
+// Bad input: a session worker whose frames cost more CPU than its share is throttled (its parallelFor
 // calls run on its own thread, its priority drops) while other sessions run, and released when alone. Asserted on
 // CPU time (CLOCK_THREAD_CPUTIME_ID), which a loaded machine does not change.
 #include "service/frame_load.hpp"

@@ -1,7 +1,7 @@
 // server_accuracy: measures a mesh (e.g. the server's final mesh.ply, or facescan-bench recon --mesh) against the
 // synthetic subject of `facescan-agent --source synthetic[:frames=N]` with the project's ruler (facescan_eval),
 // so the mesh fetched over DDS and the bench's mesh are judged by the same code. Not a test: a measuring tool
-// for the issue-8 figures. Usage: server_accuracy MESH [MESH...]  (default synthetic sequence parameters)
+// for the server's accuracy figures. Usage: server_accuracy MESH [MESH...]  (default synthetic sequence parameters)
 #include <cstdio>
 
 #include "eval/accuracy.hpp"

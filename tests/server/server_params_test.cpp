@@ -163,7 +163,7 @@ TEST(SessionStore, JsonEscapesQuotesAndControlCharacters) {
     EXPECT_EQ(jsonEscape("a\"b\\c\nd\x01"), "a\\\"b\\\\c\\nd\\u0001");
 }
 
-// Split brain (issue 13): two servers that could not see each other both owned a session, and their data dirs
+// Split brain: two servers that could not see each other both owned a session, and their data dirs
 // are one (a shared folder). Neither may write over the other's files; owner.json says whose they are.
 TEST(SessionStore, TwoOwnersOfOneSessionNeverShareAFolder) {
     const auto data = tempDir("owners");

@@ -196,7 +196,7 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
     for (const char* name : {"fs-s live-1", "fs-intake", "fs-command", "fs-snapshot", "fs-status", "fs-replicate"}) {
         EXPECT_EQ(nices.count(name), 1u) << "no thread named '" << name << "'";
     }
-    // Work that can wait (snapshots, replication) yields the cores to the sessions' frames (issue 16).
+    // Work that can wait (snapshots, replication) yields the cores to the sessions' frames.
     if (nices.count("fs-s live-1")) {
         const int worker = nices.at("fs-s live-1");
         for (const char* name : {"fs-snapshot", "fs-replicate"}) {
@@ -211,7 +211,7 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
     auto snap_mesh = wire::decodeMeshDraco(snapshot->draco.data(), snapshot->draco.size());
     ASSERT_TRUE(snap_mesh.isOk()) << snap_mesh.status().toString();
     EXPECT_EQ(snap_mesh->n_faces(), snapshot->triangle_count);
-    // Issue 16: a live snapshot, as a client decodes it, is clean.
+    // A live snapshot, as a client decodes it, is clean.
     auto snap_arrays = wire::decodeIndexedMesh(snapshot->draco.data(), snapshot->draco.size());
     ASSERT_TRUE(snap_arrays.isOk());
     EXPECT_TRUE(recon::countDefects(*snap_arrays).clean());
@@ -406,7 +406,7 @@ TEST(ServerSession, SessionsBeyondMaxSessionsAreRefusedWithAReason) {
     EXPECT_TRUE(ok->ok) << ok->error;
 }
 
-// Issue 16, bad input: one session fed frames that are no use (a depth image full of noise, a head filling the
+// Bad input: one session fed frames that are no use (a depth image full of noise, a head filling the
 // frame at 0.4 m) and a stream faster than it can process, next to a session scanning a head. The bad frames are
 // rejected at detection (their cost is bounded there); the flooded session skips frames and its status says it
 // is behind; the other keeps integrating. (Throttling itself is tested with CPU time in frame_load_test.)
@@ -470,7 +470,7 @@ TEST(ServerSession, ASessionThatFallsBehindIsReportedAndDoesNotStallAnother) {
         status->frames_integrated, status->frames_skipped, status->latency_p95_ms);
 }
 
-// Issue 16: a live server that is behind skips frames, so the frame after the first one it fused may come many
+// A live server that is behind skips frames, so the frame after the first one it fused may come many
 // frames later (behind a slow first frame: 7-11 frames, the head turned by up to ~10 deg). Here the agent sends
 // frame 0, then frame 11 on: every frame processed after the gap is tracked (the motion limits scale with the frame
 // periods between the source timestamps, at the CameraInfo's rate), where the session used to stay lost with a
@@ -499,7 +499,7 @@ TEST(ServerSession, ALiveSessionTracksOnWhenFramesAfterItsFirstWereSkipped) {
     EXPECT_EQ(status->state, static_cast<uint32_t>(facescan_wire_STATE_SCANNING)) << status->detail;
 }
 
-// Issue 16: a session's engine (every per-frame buffer and the detector's cascade: 25 ms on an idle 2-core server,
+// A session's engine (every per-frame buffer and the detector's cascade: 25 ms on an idle 2-core server,
 // over 100 ms with four sessions running) was built on the server's intake thread, so every running session got no
 // frame meanwhile and skipped them. Here a joining camera of 3072 x 3072 pixels makes the build take long (hundreds
 // of ms); the running session must keep getting its frames all the while.

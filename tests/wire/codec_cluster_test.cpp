@@ -1,4 +1,4 @@
-// The cluster's messages and the replica format (issue 13): round trips, and every kind of bad input refused with
+// The cluster's messages and the replica format: round trips, and every kind of bad input refused with
 // a Status that says what is wrong (truncated, corrupt, another format version, values out of range).
 #include <gtest/gtest.h>
 

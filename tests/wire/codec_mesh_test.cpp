@@ -135,7 +135,7 @@ TEST(MeshDraco, TighterBudgetAndNormalsOnRequest) {
 
 TEST(MeshDraco, ClosePointsAreWeldedOnTheGridNotLeftAsZeroAreaTriangles) {
     // A strip whose middle row is 10 um from the row below it: on the 0.05 mm grid the two rows meet. Draco alone
-    // turned such triangles into zero-area ones (835 in a 114k-triangle final mesh, issue 16).
+    // turned such triangles into zero-area ones (835 in a 114k-triangle final mesh).
     recon::Mesh mesh;
     std::vector<recon::Mesh::VertexHandle> v;
     for (int row = 0; row < 3; ++row) {

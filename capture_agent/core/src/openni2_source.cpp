@@ -291,7 +291,7 @@ void OpenNi2Source::openColour() {
         }
         device_.setDepthColorSyncEnabled(true);  // best effort: pairs are matched by timestamp anyway
     } else {
-        // A recording does not store the device's registration mode; like TUM folders (DESIGN.md s7), colour is
+        // A recording does not store the device's registration mode; like TUM folders (docs/design.md s7), colour is
         // taken as registered unless the player says otherwise.
         info_.colour_registered = device_.getImageRegistrationMode() != openni::IMAGE_REGISTRATION_OFF ||
                                   !device_.isPropertySupported(openni::DEVICE_PROPERTY_IMAGE_REGISTRATION);

@@ -1,4 +1,4 @@
-// A TUM RGB-D folder (DESIGN.md section 7): rgb.txt and depth.txt list "timestamp path"; depth PNGs are 16-bit;
+// A TUM RGB-D folder (docs/design.md section 7): rgb.txt and depth.txt list "timestamp path"; depth PNGs are 16-bit;
 // intrinsics.txt, when present, holds "fx fy cx cy". Colour is paired with the depth image nearest in time.
 #include <cmath>
 #include <filesystem>
@@ -124,7 +124,7 @@ StatusOr<std::unique_ptr<FrameSource>> openTumSource(const std::string& dir_text
     info.intrinsics.height_px = first.rows;
     info.depth_units_m = options.tum_depth_units_m;
     info.has_colour = !rgb.empty();
-    info.colour_registered = true;  // TUM folders hold registered colour (DESIGN.md s7)
+    info.colour_registered = true;  // TUM folders hold registered colour (docs/design.md s7)
     info.is_recording = true;
     info.expected_frames = options.max_frames > 0 ? std::min<int>(options.max_frames, static_cast<int>(depth.size()))
                                                   : static_cast<int>(depth.size());

@@ -1,4 +1,4 @@
-// The Kinect v1 noise model of DESIGN.md s6 (Nguyen, Izadi, Lovell 2012), applied to an ideal depth image.
+// The Kinect v1 noise model of docs/design.md s6 (Nguyen, Izadi, Lovell 2012), applied to an ideal depth image.
 #include "depth_noise.hpp"
 
 #include <algorithm>

@@ -1,4 +1,4 @@
-// Internal: the Kinect v1 depth noise model (Nguyen, Izadi, Lovell 2012; DESIGN.md s6) and the random numbers
+// Internal: the Kinect v1 depth noise model (Nguyen, Izadi, Lovell 2012; docs/design.md s6) and the random numbers
 // it needs (counter-based seeding so any frame or row can be generated independently and deterministically).
 #pragma once
 

@@ -1,4 +1,4 @@
-// Writes a synthetic sequence as a TUM RGB-D folder (DESIGN.md s7) with its ground truth.
+// Writes a synthetic sequence as a TUM RGB-D folder (docs/design.md s7) with its ground truth.
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <cstdio>
 #include <fstream>

@@ -11,7 +11,7 @@ namespace facescan::client {
 // A JSON string literal with quotes, backslashes and control characters escaped.
 std::string jsonString(const std::string& s);
 
-// Who owns a session (issue 13): the claims on facescan/SessionOwner, which every server, agent and client follow.
+// Who owns a session: the claims on facescan/SessionOwner, which every server, agent and client follow.
 struct Ownership {
     std::string owner, standby;
     uint32_t epoch = 0;

@@ -1,4 +1,4 @@
-// The cluster's public messages (issue 13) as C++ values: ServerAnnounce and SessionOwner, converted and checked
+// The cluster's public messages as C++ values: ServerAnnounce and SessionOwner, converted and checked
 // in one place. Every field read from the network is validated here: a malformed sample is refused with a
 // Status, never trusted (tests/fuzz/fuzz_cluster_messages.cpp).
 #pragma once

@@ -1,4 +1,4 @@
-// Lossless depth codecs for RgbdFrame.depth (DESIGN.md section 3). Depth must arrive bit-exact: fusion accuracy
+// Lossless depth codecs for RgbdFrame.depth (docs/design.md section 3). Depth must arrive bit-exact: fusion accuracy
 // starts at the raw sensor value, so every codec here is lossless and round-trips every uint16 image.
 //
 // Every payload starts with a 16-byte self-describing header (magic "FSD", version, codec, width, height, body
@@ -44,7 +44,7 @@ inline constexpr size_t kDepthHeaderBytes = 16;
 struct DepthCodecParams {
     // Shipped default: histogram-packed deltas + zstd level 1 with a fast match step. Measured
     // (`facescan-bench codecs`, 640x480 frames) it has the best ratio of the codecs at under 1 ms encode on every
-    // Kinect-like set; the per-set table is in the issue note and the bench prints it.
+    // Kinect-like set; `facescan-bench codecs` prints the per-set table.
     DepthCodecId codec = DepthCodecId::kPackedDeltaZstd;
     int zstd_level = 1;  // zstd compression level [-7, 19]; 1 is the fastest positive level
     // kPackedDeltaZstd only, at zstd levels <= 1 (zstd's "fast" strategy): the match finder's step

@@ -1,7 +1,7 @@
 // Mesh codec for MeshSnapshot.draco and ScanReply.payload: Draco (edgebreaker) with positions in metres and 8-bit
-// vertex colours; no normals (issue 16: receivers recompute them from the triangles, as three.js does). Positions
+// vertex colours; no normals (receivers recompute them from the triangles, as three.js does). Positions
 // are quantised on a grid derived from the mesh's bounding box and the allowed error (default 0.05 mm, well under
-// the 1.51 mm voxel of DESIGN.md section 1). The encoder cleans the mesh on that grid before encoding, so the
+// the 1.51 mm voxel of docs/design.md section 1). The encoder cleans the mesh on that grid before encoding, so the
 // decoded mesh has no zero-area or duplicate triangle and no unreferenced vertex (recon::MeshDefects::clean).
 //
 // Draco's own decoder sizes its tables from counts in the bitstream; decodeMeshDraco reads and caps those counts
@@ -30,8 +30,9 @@ struct MeshCodecParams {
     Eigen::Vector3f lattice_origin_m = Eigen::Vector3f::Zero();  // metres
     int normal_bits = 0;  // [0, 30] octahedral normal bits; 0 = leave normals out (the receiver recomputes them)
     bool colours = true;  // send the 8-bit vertex colours (lossless)
-    int speed = 8;  // Draco encode/decode speed [0, 10]: without normals 8 is smaller and faster than 7 (issue 16,
-                    // facescan-bench mesh --sweep: 143 vs 151 KB, 21 vs 22 ms); 0-1 save 8 % more at 3x the time
+    // Draco encode/decode speed [0, 10]: without normals 8 is smaller and faster than 7 (facescan-bench mesh
+    // --sweep: 143 vs 151 KB, 21 vs 22 ms); 0-1 save 8 % more at 3x the time.
+    int speed = 8;
 
     Status validate() const;
 };

@@ -54,7 +54,7 @@ struct ScanStatusData {
     float latency_p95_ms = 0;  // capture to pose known
     uint32_t snapshot_seq = 0;
     int64_t updated_ns = 0;  // server's CLOCK_REALTIME when published
-    // The cluster (issue 13).
+    // The cluster.
     std::string standby_id;
     uint32_t owner_epoch = 0;
     uint32_t failovers = 0;

@@ -1,4 +1,4 @@
-// A session's replica as bytes (issue 13): what the owner sends its standby every round and appends to its data
+// A session's replica as bytes: what the owner sends its standby every round and appends to its data
 // dir, so that the standby (or the same server after a restart) continues the scan. One versioned format:
 //
 //   header (24 bytes, little-endian): magic "FSRP", u16 format version, u16 flags (bit 0: full),
@@ -94,7 +94,7 @@ Status mergeReplica(ReplicaData& base, const ReplicaData& delta);
 
 // Running digest of accepted frames: FNV-1a 64 over depth then colour, eight bytes (little-endian) a step, then
 // the tail byte by byte, then the size (a recording that arrived bit-exact has the digest the agent computed while
-// sending it). A step per word, not per byte: the byte-wise hash was 0.8 % of the server's CPU (issue 16).
+// sending it). A step per word, not per byte: the byte-wise hash was 0.8 % of the server's CPU.
 uint64_t frameDigest(uint64_t digest, const uint8_t* depth, size_t depth_size, const uint8_t* colour,
                      size_t colour_size);
 inline constexpr uint64_t kFrameDigestSeed = 1469598103934665603ull;

@@ -127,38 +127,73 @@ bool Reconstructor::checkInput(const RgbdFrame& frame, const cv::Mat& head_mask,
 }
 
 FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& head_mask, const cv::Rect& mask_box) {
+    // Figure 1.1 of the thesis for one frame: noise reduction and point cloud, surface alignment against the
+    // ray-cast model, volumetric integration, ray casting. Each robustness policy is a named step below.
     FrameResult result;
     if (!checkInput(frame, head_mask, result)) {
         result.consecutive_failures = consecutive_failures_;
         return result;
     }
     Stopwatch watch;
-    // A frame after a rejected or held one is fused whatever fuse_every says: the model catches up at once.
-    const bool after_gap = consecutive_failures_ > 0 || verify_next_;
-    auto reject = [&](TrackingStatus status, const char* why) {
-        result.tracking.status = status;
-        result.tracking.T_world_camera = T_world_camera_;
-        result.reason = why;
-        ++consecutive_failures_;
-        result.consecutive_failures = consecutive_failures_;
-        result.reacquiring = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
-        return result;
-    };
+    const FramePlan plan = planFrame(frame.timestamp_ns);
 
-    // A frame that will not be fused may be registered on the coarser levels alone (unfused_finest_level): known
-    // before registration, since fusion only depends on the count (a verified fit, which is always fused, only
-    // follows skipped frames or a failed fit, and such frames take the full path). Only the next frame: less than
-    // half a period late (a camera's clock jitters; one skipped frame makes it two periods).
-    const float motion_scale = motionScale(frame.timestamp_ns);
-    const bool fuse_due = frames_integrated_ < 2 || after_gap || frames_since_fuse_ + 1 >= fuse_every_;
-    const bool next_frame = motion_scale < kNextFrameScale;
-    const int coarse_level = have_model_ && !fuse_due && next_frame ? params_.unfused_finest_level : 0;
-
-    // Noise reduction and point cloud (thesis 4.1.1-4.1.2).
-    const int valid = filter_.filter(frame.depth_m, head_mask, frame_, mask_box, coarse_level);
+    // Noise reduction and point-cloud generation (thesis 4.1.1-4.1.2), on the levels registration will read.
+    const int valid = filter_.filter(frame.depth_m, head_mask, frame_, mask_box, plan.coarse_level);
     result.ms.filter = watch.lapMs();
-    if (valid < params_.min_head_pixels) return reject(TrackingStatus::kNoHead, "too few valid head pixels");
+    if (valid < params_.min_head_pixels) {
+        return rejectFrame(result, TrackingStatus::kNoHead, "too few valid head pixels");
+    }
+    restartOneFrameModelIfLost(result);
 
+    bool fuse = true;
+    if (!have_model_) {
+        // The first frame defines the reference orientation (thesis 4.1): world = this camera.
+        if (!startModel(valid, result)) {
+            return rejectFrame(result, TrackingStatus::kNoHead, "no valid head point to place the volume");
+        }
+    } else if (!trackFrame(plan, valid, watch, result, fuse)) {
+        return result;  // held or rejected: result says which and why
+    }
+    recordPose(frame.timestamp_ns, result);
+    if (!fuse) return result;  // tracked only: the model and its last cast stay as they are
+
+    // Volumetric integration (thesis 4.2.1), then ray casting for the next registration (4.2.2).
+    integrateFrame(frame, result);
+    result.ms.integrate = watch.lapMs();
+    castModelIfDue(result);
+    result.ms.raycast = watch.lapMs();
+    return result;
+}
+
+Reconstructor::FramePlan Reconstructor::planFrame(int64_t timestamp_ns) const {
+    FramePlan plan;
+    // A frame after a rejected or held one is fused whatever fuse_every says: the model catches up at once.
+    plan.after_gap = consecutive_failures_ > 0 || verify_next_;
+    plan.motion_scale = motionScale(timestamp_ns);
+    // Economy (departs from 4.1.3, which registers every frame on every level): a frame that will not be fused may
+    // be registered on the coarser levels alone (unfused_finest_level). That is known before registration, since
+    // fusion only depends on the count (a verified fit, which is always fused, only follows skipped frames or a
+    // failed fit, and such frames take the full path). Only the next frame: less than half a period late (a
+    // camera's clock jitters; one skipped frame makes it two periods).
+    const bool fuse_due = frames_integrated_ < 2 || plan.after_gap || frames_since_fuse_ + 1 >= fuse_every_;
+    const bool next_frame = plan.motion_scale < kNextFrameScale;
+    plan.coarse_level = have_model_ && !fuse_due && next_frame ? params_.unfused_finest_level : 0;
+    return plan;
+}
+
+FrameResult Reconstructor::rejectFrame(FrameResult& result, TrackingStatus status, const char* why) {
+    // Thesis 4.1: frames that cannot be aligned are discarded; after max_failures_before_reacquire of them in a
+    // row the caller re-detects the head and registration searches for it.
+    result.tracking.status = status;
+    result.tracking.T_world_camera = T_world_camera_;
+    result.reason = why;
+    ++consecutive_failures_;
+    result.consecutive_failures = consecutive_failures_;
+    result.reacquiring = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
+    return result;
+}
+
+void Reconstructor::restartOneFrameModelIfLost(FrameResult& result) {
     // A model of one fused frame that lost the head for good starts over from this frame: re-acquisition cannot
     // verify a fit against one view once the head has turned away from it (most of what the frame shows is new),
     // so such a session would stay lost; one frame of model is all that is given up.
@@ -166,118 +201,128 @@ FrameResult Reconstructor::processFrame(const RgbdFrame& frame, const cv::Mat& h
         reset();
         result.restarted = true;
     }
-    bool fuse = true;
-    if (!have_model_) {
-        // The first frame defines the reference orientation (thesis 4.1): world = this camera.
-        if (!volume_.placed() && !volume_.place(frame_.levels[0]))
-            return reject(TrackingStatus::kNoHead, "no valid head point to place the volume");
-        HeadRegion::fromFirstFrame(frame_.levels[0], params_.head_region, region_);
-        visible_ref_px_ = static_cast<float>(countValid(frame_.levels[std::min(kVisibilityLevel, frame_.count - 1)]));
-        T_world_camera_ = Pose::Identity();
-        result.tracking.status = TrackingStatus::kFirstFrame;
-        result.tracking.inliers = valid;
-    } else {
-        // Robust integration, part 1: whatever lies well in front of the confident model at the predicted pose
-        // (further than any head motion between frames could put it: a hand in front of the face) is an occluder;
-        // it leaves the frame before registration, so it cannot pull the fit either.
-        // A frame registered on the coarser levels only is tested there (its finer levels are not read again).
-        if (params_.robust_integration) prefilterOccluders(coarse_level, result);
-        // A head mostly hidden (a hand across the face, a head half out of view) leaves too little surface to pin
-        // down all six degrees of freedom: a fit may slide along the visible part, and so may a search. Such a
-        // frame is held: neither registered nor fused; the last good pose stays the next frame's start, and the
-        // next fit is verified before it is fused (after a real loss, the head back in view is searched for
-        // whatever part of it shows).
-        const int visible = countValid(frame_.levels[std::min(kVisibilityLevel, frame_.count - 1)]);
-        const bool long_loss = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
-        if (!long_loss && headMostlyHidden(visible)) {
-            result.ms.icp = watch.lapMs();
-            result.tracking.status = TrackingStatus::kNotEnoughPoints;
-            result.tracking.T_world_camera = T_world_camera_;
-            result.reason = "head mostly hidden: held, not fused";
-            result.consecutive_failures = consecutive_failures_;
-            return result;
-        }
-        Pose estimate = T_world_camera_;
-        bool registered = false;
-        if (coarse_level > 0) {
-            // Within one frame's motion limits: a fit that moved further takes the full path, which verifies it.
-            result.tracking = icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate, 1.0f, coarse_level);
-            registered = result.tracking.ok();
-            if (registered) {
-                result.finest_level = coarse_level;
-            } else {  // the full path after all, with the finer levels it needs
-                estimate = T_world_camera_;
-                if (params_.robust_integration) prefilterOccluders(0, result);
-                for (int l = 0; l < coarse_level; ++l) filter_.computeNormals(frame_.levels[l]);
-            }
-        }
-        if (!registered && !registerFrame(valid, motion_scale, result, estimate)) {
-            const char* why = "registration failed";
-            switch (result.tracking.status) {
-                case TrackingStatus::kNotEnoughPoints: why = "too few correspondences with the model"; break;
-                case TrackingStatus::kDiverged: why = "registration diverged (residual too large)"; break;
-                case TrackingStatus::kLargeMotion: why = "motion larger than the limits"; break;
-                case TrackingStatus::kUnverified: why = "lost: no fit of the head passed verification"; break;
-                default: break;
-            }
-            const TrackingStatus status = result.tracking.status;
-            result = reject(status, why);
-            result.ms.icp = watch.elapsedMs();
-            return result;
-        }
-        // After a real loss the verified re-acquisition starts the visibility count afresh (the head may be nearer
-        // or further than before).
-        if (result.reacquired && long_loss) visible_ref_px_ = static_cast<float>(visible);
-        visible_ref_px_ += kVisibleRefRate * (static_cast<float>(visible) - visible_ref_px_);
-        verify_next_ = false;
-        T_world_camera_ = estimate;
-        // ReconParams::fuse_every: one tracked frame in N is fused; always the first two, any after a gap (a
-        // re-acquisition only follows one) and any fit verified because frames were skipped.
-        fuse = frames_integrated_ < 2 || after_gap || result.verified || ++frames_since_fuse_ >= fuse_every_;
-        // Robust integration, part 2: at the fitted pose, what lies in front of the confident model by more than
-        // the truncation band (a hand near the face) is left out of this frame's fusion. The next cast looks for
-        // the model behind such pixels (their hint is the model's depth), so the comparison holds for as long as
-        // the occluder stays.
-        if (params_.robust_integration && fuse) {
-            const float band = params_.occluder_band_m > 0.0f ? params_.occluder_band_m : params_.tsdf.trunc_dist_m;
-            result.occluding_pixels += rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_,
-                                                            volume_.grid(), band, params_.confident_weight, &hint_m_);
-        }
+}
+
+bool Reconstructor::startModel(int valid_px, FrameResult& result) {
+    if (!volume_.placed() && !volume_.place(frame_.levels[0])) return false;
+    HeadRegion::fromFirstFrame(frame_.levels[0], params_.head_region, region_);
+    visible_ref_px_ = static_cast<float>(countValid(frame_.levels[std::min(kVisibilityLevel, frame_.count - 1)]));
+    T_world_camera_ = Pose::Identity();
+    result.tracking.status = TrackingStatus::kFirstFrame;
+    result.tracking.inliers = valid_px;
+    return true;
+}
+
+bool Reconstructor::trackFrame(const FramePlan& plan, int valid_px, Stopwatch& watch, FrameResult& result, bool& fuse) {
+    // Robust integration, part 1 (departs from 4.2.1, which fuses every measurement): whatever lies well in front
+    // of the confident model at the predicted pose (further than any head motion between frames could put it: a
+    // hand in front of the face) is an occluder; it leaves the frame before registration, so it cannot pull the
+    // fit either. A frame registered on the coarser levels only is tested there (its finer levels are not read).
+    if (params_.robust_integration) prefilterOccluders(plan.coarse_level, result);
+    // Held frames (departs from 4.1.3): a head mostly hidden (a hand across the face, a head half out of view)
+    // leaves too little surface to pin down all six degrees of freedom: a fit may slide along the visible part, and
+    // so may a search. Such a frame is neither registered nor fused; the last good pose stays the next frame's
+    // start, and the next fit is verified before it is fused (after a real loss, the head back in view is searched
+    // for whatever part of it shows).
+    const int visible = countValid(frame_.levels[std::min(kVisibilityLevel, frame_.count - 1)]);
+    const bool long_loss = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
+    if (!long_loss && headMostlyHidden(visible)) {
         result.ms.icp = watch.lapMs();
+        result.tracking.status = TrackingStatus::kNotEnoughPoints;
+        result.tracking.T_world_camera = T_world_camera_;
+        result.reason = "head mostly hidden: held, not fused";
+        result.consecutive_failures = consecutive_failures_;
+        return false;
     }
+    Pose estimate = T_world_camera_;
+    const bool registered = plan.coarse_level > 0 && registerCoarse(plan.coarse_level, result, estimate);
+    if (!registered && !registerFrame(valid_px, plan.motion_scale, result, estimate)) {
+        rejectFrame(result, result.tracking.status, whyNotRegistered(result.tracking.status));
+        result.ms.icp = watch.elapsedMs();
+        return false;
+    }
+    // After a real loss the verified re-acquisition starts the visibility count afresh (the head may be nearer
+    // or further than before).
+    if (result.reacquired && long_loss) visible_ref_px_ = static_cast<float>(visible);
+    visible_ref_px_ += kVisibleRefRate * (static_cast<float>(visible) - visible_ref_px_);
+    verify_next_ = false;
+    T_world_camera_ = estimate;
+    // ReconParams::fuse_every: one tracked frame in N is fused; always the first two, any after a gap (a
+    // re-acquisition only follows one) and any fit verified because frames were skipped.
+    fuse = frames_integrated_ < 2 || plan.after_gap || result.verified || ++frames_since_fuse_ >= fuse_every_;
+    // Robust integration, part 2: at the fitted pose, what lies in front of the confident model by more than the
+    // truncation band (a hand near the face) is left out of this frame's fusion. The next cast looks for the model
+    // behind such pixels (their hint is the model's depth), so the comparison holds for as long as the occluder
+    // stays.
+    if (params_.robust_integration && fuse) {
+        const float band = params_.occluder_band_m > 0.0f ? params_.occluder_band_m : params_.tsdf.trunc_dist_m;
+        result.occluding_pixels += rejectOccludingDepth(frame_, model_.levels[0], T_world_model_, T_world_camera_,
+                                                        volume_.grid(), band, params_.confident_weight, &hint_m_);
+    }
+    result.ms.icp = watch.lapMs();
+    return true;
+}
+
+bool Reconstructor::registerCoarse(int coarse_level, FrameResult& result, Pose& estimate) {
+    // Within one frame's motion limits: a fit that moved further takes the full path, which verifies it.
+    result.tracking = icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate, 1.0f, coarse_level);
+    if (result.tracking.ok()) {
+        result.finest_level = coarse_level;
+        return true;
+    }
+    // The full path after all, with the finer levels it needs.
+    estimate = T_world_camera_;
+    if (params_.robust_integration) prefilterOccluders(0, result);
+    for (int l = 0; l < coarse_level; ++l) filter_.computeNormals(frame_.levels[l]);
+    return false;
+}
+
+const char* Reconstructor::whyNotRegistered(TrackingStatus status) {
+    switch (status) {
+        case TrackingStatus::kNotEnoughPoints: return "too few correspondences with the model";
+        case TrackingStatus::kDiverged: return "registration diverged (residual too large)";
+        case TrackingStatus::kLargeMotion: return "motion larger than the limits";
+        case TrackingStatus::kUnverified: return "lost: no fit of the head passed verification";
+        default: return "registration failed";
+    }
+}
+
+void Reconstructor::recordPose(int64_t timestamp_ns, FrameResult& result) {
     result.tracked = true;
     consecutive_failures_ = 0;
-    trajectory_.emplace_back(frame.timestamp_ns, T_world_camera_);
+    trajectory_.emplace_back(timestamp_ns, T_world_camera_);
     result.tracking.T_world_camera = T_world_camera_;
     result.consecutive_failures = 0;
-    if (!fuse) return result;  // tracked only: the model and its last cast stay as they are
-    frames_since_fuse_ = 0;
+}
 
-    // Volumetric integration (thesis 4.2.1) and ray casting for the next registration (4.2.2). Integration reads
-    // colour only inside the surface's ROI, so a colour source decodes just that (its time counts as fusion's).
+void Reconstructor::integrateFrame(const RgbdFrame& frame, FrameResult& result) {
+    frames_since_fuse_ = 0;
     {
+        // Integration reads colour only inside the surface's ROI, so a colour source decodes just that (its time
+        // counts as fusion's).
         const cv::Mat& colour = frameColour(frame, frame_.levels[0].roi);
         std::lock_guard<std::mutex> lock(volume_mutex_);
         volume_.integrate(frame_.levels[0], colour, T_world_camera_);
     }
-    result.ms.integrate = watch.lapMs();
     result.integrated = true;
     ++frames_integrated_;
     have_model_ = true;
-    const cv::Rect& roi0 = frame_.levels[0].roi;
-    const int m = params_.roi_margin_px;
-    // The next frame registers against the last cast while it is recent enough (model_cast_every); the first
-    // frames, a re-acquisition (its cast was from the search's pose) and a new model level always cast.
+}
+
+void Reconstructor::castModelIfDue(FrameResult& result) {
+    // Economy (departs from 4.2.2, which casts after every frame): the next frame registers against the last cast
+    // while it is recent enough (model_cast_every); the first frames, a re-acquisition (its cast was from the
+    // search's pose) and a new model level always cast.
     const bool cast = ++frames_since_cast_ >= cast_every_ || frames_integrated_ <= 2 || result.reacquired ||
                       next_model_level_ != model_level_;
     if (cast) {
         frames_since_cast_ = 0;
+        const cv::Rect& roi0 = frame_.levels[0].roi;
+        const int m = params_.roi_margin_px;
         raycastModel(cv::Rect(roi0.x - m, roi0.y - m, roi0.width + 2 * m, roi0.height + 2 * m),
                      result.occluding_pixels > 0 ? hint_m_ : frame_.levels[0].depth_m);
     }
     result.model_cast = cast;
-    result.ms.raycast = watch.lapMs();
-    return result;
 }
 
 void Reconstructor::prefilterOccluders(int level, FrameResult& result) {
@@ -329,7 +374,7 @@ bool Reconstructor::registerFrame(int valid, float motion_scale, FrameResult& re
     if (!params_.reacquire.enabled) return result.tracking.ok();
     if (consecutive_failures_ > 0 || verify_next_) {
         // After a loss (or hidden frames) nothing is fused before a fit is verified: the plain fit, else the best
-        // verified hypothesis (issue 18).
+        // verified hypothesis.
         const bool icp_ok = result.tracking.ok();
         if (reacquire(icp_ok, estimate, valid, result)) {
             estimate = T_world_camera_;

@@ -1,5 +1,5 @@
 // The Reconstructor's state as plain data (recon_state.hpp): what a standby server or a restarted one needs to
-// continue a scan (issue 13). Kept apart from the frame path in reconstructor.cpp.
+// continue a scan. Kept apart from the frame path in reconstructor.cpp.
 #include "recon/reconstructor.hpp"
 
 namespace facescan::recon {

@@ -58,7 +58,8 @@ void FrameLoad::join() {
     // only shrinks), or deeper where the costs they measured say this share needs it. A session that started at full
     // skipped its first second of frames while it found its step; one that started at the deepest step in use still
     // spent its first 25 frames above its step (warm-up, then kStepDownFrames), where most of four sessions' skipped
-    // frames and slowest poses fell (issue 16 note). It probes the steps above after the hold, as any session does.
+    // frames and slowest poses fell (tests/bench/server_realtime.sh). It probes the steps above after the hold, as any
+    // session does.
     int deepest = 0;
     for (int s = 0; s < kEconomySteps; ++s) {
         if (g_at_step[static_cast<size_t>(s)].load(std::memory_order_relaxed) > 0) deepest = s;
@@ -178,9 +179,9 @@ void FrameLoad::chooseModel(float frame_ms, float previous_ms, float budget_ms, 
         // Far over (a session joined, or this one just started beside others): straight to the first step predicted
         // to fit, each step costing 1 / kStepCostRatio of the one above, rather than one step every
         // kStepDownFrames. Four sessions on 2 cores took 45 frames and more to get from full to the last step, and
-        // most of a 300-frame run's skipped frames fell in those (issue 16 note). A failed probe goes back one. The
-        // prediction starts from the lowest of the step's average and the last two frames: a stall does not add
-        // steps.
+        // most of a 300-frame run's skipped frames fell in those (tests/bench/server_realtime.sh). A failed probe goes
+        // back one. The prediction starts from the lowest of the step's average and the last two frames: a stall does
+        // not add steps.
         int to = economy_ + 1;
         for (float predicted_ms = std::min({cost, frame_ms, previous_ms}) / kStepCostRatio;
              !probing_ && to + 1 < kEconomySteps && predicted_ms > down_ms; predicted_ms /= kStepCostRatio) {

@@ -1,4 +1,4 @@
-// The server's part in the cluster (issue 13), on the intake thread: which new session to claim, when a claim has
+// The server's part in the cluster, on the intake thread: which new session to claim, when a claim has
 // settled, when to give one up, when to take over from a dead owner or resume from the data dir. Every decision
 // is a function of the view that DDS gives (announcements with liveliness, claims with EXCLUSIVE ownership and
 // instance states); there is no protocol of our own beyond writing and reading those topics.

@@ -357,6 +357,7 @@ std::string serverUsage() {
            "  --replica-interval-s S  seconds between replicas of a scan to its standby and data dir (default 1)\n"
            "  --check                 check the configuration (file, flags, DDS profile, data dir) and exit\n" +
            wire::ddsOptionsHelp(26) +
+           "  --version               print the version and the git commit it was built from\n"
            "  --help                  this text\n\n"
            "config keys:\n" +
            keys;

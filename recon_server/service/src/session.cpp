@@ -388,7 +388,7 @@ void Session::workerLoop() {
 char Session::processFrame(PendingFrame& pending) {
     const int64_t t0 = steadyNowNs();
     // camera_ is set once before the worker starts: no lock to read it. Colour on demand: a frame only tracked
-    // decodes none, a fused one only its head's region (issue 16).
+    // decodes none, a fused one only its head's region.
     const Status decoded = decoder_.decode(pending.view(), *camera_, wire::ColourDecode::kOnDemand, frame_);
     if (!decoded.isOk()) {
         std::lock_guard lk(mutex_);

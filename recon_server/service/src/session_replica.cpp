@@ -1,4 +1,4 @@
-// A session's part in the cluster (issue 13): building its engine (from a CameraInfo or a replica's state, on a
+// A session's part in the cluster: building its engine (from a CameraInfo or a replica's state, on a
 // thread of the server's own), restoring from a replica, and taking replicas on the worker between two frames.
 // Knows nothing of DDS or files: the server's replication thread encodes, sends and stores them.
 #include <algorithm>

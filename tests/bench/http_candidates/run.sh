@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Measures the HTTP/WebSocket candidates of issue 15 (the packages must be installed: libcivetweb-dev
+# Measures the HTTP/WebSocket libraries that were candidates for the viewer (the packages must be installed: libcivetweb-dev
 # libcpp-httplib-dev libwebsocketpp-dev libboost1.81-dev): compile time and size of each prototype, throughput of a
 # 600 kB snapshot fanned out to 10 clients (node 20 clients), and the time to stop with the clients connected.
 set -euo pipefail

@@ -26,7 +26,7 @@ const session = `browser-${process.pid}`;
 const server = start('server', env.FACESCAN_SERVER, [...ddsArgs(domain), '--data-dir', path.join(outDir, 'data'),
   '--snapshot-hz', '2'], outDir);
 const agent = start('agent', env.FACESCAN_AGENT, [...ddsArgs(domain), '--session', session, '--source',
-  // Some 7 s in, the subject walks out of view for a second and comes back turned (issue 18): the page must show
+  // Some 7 s in, the subject walks out of view for a second and comes back turned: the page must show
   // the advice while the face is lost, and the scan must come back by itself.
   'synthetic:scenario=gap,gap_start=200,frames=600,subject=builtin,seed=3', '--rate', 'real',
   '--wait-for-server', '30'], outDir);

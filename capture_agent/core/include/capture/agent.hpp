@@ -61,7 +61,7 @@ struct AgentStats {
     double bytes_per_s = 0;  // compressed bytes per second over the last interval
     double ratio = 0;        // raw bytes / compressed bytes so far
     int servers = 0;         // servers alive on the domain
-    // The session's owner (issue 13).
+    // The session's owner.
     std::string owner;  // empty: none yet
     std::string standby;
     uint32_t epoch = 0;

@@ -1,5 +1,5 @@
 // Where frames come from: one interface for a live OpenNI2 camera, an .oni recording, a TUM RGB-D folder and the
-// synthetic Kinect (DESIGN.md section 2). Sources deliver raw depth (16-bit, in the source's units) because the
+// synthetic Kinect (docs/design.md section 2). Sources deliver raw depth (16-bit, in the source's units) because the
 // wire codecs are lossless on raw units; conversion to metres happens at the server's boundary.
 #pragma once
 

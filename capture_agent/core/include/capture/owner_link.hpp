@@ -1,4 +1,4 @@
-// The agent's side of the cluster (issue 13): which server owns its session, and the frames it keeps until they
+// The agent's side of the cluster: which server owns its session, and the frames it keeps until they
 // are safe.
 //   OwnerLink     follows facescan/SessionOwner for the session (the strongest live claim, EXCLUSIVE ownership) and
 //                 facescan/ServerAnnounce (how many servers are alive). Frames go only to the owner: they are

@@ -1,9 +1,9 @@
 // The synthetic Kinect v1: THE renderer of the project (tests, capture agent `synthetic` source, benchmarks).
 // A head turns in front of a fixed camera, with a torso below it and a wall behind it; the output is 640x480
-// depth (metres) and colour registered to depth, with the Kinect v1 noise model of DESIGN.md s6 (Nguyen, Izadi,
+// depth (metres) and colour registered to depth, with the Kinect v1 noise model of docs/design.md s6 (Nguyen, Izadi,
 // Lovell 2012), plus ground truth (pose, labels, noise-free depth, face box). Events for robustness tests: a nod
 // onto the chest, a gap in which the subject walks out of view and comes back turned, and a hand-sized occluder
-// crossing in front of the face (issue 18).
+// crossing in front of the face.
 #pragma once
 
 #include <cstdint>
@@ -18,7 +18,7 @@
 
 namespace facescan::synth {
 
-// Kinect v1 depth noise (Nguyen, Izadi, Lovell 2012; DESIGN.md s6).
+// Kinect v1 depth noise (Nguyen, Izadi, Lovell 2012; docs/design.md s6).
 struct NoiseParams {
     float axial_a_m = 0.0012f;         // metres; sigma_z = a + b (z - z0)^2 + angle term
     float axial_b_per_m = 0.0019f;     // 1/metre
@@ -128,7 +128,7 @@ class KinectSimulator {
     std::unique_ptr<Scene> scene_;  // renderable copies of head, torso, wall
 };
 
-// Writes frames [0, frameCount) as a TUM RGB-D folder (DESIGN.md s7):
+// Writes frames [0, frameCount) as a TUM RGB-D folder (docs/design.md s7):
 //   rgb/<t>.png, depth/<t>.png (16-bit, 5000 units per metre), rgb.txt, depth.txt,
 //   groundtruth.txt   `t tx ty tz qx qy qz qw`: camera i in the reference frame = the FIRST camera frame
 //                     (T_camera0_camera_i; the head is static in that frame),

@@ -1,6 +1,6 @@
 // The text form of a synthetic sequence, shared by every program that renders one (the agent's `synthetic:`
 // source, facescan-bench recon and synth): "scenario=wide,frames=200,seed=3,subject=builtin". A scenario sets the
-// motion and events of one robustness case (issue 18); the other keys override single parameters after it,
+// motion and events of one robustness case; the other keys override single parameters after it,
 // whatever their order.
 #pragma once
 
@@ -18,7 +18,7 @@ struct SyntheticSpec {
     std::string subject = "auto";  // auto (the scan when found, else built-in) | builtin | scan | FILE
 };
 
-// The named scenarios, one per row of issue 18's target table:
+// The named scenarios, one per robustness case the tracker must survive:
 //   gentle    the default: yaw +-35 deg, pitch +-12 deg, 300 frames (up to 0.7 deg a frame)
 //   wide      yaw +-60, pitch +-20, up to 2.8 deg a frame, torso, 300 frames
 //   chin      nods the chin 30 deg down onto the chest and back, twice (slight yaw), 180 frames

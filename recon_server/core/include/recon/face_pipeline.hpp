@@ -1,7 +1,7 @@
-// The per-frame head policy in front of the reconstructor (DESIGN.md s4): decide whether to detect, segment the
+// The per-frame head policy in front of the reconstructor (docs/design.md s4): decide whether to detect, segment the
 // head, and report it. Independent of the Reconstructor: the caller passes what the tracked model predicts
 // (Reconstructor::predictHead), so while tracking the head is segmented from the model's prediction
-// (ModelSegmenter, issue 18) and detection with the width criterion runs only to start a scan, when the
+// (ModelSegmenter) and detection with the width criterion runs only to start a scan, when the
 // prediction is not confirmed, and every redetect_every_frames as a check.
 //
 //   recon::FacePipeline pipeline = *recon::FacePipeline::create({}, depth_intrinsics, colour_camera);

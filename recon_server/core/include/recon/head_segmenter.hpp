@@ -31,7 +31,7 @@ struct HeadSegmenterParams {
     // The eq. 3.11 line runs through the shoulders; the neck above it is removed by moving the line up to the top
     // of the neck (under the jaw), searched within this distance (the thesis' neck shift, made adaptive).
     float neck_shift_max_m = 0.10f;  // metres
-    // What counts as a head (DESIGN.md s1; also the depth-only fallback's blob test).
+    // What counts as a head (docs/design.md s1; also the depth-only fallback's blob test).
     float head_width_min_m = 0.08f;   // metres
     float head_width_max_m = 0.25f;   // metres
     float head_height_min_m = 0.10f;  // metres

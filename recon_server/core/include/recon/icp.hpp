@@ -20,7 +20,7 @@ enum class TrackingStatus {
     kLargeMotion,      // converged, but further from the prediction than the motion limits allow
     kNoHead,           // the head mask (or the depth inside it) was empty
     kInvalidInput,     // wrong sizes or types; the frame was not looked at
-    kUnverified,       // after a loss: no fit of the frame passed verification (Reconstructor, issue 18)
+    kUnverified,       // after a loss: no fit of the frame passed verification (Reconstructor)
 };
 const char* trackingStatusName(TrackingStatus s);
 

@@ -1,5 +1,5 @@
 // A triangle mesh as flat arrays: what marching cubes emits, what the wire carries and what the mesh files hold.
-// There is no half-edge structure: building OpenMesh's connectivity took 33 ms of a 59 ms decode (issue 16), and
+// There is no half-edge structure: building OpenMesh's connectivity took 33 ms of a 59 ms decode, and
 // writing PLY, OBJ, STL or OFF needs none. toOpenMesh() gives the half-edge mesh to code that walks neighbourhoods.
 #pragma once
 
@@ -48,7 +48,7 @@ struct MeshDefects {
     size_t non_manifold_edges = 0;     // edges shared by more than two triangles
     size_t non_manifold_vertices = 0;  // vertices whose triangles form more than one fan (edge-connected piece)
     size_t boundary_edges = 0;         // edges of exactly one triangle (holes and the scan's rim: expected)
-    // The service's promise (issue 16): no zero-area, duplicate triangle or unreferenced vertex.
+    // The service's promise: no zero-area, duplicate triangle or unreferenced vertex.
     bool clean() const { return zero_area_triangles == 0 && duplicate_triangles == 0 && unreferenced_vertices == 0; }
 };
 MeshDefects countDefects(const IndexedMesh& mesh);

@@ -2,7 +2,7 @@
 // mesh with shared vertices, in metres in the world frame (the first frame's camera), with vertex colours from the
 // voxels (and, on request, vertex normals from the gradient of D). Small disconnected fragments are removed.
 // The volume is meshed block by block (8^3 voxels); IncrementalMesher keeps each block's triangles between calls
-// and re-meshes only the blocks whose voxels changed, which is what makes 1 Hz live snapshots cheap (issue 16).
+// and re-meshes only the blocks whose voxels changed, which is what makes 1 Hz live snapshots cheap.
 #pragma once
 
 #include <cstdint>

@@ -1,4 +1,4 @@
-// How well a frame agrees with the model at a pose (issue 18). Both tests pair each measured point with the model
+// How well a frame agrees with the model at a pose. Both tests pair each measured point with the model
 // surface seen along the same ray of the model's camera, the projective association of thesis Algorithm 2:
 //  - checkPose verifies a fit before anything is fused after a loss: the share of measured points on the model
 //    surface (inliers), their residual, and the share that lies behind a model surface, where the camera would

@@ -1,4 +1,4 @@
-// Head segmentation from the tracked model (issue 18). Once the head is tracked, the ray-cast model says where
+// Head segmentation from the tracked model. Once the head is tracked, the ray-cast model says where
 // its surface will be in the next frame: pixels whose depth lies within a margin of that prediction are head
 // (the seeds), and so are the pixels that grow from them through depth-continuous neighbours (Algorithm 1's test,
 // thesis section 3.2) inside a band around the predicted footprint. Growth stops at the head region, a world-frame

@@ -1,4 +1,4 @@
-// Allocation-free parallel loop for the per-frame path (DESIGN.md s4: "no allocation in the per-frame path after
+// Allocation-free parallel loop for the per-frame path (docs/design.md s4: "no allocation in the per-frame path after
 // warm-up"). cv::parallel_for_ wraps every body in std::function copies (three heap allocations a call, ~57 a
 // frame), so the recon core uses this instead.
 //
@@ -25,7 +25,7 @@ void parallelForErased(int begin, int end, ChunkFn fn, void* body);
 
 }  // namespace detail
 
-// Per-thread control and accounting (issue 16, "bad input": one session's slow frames must not monopolise the
+// Per-thread control and accounting (bad input: one session's slow frames must not monopolise the
 // pool that every session shares). Both act on the calling thread's own calls only.
 // Serial: its parallelFor calls run on itself alone, leaving the pool's workers to the other threads.
 void setParallelSerial(bool serial);

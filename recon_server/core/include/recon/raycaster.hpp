@@ -25,7 +25,7 @@ struct RaycastParams {
     float hint_widen_m = 0.015f;        // metres; ...with the search window widened by this on both sides.
                                         // 12 px and 0.03 m marched 61 % of the samples for rays that mostly
                                         // missed; 4 px and 0.015 m: ray cast -25 %, same accuracy and tracking
-                                        // in every synthetic scenario and on 7-Scenes (issue 16 note).
+                                        // in every synthetic scenario and on 7-Scenes.
     bool march_without_hint = false;    // rays with no hint even then march the whole cube (empty blocks are
                                         // skipped half a block at a time); false = no surface there. Without
                                         // any hint image (empty depth_hint_m) rays always march the whole cube.

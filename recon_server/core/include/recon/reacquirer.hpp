@@ -1,4 +1,4 @@
-// Re-acquisition after a loss (issue 18): the head is back in view, but at a pose that frame-to-model ICP from the
+// Re-acquisition after a loss: the head is back in view, but at a pose that frame-to-model ICP from the
 // last good pose cannot reach (it turned while out of view, or turned too fast). Hypotheses rotate the camera about
 // the head's vertical and horizontal axes from the last good pose, each re-centred on the head (thesis eq. 4.11's
 // centroid alignment, between the frame's head centre and the head region's). For each, the model is ray-cast

@@ -1,5 +1,5 @@
-// The reconstructor's state as plain data, for replication to a standby server and for resuming after a restart
-// (issue 13): the volume's blocks (all of them, or those changed since an earlier capture), the poses, the
+// The reconstructor's state as plain data, for replication to a standby server and for resuming after a restart:
+// the volume's blocks (all of them, or those changed since an earlier capture), the poses, the
 // trajectory and the counters. The core only copies memory here; encoding, compression, DDS and files are the
 // service's and the wire layer's business (wire/replica_codec.hpp).
 //

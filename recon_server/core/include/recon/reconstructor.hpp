@@ -26,6 +26,8 @@
 
 namespace facescan::recon {
 
+class Stopwatch;  // recon/timing.hpp
+
 struct ReconParams {
     FilterParams filter;
     IcpParams icp;
@@ -42,7 +44,7 @@ struct ReconParams {
     // the ray cast -59 % and a frame's serial cost 12.0 -> 9.0 ms; the default sequence keeps its accuracy (mean
     // 0.0954 -> 0.0944 mm, ATE 1.61 -> 1.68 mm), but the wide turn loses some (mean +0.017 mm, ATE 1.76 -> 1.95 mm;
     // with the renderer's mask instead, ATE improves: the loss is in the model-based segmentation, cause not yet
-    // found). So full resolution stays the default, and a loaded server casts coarse (issue 16 note).
+    // found). So full resolution stays the default, and a loaded server casts coarse.
     // Must be below filter.levels.
     int model_level = 0;
     // The model is ray cast after one integrated frame in model_cast_every (1 = after every frame, as in the
@@ -51,7 +53,7 @@ struct ReconParams {
     // pipeline --cast-every 2, the default and the five scenarios): a frame's serial cost 10.3 -> 8.0 ms, and the
     // accuracy kept: mean distance within -0.007..+0.008 mm of every frame's, ATE 1.63-1.92 mm against 1.55-1.90.
     // The model at half resolution (model_level 1) saves more (7.1 ms) but tracks worse (ATE 2.04-2.84 mm), so a
-    // loaded server casts every 2nd frame first (issue 16). A cast still follows the first frames, a re-acquisition
+    // loaded server casts every 2nd frame first. A cast still follows the first frames, a re-acquisition
     // and a change of model level. Must be in [1, kMaxModelCastEvery].
     int model_cast_every = 1;
     static constexpr int kMaxModelCastEvery = 4;
@@ -59,7 +61,7 @@ struct ReconParams {
     // as in the thesis); the frames between are registered (their pose is known and in the trajectory) but leave
     // the model alone, and so are not ray cast after either (model_cast_every counts fused frames). Integration is
     // a loaded server's largest stage once the model is cast coarse and every other frame; fusing every other
-    // frame of a 30 Hz stream halves it and still averages each surface over many views (issue 16 note). The first
+    // frame of a 30 Hz stream halves it and still averages each surface over many views. The first
     // two frames and every frame after a rejected or held one (a re-acquisition, a verified fit) are always fused.
     // Must be in [1, kMaxFuseEvery].
     int fuse_every = 1;
@@ -96,7 +98,7 @@ struct ReconParams {
     float source_fps = 30.0f;       // frames per second; 0 = every frame counts as the next one
     float max_motion_scale = 4.0f;  // ratio
 
-    // Meyer's values (DESIGN.md section 1): 256^3 voxels over 0.386 m, mu 5 mm, W max 256, bilateral 1 px / 50 mm,
+    // Meyer's values (docs/design.md section 1): 256^3 voxels over 0.386 m, mu 5 mm, W max 256, bilateral 1 px / 50 mm,
     // 3 levels, ICP 20/15/10 iterations, gates 50-200 mm and 30-45 deg, re-acquire after 5 failed frames.
     static ReconParams faceDefaults();
     // Faster: fewer ICP iterations, a looser convergence test, coarser ray steps. Same volume and accuracy class.
@@ -219,7 +221,30 @@ class Reconstructor {
     const TsdfVolume& volume() const { return volume_; }  // not thread-safe: the frame thread only
 
  private:
+    // What a frame needs before it is filtered: whether it follows a gap, how many frame periods after the last
+    // tracked one it comes, and the finest pyramid level registration will read.
+    struct FramePlan {
+        bool after_gap = false;
+        float motion_scale = 1.0f;
+        int coarse_level = 0;
+    };
+    // processFrame's steps (Figure 1.1), in order.
     bool checkInput(const RgbdFrame& frame, const cv::Mat& head_mask, FrameResult& result) const;
+    FramePlan planFrame(int64_t timestamp_ns) const;
+    // A frame not aligned (thesis 4.1: discarded): counted towards re-acquisition; returns a copy of result.
+    FrameResult rejectFrame(FrameResult& result, TrackingStatus status, const char* why);
+    void restartOneFrameModelIfLost(FrameResult& result);
+    // The first frame: places the volume and defines the world; false when no head point places it.
+    bool startModel(int valid_px, FrameResult& result);
+    // Surface alignment with the robustness policies: false when the frame is held or rejected (result says why);
+    // `fuse` says whether a tracked frame is fused.
+    bool trackFrame(const FramePlan& plan, int valid_px, Stopwatch& watch, FrameResult& result, bool& fuse);
+    // Registration on the coarse levels alone; false (the finer levels prepared) when the full path must follow.
+    bool registerCoarse(int coarse_level, FrameResult& result, Pose& estimate);
+    static const char* whyNotRegistered(TrackingStatus status);
+    void recordPose(int64_t timestamp_ns, FrameResult& result);
+    void integrateFrame(const RgbdFrame& frame, FrameResult& result);
+    void castModelIfDue(FrameResult& result);
     void raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_m);
     // Robust integration's pre-filter (ReconParams::occluder_prefilter_m) over the frame's pyramid from `level` on,
     // at the predicted pose (result.occluding_pixels: what it removed); at level 0 it also refreshes the next
@@ -273,7 +298,7 @@ class Reconstructor {
     mutable std::mutex volume_mutex_;  // guards volume_ between processFrame and snapshot/preview callers
 };
 
-// One line of a TUM trajectory (DESIGN.md section 7): "timestamp tx ty tz qx qy qz qw", timestamp in seconds.
+// One line of a TUM trajectory (docs/design.md section 7): "timestamp tx ty tz qx qy qz qw", timestamp in seconds.
 std::string toTumLine(int64_t timestamp_ns, const Pose& T_world_camera);
 
 }  // namespace facescan::recon

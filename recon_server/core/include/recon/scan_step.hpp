@@ -1,4 +1,4 @@
-// One frame of a scan as facescan-server runs it, and what to tell the person being scanned (issue 18): the
+// One frame of a scan as facescan-server runs it, and what to tell the person being scanned: the
 // model's prediction seeds the head segmentation (detection when there is none), the head goes to the
 // reconstructor, and a frame without a head counts as one (Reconstructor::noHead), so a loss is noticed, and the
 // next head is verified before anything is fused. Shared by the server's session worker and facescan-bench.

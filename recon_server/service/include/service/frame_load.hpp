@@ -1,4 +1,4 @@
-// Bounds one session's frame worker (issue 16, "bad input"): a frame that makes the loop slow (a depth image full
+// Bounds one session's frame worker against bad input: a frame that makes the loop slow (a depth image full
 // of noise, a head filling the frame at 0.4 m) must not stall the other sessions, which share the same cores and
 // the recon core's process-wide parallelFor pool.
 //
@@ -15,7 +15,7 @@
 // step 2 also casts it at half resolution (setModelLevel: 6.1 ms, ATE up by about 0.5 mm on the scenarios); step 3
 // also fuses only every other tracked frame (setFuseEvery; the model is then cast after each fused frame, so as
 // often as at step 2): integration is the largest stage left at step 2 (4.5 of 11.2 ms a frame on a slow host),
-// and the scenarios' mean distance to the true head moves by at most 0.01 mm (issue 16 note); step 4 fuses every
+// and the scenarios' mean distance to the true head moves by at most 0.01 mm (bench recon); step 4 fuses every
 // third tracked frame (a frame 1.01-1.26x cheaper than at step 3 on a slow host; the mean distance moves by
 // -0.022..+0.016 mm from step 3's, completeness by 0.2 % at most). Every frame is still tracked: from step 3 the
 // frames not fused are registered on the coarser pyramid levels only (recon::ReconParams::unfused_finest_level;
@@ -47,9 +47,9 @@ class FrameLoad {
     // would fit (skipping alone: one step); a step is kept kStepDownFrames before the next one down (the skip share
     // lags). After kStepHoldFrames at a step it probes the step above if that would fit kStepUpFraction of the
     // budget (the lower of that step's last average and this one's times kStepCostRatio: measured 10.3 / 8.0,
-    // 8.0 / 6.1, and 1.25-1.48 for step 2 over step 3: see the issue 16 note). A probe that steps down again within
-    // kProbeFrames doubles the hold, up to kMaxStepHoldFrames; a session leaving resets it. A session joining, or
-    // seeing one join (its share shrinks), goes at once to the step predicted to fit its share from the costs
+    // 8.0 / 6.1, and 1.25-1.48 for step 2 over step 3 in tests/bench/server_realtime.sh). A probe that steps down again
+    // within kProbeFrames doubles the hold, up to kMaxStepHoldFrames; a session leaving resets it. A session joining,
+    // or seeing one join (its share shrinks), goes at once to the step predicted to fit its share from the costs
     // measured on this host (stepToFit: its own steps' averages, or the last other session's, kSettledFrames or more
     // frames old) and judges it on its first two frames, as a probe. 0: the model cast after every frame; 1: after
     // every other; 2: and coarse; 3: and every other frame fused; 4: every third fused
@@ -131,7 +131,7 @@ class FrameLoad {
 // They run kBackgroundNice above the thread's nice value (CFS weight 110 against 1024: about a tenth of a worker's
 // share), so on a busy machine the scheduler prefers the workers, while an idle core still runs them at full
 // speed. Replication at nice 0 encoded each session's first, full replica (50-90 ms) at the moment the next
-// session joined: four sessions skipped 52 frames in 10 runs with it, 18 in 9 without (issue 16 note).
+// session joined: four sessions skipped 52 frames in 10 runs with it, 18 in 9 without (server_realtime.sh).
 inline constexpr int kBackgroundNice = 10;
 void runThisThreadInBackground();
 

@@ -1,4 +1,4 @@
-// Where new sessions go and which server stands by (issue 13). Pure functions of one server's view of the domain
+// Where new sessions go and which server stands by. Pure functions of one server's view of the domain
 // (announcements and claims): every server computes the same answer from the same view, so placement needs no
 // protocol of its own. When views differ for a moment (two servers claim the same session), DDS settles it:
 // claims are written with EXCLUSIVE ownership, and every reader sees the same, strongest one.

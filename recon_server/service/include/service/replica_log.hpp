@@ -1,4 +1,4 @@
-// The owner's replica of a session on disk (issue 13, restart recovery): DIR/replica.log holds a full replica
+// The owner's replica of a session on disk (restart recovery): DIR/replica.log holds a full replica
 // followed by the deltas of the rounds after it, each record framed as [u32 magic "FSRL"][u32 bytes][bytes of
 // wire::encodeReplica]. A round is appended and synced before the agent is told it may drop the frames it
 // covers; a full round replaces the file (temporary file, sync, rename). After a crash the last record may be

@@ -1,4 +1,4 @@
-// Replication of the sessions a server owns (issue 13), on its own thread:
+// Replication of the sessions a server owns, on its own thread:
 //   owner side    every --replica-interval-s, each owned session's worker captures its state between two frames
 //                 (the blocks changed since the last round, or all of them), the round is encoded
 //                 (wire/replica_codec.hpp), appended to the session's folder in the data dir (replica_log.hpp)

@@ -1,4 +1,4 @@
-// facescan-server's engine: DDS endpoints on one participant and the threads of issue 8, in a cluster (issue 13).
+// facescan-server's engine: DDS endpoints on one participant and its threads (docs/design.md), in a cluster.
 //   intake    one waitset on CameraInfo, ScanCommand, the cluster's topics and the frame reader of every owned
 //             session; it routes samples and makes the cluster's decisions (server_cluster.cpp): which new
 //             session to claim, when a claim has settled, when to give one up, when to take over from a dead

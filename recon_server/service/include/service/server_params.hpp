@@ -34,7 +34,7 @@ struct ServerParams {
     std::filesystem::path data_dir = "facescan-data";  // finished sessions go to data_dir/SESSION/
     wire::DomainConfig domain{0, "lan"};
     std::string server_id;  // in every reply, status and announcement; default "<hostname>-<pid>"; [A-Za-z0-9._-]
-    // The cluster (issue 13).
+    // The cluster.
     float replica_interval_s = 1.0f;      // seconds between replicas of a session (to the standby and the data dir)
     int replica_full_every = 30;          // rounds; every this many, a full replica (the data dir's log starts over)
     int replica_zstd_level = 1;           // 1 (fastest) .. 19

@@ -73,7 +73,7 @@ struct SessionStats {
     uint32_t snapshot_seq = 0;
     double duration_s = 0;  // first to last processed frame
     std::string source;
-    // The cluster (issue 13).
+    // The cluster.
     std::string owner_id;    // this server, as the session's owner
     std::string standby_id;  // where its replicas go (empty: none)
     uint32_t epoch = 1;      // ownership epoch: 1, +1 per takeover
@@ -81,7 +81,7 @@ struct SessionStats {
     float last_takeover_ms = 0;  // the owner's last sign of life to the first frame integrated after the takeover
     uint32_t next_seq = 0;       // the next frame the session takes (the agent resends from here)
     uint64_t frames_digest = wire::kFrameDigestSeed;  // of the frames processed, in order
-    // Issue 16, bad input: the worker's load (service/frame_load.hpp). A live session that is throttled or skips
+    // Bad input: the worker's load (service/frame_load.hpp). A live session that is throttled or skips
     // more than kBehindSkipFraction of its recent frames is behind; stats() then says so in the detail, first
     // unless the face is lost (the advice to the person comes first then).
     bool behind = false;
@@ -126,7 +126,7 @@ struct SnapshotResult {
 };
 
 // One processed frame's timings, written to the data dir as frames.tsv: where a loaded server's slow poses and
-// skipped frames fell (issue 16), which the summary's percentiles cannot say.
+// skipped frames fell, which the summary's percentiles cannot say.
 struct FrameTiming {
     uint32_t seq = 0;
     float queued_ms = 0;       // capture (the agent's clock) to the worker taking it: transport and the wait

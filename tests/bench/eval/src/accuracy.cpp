@@ -1,4 +1,4 @@
-// The accuracy ruler (DESIGN.md s6): rigid point-to-plane ICP of M onto G from several starting poses, then
+// The accuracy ruler (docs/design.md s6): rigid point-to-plane ICP of M onto G from several starting poses, then
 // point-to-surface distances over G's face region, completeness (whole region and observed part) and outliers.
 #include "eval/accuracy.hpp"
 

@@ -1,4 +1,4 @@
-// The accuracy ruler: how close a reconstructed mesh M is to the ground-truth head G (DESIGN.md s6).
+// The accuracy ruler: how close a reconstructed mesh M is to the ground-truth head G (docs/design.md s6).
 //
 // Face region of G: the vertices within `face_radius_m` of G's nose tip whose normal faces forward
 // (normal . face_direction >= min_facing_cos). M is rigidly aligned to G (point-to-plane ICP from several
@@ -87,7 +87,7 @@ struct AccuracyReport {
     double offset_mm = 0;
 };
 
-// The report as one JSON object with the stable keys of DESIGN.md s6 (mean_mm rms_mm median_mm p90_mm
+// The report as one JSON object with the stable keys of docs/design.md s6 (mean_mm rms_mm median_mm p90_mm
 // completeness completeness_observed observable_share outliers), plus mesh_vertices_used, offset_mm and
 // unaligned{mean_mm rms_mm median_mm p90_mm outliers samples}. Every bench and the demo print this one.
 std::string accuracyJson(const AccuracyReport& r);
@@ -139,7 +139,7 @@ class SurfaceDistance {
 
 // How many vertices of `mesh` lie farther than max_distance_m from `reference`'s surface, or nearest to a reference
 // vertex that `allowed` (per reference vertex, when given) marks 0: what a scan holds that is not the reference
-// (a fused torso or occluder, issue 18). Both meshes in the same frame, metres.
+// (a fused torso or occluder). Both meshes in the same frame, metres.
 int countVerticesFarFrom(const recon::Mesh& mesh, const recon::Mesh& reference, float max_distance_m,
                          const std::vector<uint8_t>* allowed = nullptr);
 

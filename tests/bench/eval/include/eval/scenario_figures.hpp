@@ -1,4 +1,4 @@
-// The robustness figures of a synthetic scenario (issue 18; facescan-bench recon and the core tests), from the
+// The robustness figures of a synthetic scenario (facescan-bench recon and the core tests), from the
 // renderer's ground truth: how many frames with the head in view were tracked, how long re-acquisition took after each
 // loss and how far the head had turned, whether any fused pose was wrong, and whether anything other than the head
 // (torso, occluder) was fused.
