@@ -302,7 +302,11 @@ void Session::workerLoop() {
             if (beat) beat->end();
         }
     } leave{*load_, beat_.get()};
-    applyEconomy(*load_, params_.recon, id_, *recon_);  // a session joining busy ones starts at their step
+    // A recording has no deadline: its agent keeps every frame until it is confirmed and waits for the server, so a
+    // loaded server makes it take longer, never come out worse. The economy steps (a cheaper model cast, frames
+    // tracked but not fused) are for live scans, which must keep up with the camera.
+    const bool economy = camera_ && !camera_->every_frame;
+    if (economy) applyEconomy(*load_, params_.recon, id_, *recon_);  // a session joining busy ones starts at their step
     for (;;) {
         std::unique_lock lk(mutex_);
         if (beat_) beat_->end();
@@ -374,7 +378,7 @@ void Session::workerLoop() {
         timing.cpu_ms = load_->lastFrameMs();
         if (frame_timings_.size() < kMaxFrameTimings) frame_timings_.push_back(timing);
         recon_->setSearchEvery(load_->searchEvery());  // a lost session over budget searches less often
-        applyEconomy(*load_, params_.recon, id_, *recon_);
+        if (economy) applyEconomy(*load_, params_.recon, id_, *recon_);
         noteLoad();
         copySnapshotIfAsked();
         lk.lock();
