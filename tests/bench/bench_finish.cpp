@@ -90,8 +90,8 @@ StatusOr<Open3dResult> runOpen3d(const recon::IndexedMesh& full, int target) {
               "o3d.io.write_triangle_mesh(sys.argv[2], s)\n"
               "open(sys.argv[4], 'w').write('%f' % (dt * 1000))\n";
     }
-    const std::string cmd = "/usr/bin/python3 " + (dir / "decimate.py").string() + " " + (dir / "full.ply").string() + " " +
-                            (dir / "o3d.ply").string() + " " + std::to_string(target) + " " +
+    const std::string cmd = "/usr/bin/python3 " + (dir / "decimate.py").string() + " " + (dir / "full.ply").string() +
+                            " " + (dir / "o3d.ply").string() + " " + std::to_string(target) + " " +
                             (dir / "ms.txt").string() + " >/dev/null 2>&1";
     const int rc = std::system(cmd.c_str());
     Open3dResult out;

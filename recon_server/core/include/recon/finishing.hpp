@@ -7,8 +7,8 @@
 //  2. closing: holes up to a size filled with new triangles; the surface that was seen keeps every vertex where it
 //     was (closing only adds);
 //  3. a triangle budget: quadric error decimation (Garland and Heckbert 1997) through OpenMesh's Decimater,
-//     half-edge collapses only (a kept vertex keeps its measured position and colour) and the boundary locked, so
-//     the rim of the scan and the holes that were left stay where they were.
+//     half-edge collapses only (a kept vertex keeps its measured position and colour), with the paper's boundary
+//     constraint planes, so the rim of the scan and the holes that were left stay where they were.
 // The report says what each step did and how far the result lies from the full mesh.
 #pragma once
 
@@ -68,7 +68,7 @@ struct FinishReport {
     size_t holes_filled = 0;
     size_t holes_left = 0;       // boundary loops left open (the rim, and holes larger than max_hole_m)
     size_t triangles_added = 0;  // by closing
-    bool budget_reached = true;  // false when the locked boundary left more triangles than the budget
+    bool budget_reached = true;  // false when no legal collapse was left before the budget
     DistanceFigures distance;    // full mesh (after step 1) vertices -> result surface; zero when not measured
     double ms_parts = 0, ms_close = 0, ms_decimate = 0, ms_distance = 0;  // milliseconds, wall clock
     std::vector<std::string> notes;  // what the user should know (a budget not reached, a hole too large, ...)
@@ -91,7 +91,7 @@ void keepHead(IndexedMesh& mesh, const FinishParams& params, const HeadRegion* h
 // (coloured as the loop's mean). Existing vertices and triangles are unchanged; only simple loops (no vertex twice)
 // are filled.
 void fillHoles(IndexedMesh& mesh, float max_hole_m, FinishReport& report);
-// Quadric decimation down to max_triangles (boundary vertices locked; no collapse that flips a normal).
+// Quadric decimation down to max_triangles (boundary constraint planes; no collapse that flips a normal).
 void decimate(IndexedMesh& mesh, int max_triangles, FinishReport& report);
 
 }  // namespace facescan::recon

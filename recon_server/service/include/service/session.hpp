@@ -241,7 +241,8 @@ class Session {
     bool mayWrite();
     void noteLoad();  // after a frame: the worker's load and recent skips into stats_
     void recordLatency(float ms);
-    std::string summaryJson(const SessionStats& s, const MeshResult& m) const;
+    // finish_json: the finishing stage's report (recon::FinishReport::json()), or null.
+    std::string summaryJson(const SessionStats& s, const MeshResult& m, const std::string& finish_json) const;
     std::string frameTimingsTsv() const;
 
     // First member, so last destroyed: a session counts as live until all of its memory is freed.
