@@ -90,6 +90,12 @@ TEST(MeshDistance, GridAgreesWithEveryTriangle) {
         }
         ASSERT_NEAR(grid.distance(p), brute, 1e-7f) << "point " << i;
     }
+    // A subsample: every k-th vertex, at most the number asked for, and the same figures where they are exact.
+    const DistanceFigures all = vertexToSurfaceDistance(m, m), some = vertexToSurfaceDistance(m, m, 100);
+    EXPECT_EQ(all.samples, m.vertexCount());
+    EXPECT_LE(some.samples, 100u);
+    EXPECT_GE(some.samples, 50u);
+    EXPECT_EQ(some.max_mm, 0.0);
     // A known answer: 2 mm above a flat triangle's interior.
     IndexedMesh flat;
     flat.positions_m = {{0, 0, 0}, {0.01f, 0, 0}, {0, 0.01f, 0}};

@@ -10,6 +10,10 @@
 namespace facescan::recon {
 namespace {
 
+// The report's distance is measured from at most this many of the full mesh's vertices (every k-th): a p99 over
+// 30,000 samples is as good as over all 100,000, at a third of the time the server's finish spends on it.
+constexpr size_t kDistanceSamples = 30'000;
+
 double msSince(std::chrono::steady_clock::time_point t0) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -178,7 +182,7 @@ StatusOr<FinishReport> finishMesh(IndexedMesh& mesh, const FinishParams& params,
     }
     if (!full.triangles.empty()) {
         t0 = std::chrono::steady_clock::now();
-        report.distance = vertexToSurfaceDistance(full, mesh);
+        report.distance = vertexToSurfaceDistance(full, mesh, kDistanceSamples);
         report.ms_distance = msSince(t0);
     }
     report.triangles_out = mesh.triangleCount();

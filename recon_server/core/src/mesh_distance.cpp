@@ -126,14 +126,17 @@ float TriangleGrid::distance(const Vec3& p) const {
     return std::sqrt(best_sq);
 }
 
-DistanceFigures vertexToSurfaceDistance(const IndexedMesh& from, const IndexedMesh& to) {
+DistanceFigures vertexToSurfaceDistance(const IndexedMesh& from, const IndexedMesh& to, size_t max_samples) {
     DistanceFigures out;
     const TriangleGrid grid(to);
     if (grid.empty() || from.positions_m.empty()) return out;
-    std::vector<float> d(from.positions_m.size());
+    const size_t n = from.positions_m.size();
+    const size_t stride = max_samples > 0 ? (n + max_samples - 1) / max_samples : 1;
+    std::vector<float> d((n + stride - 1) / stride);
     parallelFor(0, static_cast<int>(d.size()), [&](int lo, int hi) {
-        for (int i = lo; i < hi; ++i)
-            d[static_cast<size_t>(i)] = grid.distance(from.positions_m[static_cast<size_t>(i)]);
+        for (int i = lo; i < hi; ++i) {
+            d[static_cast<size_t>(i)] = grid.distance(from.positions_m[static_cast<size_t>(i) * stride]);
+        }
     });
     double sum = 0;
     for (const float v : d) sum += v;

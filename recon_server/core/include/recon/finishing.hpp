@@ -69,7 +69,9 @@ struct FinishReport {
     size_t holes_left = 0;       // boundary loops left open (the rim, and holes larger than max_hole_m)
     size_t triangles_added = 0;  // by closing
     bool budget_reached = true;  // false when no legal collapse was left before the budget
-    DistanceFigures distance;    // full mesh (after step 1) vertices -> result surface; zero when not measured
+    // full mesh (after step 1) vertices, at most 30,000 of them evenly spread, -> result surface; zero when not
+    // measured
+    DistanceFigures distance;
     double ms_parts = 0, ms_close = 0, ms_decimate = 0, ms_distance = 0;  // milliseconds, wall clock
     std::vector<std::string> notes;  // what the user should know (a budget not reached, a hole too large, ...)
 

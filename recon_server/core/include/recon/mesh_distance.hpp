@@ -42,6 +42,7 @@ struct DistanceFigures {
     size_t samples = 0;
 };
 // From every vertex of `from` to the surface of `to` (both in the same frame, metres). Parallel over vertices.
-DistanceFigures vertexToSurfaceDistance(const IndexedMesh& from, const IndexedMesh& to);
+// max_samples > 0: from every k-th vertex only, k chosen so that at most max_samples are measured.
+DistanceFigures vertexToSurfaceDistance(const IndexedMesh& from, const IndexedMesh& to, size_t max_samples = 0);
 
 }  // namespace facescan::recon
