@@ -195,6 +195,13 @@ int runFinish(const std::vector<std::string>& args) {
                 "res->full", "p99");
     std::printf("  %-26s %9s %9s %9s %9s %9s %9s %9s\n", "", "", "", "mean mm", "mm", "mm", "mean mm", "mm");
     printRow("facescan (OpenMesh)", result.triangleCount(), cpu_ms, to_result, to_full, result.hasColours());
+    const recon::MeshDefects before = recon::countDefects(full), after = recon::countDefects(result);
+    std::printf(
+        "  defects (full -> result): boundary edges %zu -> %zu, non-manifold edges %zu -> %zu, non-manifold "
+        "vertices %zu -> %zu, clean %s -> %s\n",
+        before.boundary_edges, after.boundary_edges, before.non_manifold_edges, after.non_manifold_edges,
+        before.non_manifold_vertices, after.non_manifold_vertices, before.clean() ? "yes" : "no",
+        after.clean() ? "yes" : "no");
     std::string o3d_json = "null";
     if (open3d && params.max_triangles > 0) {
         auto o3d = runOpen3d(full, params.max_triangles);

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <string>
 #include <unordered_map>
 
 #include "recon/finishing.hpp"
@@ -79,7 +80,8 @@ void fillHoles(IndexedMesh& mesh, float max_hole_m, FinishReport& report) {
                                       [](const Loop& x, const Loop& y) { return x.perimeter_m < y.perimeter_m; });
     const bool colours = mesh.hasColours();
     const size_t triangles_before = mesh.triangleCount();
-    size_t too_large = 0;
+    size_t too_large = 0, slits = 0;
+    std::vector<Triangle> fill;
     for (auto it = loops.begin(); it != loops.end(); ++it) {
         const Loop& loop = *it;
         if (it == rim || !loop.simple || loop.vertices.size() < 3) {
@@ -102,11 +104,33 @@ void fillHoles(IndexedMesh& mesh, float max_hole_m, FinishReport& report) {
             ++too_large;
             continue;
         }
+        // The fill: one triangle for a three-edge hole, else a fan around the centroid. A hole whose fill would
+        // hold a zero-area triangle (a slit: its rim runs straight through the centroid) stays as it is: such a
+        // triangle is a defect that the service promises not to deliver (indexed_mesh.hpp).
+        const auto centre_index = static_cast<uint32_t>(mesh.positions_m.size());
+        fill.clear();
         if (loop.vertices.size() == 3) {
-            // A triangle-shaped hole: one triangle, no new vertex.
-            mesh.triangles.push_back({loop.vertices[2], loop.vertices[1], loop.vertices[0]});
+            fill.push_back({loop.vertices[2], loop.vertices[1], loop.vertices[0]});
         } else {
-            const auto centre_index = static_cast<uint32_t>(mesh.positions_m.size());
+            // Boundary half-edge a -> b belongs to a triangle; the fill triangle has b -> a (same orientation).
+            for (size_t i = 0; i < loop.vertices.size(); ++i) {
+                const uint32_t a = loop.vertices[i], b = loop.vertices[(i + 1) % loop.vertices.size()];
+                fill.push_back({b, a, centre_index});
+            }
+        }
+        auto position = [&](uint32_t v) -> Eigen::Vector3f { return v == centre_index ? c : mesh.positions_m[v]; };
+        const bool degenerate = std::any_of(fill.begin(), fill.end(), [&](const Triangle& t) {
+            const Eigen::Vector3d p0 = position(t[0]).cast<double>();
+            const double area_m2 =
+                0.5 * (position(t[1]).cast<double>() - p0).cross(position(t[2]).cast<double>() - p0).norm();
+            return area_m2 <= 10 * kZeroAreaM2;
+        });
+        if (degenerate) {
+            ++report.holes_left;
+            ++slits;
+            continue;
+        }
+        if (loop.vertices.size() > 3) {
             mesh.positions_m.push_back(c);
             if (colours) {
                 colour /= n;
@@ -114,13 +138,9 @@ void fillHoles(IndexedMesh& mesh, float max_hole_m, FinishReport& report) {
                                             static_cast<uint8_t>(std::lround(colour.y())),
                                             static_cast<uint8_t>(std::lround(colour.z()))});
             }
-            if (mesh.hasNormals() || !mesh.normals.empty()) mesh.normals.emplace_back(Eigen::Vector3f::Zero());
-            // Boundary half-edge a -> b belongs to a triangle; the fill triangle has b -> a (same orientation).
-            for (size_t i = 0; i < loop.vertices.size(); ++i) {
-                const uint32_t a = loop.vertices[i], b = loop.vertices[(i + 1) % loop.vertices.size()];
-                mesh.triangles.push_back({b, a, centre_index});
-            }
+            if (!mesh.normals.empty()) mesh.normals.emplace_back(Eigen::Vector3f::Zero());
         }
+        mesh.triangles.insert(mesh.triangles.end(), fill.begin(), fill.end());
         ++report.holes_filled;
     }
     report.triangles_added += mesh.triangleCount() - triangles_before;
@@ -129,6 +149,10 @@ void fillHoles(IndexedMesh& mesh, float max_hole_m, FinishReport& report) {
         std::snprintf(buf, sizeof buf, "%zu hole%s wider than %.0f mm left open", too_large, too_large == 1 ? "" : "s",
                       static_cast<double>(max_hole_m) * 1e3);
         report.notes.emplace_back(buf);
+    }
+    if (slits > 0) {
+        report.notes.push_back(std::to_string(slits) + " slit" + (slits == 1 ? "" : "s") +
+                               " (holes without area) left as they were");
     }
     if (mesh.triangleCount() != triangles_before) computeVertexNormals(mesh);
 }
