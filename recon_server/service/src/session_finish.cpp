@@ -58,6 +58,12 @@ bool Session::mayWrite() {
     }
 }
 
+void Session::nextWatchedStep() {
+    // Only while the worker is inside a step (finalize on the worker): a finalize on another thread (a session
+    // that never had a worker) must not start a step that nobody ends.
+    if (beat_ && beat_->busySinceNs() != 0) beat_->begin();
+}
+
 void Session::finalize(const std::string& why, const FinishCallback& done) {
     std::shared_ptr<recon::Reconstructor> rec;
     recon::Pose pose;
@@ -83,7 +89,9 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         // the intake or another session's worker. Its params were validated at start, so it cannot refuse; its
         // notes (a budget not reached, holes left) go to the log and summary.json.
         const recon::HeadRegion region = rec->headRegion();
+        nextWatchedStep();
         auto finished = recon::finishMesh(extracted, params_.finish, &region);
+        nextWatchedStep();
         if (finished.isOk()) {
             finish_report = *finished;
             finish_json = finish_report.json();

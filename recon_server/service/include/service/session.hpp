@@ -236,6 +236,9 @@ class Session {
     char processFrame(PendingFrame& pending);  // the frame's FrameTiming::outcome
     void copySnapshotIfAsked();
     void finalize(const std::string& why, const FinishCallback& done);
+    // Meshing, finishing the model and encoding it are one watchdog step each (a triangle budget on a loaded host
+    // takes seconds of its own): starts the next step of the worker's finish.
+    void nextWatchedStep();
     // finalize, before it writes: waits while the server's view is stale (hold_); false once the session was given up
     // (abandon) or is closing.
     bool mayWrite();
