@@ -14,6 +14,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <regex>
 #include <set>
 #include <sstream>
 #include <thread>
@@ -313,9 +314,8 @@ TEST(ServerSession, EveryFrameRecordingProcessesAllFramesAndFinishesAtEndOfStrea
               std::string::npos);
 }
 
-// A server with a triangle budget and closing (--max-triangles 2000 --close holes) delivers the finished model:
-// mesh.ply and the Draco bytes hold it, with colours, and summary.json says what finishing did and how far the
-// result lies from the full mesh.
+// --max-triangles 2000 --close holes: mesh.ply holds the finished model, with colours, and summary.json says what
+// finishing did and how far the result lies from the full mesh.
 TEST(ServerSession, FinishDeliversTheFinishedModelWithinItsBudget) {
     const uint32_t domain = privateDomain(21);
     ServerParams params = testParams(domain, "budget");
@@ -342,7 +342,10 @@ TEST(ServerSession, FinishDeliversTheFinishedModelWithinItsBudget) {
     const std::string summary = readFile(dir / "summary.json");
     EXPECT_NE(summary.find("\"finish\": {\"triangles_in\": "), std::string::npos) << summary;
     EXPECT_NE(summary.find("\"budget_reached\": true"), std::string::npos) << summary;
-    EXPECT_NE(summary.find("\"distance_mm\": {\"mean\": "), std::string::npos) << summary;
+    // 2,000 triangles of this 62k-triangle face lie 0.15 mm from it; a starved face (a fan from a locked rim): 6 mm.
+    std::smatch mean;
+    ASSERT_TRUE(std::regex_search(summary, mean, std::regex(R"("distance_mm": \{"mean": ([0-9.e+-]+))"))) << summary;
+    EXPECT_LT(std::stod(mean[1].str()), 0.5) << summary;
 }
 
 // A server told to fuse every other tracked frame (--set fuse_every=2, what the load's last economy step does):
