@@ -310,6 +310,22 @@ TEST(Finishing, ScanWithTorsoKeepsTheHeadAlone) {
     p.min_part_share = 1.0f;  // only the largest part (and its equals) stay
     ASSERT_TRUE(finishMesh(again, p).isOk());
     EXPECT_GT(again.triangleCount(), m.triangleCount() * 95 / 100);
+
+    // Holes in marching cubes' output (slits among them: zero-area cracks that a fan cannot fill): filled where
+    // they have an area, and the model stays clean, with no new non-manifold edge and every seen vertex in place.
+    IndexedMesh closed = m;
+    FinishParams close;
+    close.close = ClosingMode::kHoles;
+    auto closing = finishMesh(closed, close);
+    ASSERT_TRUE(closing.isOk());
+    std::printf("holes: %s\n", closing->summary().c_str());
+    EXPECT_GT(closing->holes_filled, 0u);
+    const MeshDefects open_defects = countDefects(m), closed_defects = countDefects(closed);
+    EXPECT_TRUE(closed_defects.clean());
+    EXPECT_LE(closed_defects.non_manifold_edges, open_defects.non_manifold_edges);
+    EXPECT_LT(closed_defects.boundary_edges, open_defects.boundary_edges);
+    ASSERT_GE(closed.vertexCount(), m.vertexCount());
+    for (size_t i = 0; i < m.vertexCount(); ++i) ASSERT_EQ(closed.positions_m[i], m.positions_m[i]) << i;
 }
 
 }  // namespace
