@@ -4,13 +4,17 @@
 # returns in well under a second. Needs root (or sudo) only when a Debian package is missing.
 #   --browser   also Debian's chromium, for the web viewer's browser test (deploy/test.sh passes it; users
 #               watching scans use their own browser, so a server box does not get one)
+#   --open3d    also Debian's python3-open3d: `facescan-bench finish --open3d` runs Open3D's quadric decimation on
+#               the same mesh, the reference the finishing stage's triangle budget is held to (benchmarks only)
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 with_browser=0
+with_open3d=0
 for arg in "$@"; do
     case "$arg" in
         --browser) with_browser=1 ;;
-        *) echo "install-deps: unknown option $arg (only --browser)" >&2; exit 2 ;;
+        --open3d) with_open3d=1 ;;
+        *) echo "install-deps: unknown option $arg (--browser, --open3d)" >&2; exit 2 ;;
     esac
 done
 
@@ -40,6 +44,7 @@ PACKAGES=(
 # machine has its own.
 command -v npm >/dev/null || PACKAGES+=(nodejs npm)
 [ "$with_browser" -eq 0 ] || PACKAGES+=(chromium)
+[ "$with_open3d" -eq 0 ] || PACKAGES+=(python3-open3d)
 
 # npm ci in client_cli/web when node_modules does not match the lockfile (a stamp of the lockfile's hash).
 install_web() {

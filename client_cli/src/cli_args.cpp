@@ -82,15 +82,25 @@ const std::vector<CommandSpec>& commandSpecs() {
          "mesh",
          1,
          1,
-         {"-o", "--finish"},
-         "Usage: facescan mesh SESSION -o FILE [--finish]\n"
+         {"-o", "--finish", "--max-triangles", "--keep", "--close", "--crop"},
+         "Usage: facescan mesh SESSION -o FILE [--finish] [--max-triangles N|web|avatar|print|full]\n"
+         "                    [--keep head|all] [--close none|holes] [--crop X0,Y0,Z0,X1,Y1,Z1]\n"
          "Fetches the full-resolution mesh (the final one, or the current model while scanning) and writes it\n"
          "atomically. The format follows the extension: .ply (binary, colours), .obj and .off (colours),\n"
          ".stl (no colours), .drc (Draco, colours), .glb (glTF 2.0 binary, vertex colours). Positions are in\n"
          "metres, in the first camera's frame (x right, y down, z away from the camera); .glb uses glTF's axes\n"
          "(y up, the face looking along +z), the same mesh turned 180 degrees about x.\n"
          "  -o FILE         output file (required)\n"
-         "  --finish        end the scan first (the server writes it to its data folder)\n"},
+         "  --finish        end the scan first (the server writes it to its data folder)\n"
+         "The server's model is the tracked head alone, at full resolution unless the server was given a budget.\n"
+         "These options finish it further here, before writing (the report says what changed):\n"
+         "  --max-triangles N|web|avatar|print|full\n"
+         "                  at most N triangles (at least 500) by quadric decimation that keeps the colours and\n"
+         "                  the scan's rim; web 20000, avatar 50000, print 200000, full no budget. Prints the\n"
+         "                  distance from the result to the full mesh (mean, p99, max mm)\n"
+         "  --keep head|all head (default): drop floating fragments (parts under 1% of the largest); all: keep them\n"
+         "  --close none|holes  holes: fill holes up to 20 mm across; the seen surface stays where it was\n"
+         "  --crop X0,Y0,Z0,X1,Y1,Z1  keep only what lies inside this box (metres, the mesh's frame)\n"},
         {Command::kPreview,
          "preview",
          1,
@@ -148,7 +158,9 @@ const CommandSpec* findSpec(const std::string& name) {
 }
 
 bool takesValue(const std::string& option) {
-    static const std::set<std::string> kValued = {"--timeout", "-o", "--save", "--save-format", "--port", "--bind"};
+    static const std::set<std::string> kValued = {"--timeout", "-o",     "--save",          "--save-format",
+                                                  "--port",    "--bind", "--max-triangles", "--keep",
+                                                  "--close",   "--crop"};
     return kValued.count(option) > 0 || wire::isDdsOption(option);
 }
 
@@ -283,6 +295,18 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
             options.output = value;
         } else if (option == "--finish") {
             options.finish = true;
+        } else if (option == "--max-triangles") {
+            ASSIGN_OR_RETURN(options.finish_params.max_triangles, recon::parseTriangleBudget(value));
+            options.finish_here = true;
+        } else if (option == "--keep") {
+            ASSIGN_OR_RETURN(options.finish_params.keep, recon::parseKeepParts(value));
+            options.finish_here = true;
+        } else if (option == "--close") {
+            ASSIGN_OR_RETURN(options.finish_params.close, recon::parseClosingMode(value));
+            options.finish_here = true;
+        } else if (option == "--crop") {
+            ASSIGN_OR_RETURN(options.finish_params.crop_m, recon::parseCropBox(value));
+            options.finish_here = true;
         } else if (option == "--save") {
             if (value.empty()) return invalidArgument("--save needs a folder");
             options.save_dir = value;

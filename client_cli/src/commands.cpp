@@ -236,7 +236,17 @@ int runMesh(const CliOptions& options) {
     // Decoded even for .drc: the bytes are checked before they land in a file, and the counts are reported.
     auto mesh = wire::decodeIndexedMesh(reply->payload.data(), reply->payload.size());
     if (!mesh.isOk()) return fail(kExitServerError, "the server's mesh cannot be decoded: " + mesh.status().message());
-    if (Status s = writeMeshFile(*mesh, options.output, &reply->payload); !s.isOk()) {
+    if (options.finish_here) {
+        // The options were validated by parseArgs: finishing cannot refuse here. The user always gets a model.
+        auto report = recon::finishMesh(*mesh, options.finish_params);
+        if (!report.isOk()) return fail(kExitUsage, report.status().message());
+        std::printf("finished here: %s\n", report->summary().c_str());
+        if (mesh->triangles.empty()) {
+            return fail(kExitUsage, "nothing of the model is left to write (is the --crop box where the head is?)");
+        }
+    }
+    // The server's Draco bytes are the file only while the mesh is the server's.
+    if (Status s = writeMeshFile(*mesh, options.output, options.finish_here ? nullptr : &reply->payload); !s.isOk()) {
         return fail(s.code() == StatusCode::kUnavailable ? kExitCannotWrite : kExitServerError, s.message());
     }
     std::error_code ec;

@@ -4,7 +4,9 @@
 // completeness_observed is taken over what that frame measured (eval/observed_region.hpp). A mesh measured with
 // --mesh comes without sensor views, so its completeness_observed is the whole-region completeness.
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -12,6 +14,7 @@
 #include "bench_command.hpp"
 #include "eval/accuracy.hpp"
 #include "eval/depth_mesh.hpp"
+#include "eval/heat_map.hpp"
 #include "eval/mesh_io.hpp"
 #include "eval/observed_region.hpp"
 #include "synth/kinect_simulator.hpp"
@@ -24,7 +27,7 @@ int usage(std::FILE* out) {
     std::fprintf(
         out,
         "usage: facescan-bench accuracy --mesh M --gt G [--nose X,Y,Z] [--init FILE] [--no-align] [--json]\n"
-        "                               [--offset-mm D] [--save-mesh OUT]\n"
+        "                               [--offset-mm D] [--save-mesh OUT] [--heat-map FILE.png [--heat-max-mm E]]\n"
         "       facescan-bench accuracy --baseline-frame [--distance M] [--head builtin|scan] [--frame I]"
         " [--json]\n"
         "  G is a head-frame mesh (y up, face along +z; e.g. head_gt.ply of a synthetic TUM folder); its nose\n"
@@ -32,7 +35,10 @@ int usage(std::FILE* out) {
         "  T_camera0_head.txt (mesh in the first camera frame), whose inverse is used when --init-inverse.\n"
         "  Face region: G within 0.11 m of the nose tip, facing forward. Distances in mm, M to G surface.\n"
         "  --offset-mm D moves every vertex of M D mm along its normal first (a uniform inflation, the known\n"
-        "  answer: `--mesh G --gt G --offset-mm 1` must read 1 mm); --save-mesh OUT writes M as measured.\n");
+        "  answer: `--mesh G --gt G --offset-mm 1` must read 1 mm); --save-mesh OUT writes M as measured.\n"
+        "  --heat-map FILE.png draws each vertex's distance to G on M (aligned) from the front and both sides\n"
+        "  with a colour bar in mm, as the thesis' Figure 5.2 (grey: farther than 0.11 m from the nose tip, not\n"
+        "  measured); the bar tops out at E mm (default: the 99th percentile, rounded up to 0.5 mm).\n");
     return out == stdout ? 0 : 2;
 }
 
@@ -45,6 +51,36 @@ std::optional<recon::Pose> readPose(const std::string& path) {
     recon::Pose T;
     T.matrix() = m;
     return T;
+}
+
+// M moved into G's frame by the alignment found, its per-vertex distances to G, drawn (eval/heat_map.hpp).
+int writeHeatMap(const recon::Mesh& mesh, const recon::Mesh& gt, const eval::AccuracyReport& rep,
+                 const Eigen::Vector3f& nose, eval::HeatMapParams heat, const std::string& path,
+                 const std::string& mesh_path) {
+    recon::Mesh moved = mesh;
+    for (const auto vh : moved.vertices()) {
+        const auto& q = moved.point(vh);
+        const Eigen::Vector3f p = rep.T_gt_mesh * Eigen::Vector3f(q[0], q[1], q[2]);
+        moved.set_point(vh, recon::Mesh::Point(p.x(), p.y(), p.z()));
+    }
+    moved.update_normals();
+    const std::vector<float> errors = eval::vertexErrorsMm(moved, gt);
+    char title[256];
+    std::snprintf(title, sizeof title, "%s: distance to ground truth, face mean %.3f mm, p90 %.3f mm",
+                  std::filesystem::path(mesh_path).filename().c_str(), rep.mean_mm, rep.p90_mm);
+    heat.title = title;
+    auto image = eval::renderErrorHeatMap(moved, errors, nose, heat);
+    if (!image.isOk()) {
+        std::fprintf(stderr, "accuracy: %s\n", image.status().toString().c_str());
+        return 2;
+    }
+    if (!cv::imwrite(path, *image)) {
+        std::fprintf(stderr, "accuracy: cannot write the heat map to %s (is it a .png in a writable folder?)\n",
+                     path.c_str());
+        return 1;
+    }
+    std::printf("wrote the heat map %s (%dx%d)\n", path.c_str(), image->cols, image->rows);
+    return 0;
 }
 
 void printReport(const char* what, const eval::AccuracyReport& r, bool json) {
@@ -65,8 +101,9 @@ void printReport(const char* what, const eval::AccuracyReport& r, bool json) {
 }
 
 int runAccuracy(const std::vector<std::string>& args) {
-    std::string mesh_path, gt_path, init_path, head_arg = "default", save_path;
+    std::string mesh_path, gt_path, init_path, head_arg = "default", save_path, heat_path;
     float offset_mm = 0;
+    eval::HeatMapParams heat;
     std::optional<Eigen::Vector3f> nose;
     bool json = false, baseline = false, init_inverse = false;
     eval::AccuracyParams params;
@@ -89,6 +126,10 @@ int runAccuracy(const std::vector<std::string>& args) {
             gt_path = args[++i];
         } else if (a == "--offset-mm" && v) {
             offset_mm = std::strtof(args[++i].c_str(), nullptr);
+        } else if (a == "--heat-map" && v) {
+            heat_path = args[++i];
+        } else if (a == "--heat-max-mm" && v) {
+            heat.max_error_mm = std::strtof(args[++i].c_str(), nullptr);
         } else if (a == "--save-mesh" && v) {
             save_path = args[++i];
         } else if (a == "--init" && v) {
@@ -172,6 +213,13 @@ int runAccuracy(const std::vector<std::string>& args) {
     if (!rep.isOk()) {
         std::fprintf(stderr, "accuracy: %s\n", rep.status().toString().c_str());
         return 1;
+    }
+    if (!heat_path.empty()) {
+        if (const int rc =
+                writeHeatMap(*mesh, *gt, *rep, nose.value_or(eval::findNoseTip(*gt)), heat, heat_path, mesh_path);
+            rc != 0) {
+            return rc;
+        }
     }
     printReport(("accuracy of " + mesh_path + " against " + gt_path).c_str(), *rep, json);
     return 0;

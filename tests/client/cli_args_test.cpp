@@ -28,6 +28,28 @@ TEST(CliArgs, MeshWithGlobalOptionsAnywhere) {
     EXPECT_EQ(parsed->timeout.count(), 2500);
 }
 
+TEST(CliArgs, MeshFinishingOptionsAndTheirBadValues) {
+    auto plain = parse({"mesh", "s", "-o", "f.ply"});
+    ASSERT_TRUE(plain.isOk());
+    EXPECT_FALSE(plain->finish_here);  // the server's model is written as it came
+    auto parsed = parse({"mesh", "s", "-o", "f.glb", "--max-triangles", "avatar", "--keep", "all", "--close", "holes",
+                         "--crop=-0.2,-0.2,0.2,0.2,0.2,1.2"});
+    ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+    EXPECT_TRUE(parsed->finish_here);
+    EXPECT_EQ(parsed->finish_params.max_triangles, 50000);
+    EXPECT_EQ(parsed->finish_params.keep, recon::KeepParts::kAll);
+    EXPECT_EQ(parsed->finish_params.close, recon::ClosingMode::kHoles);
+    ASSERT_TRUE(parsed->finish_params.crop_m.has_value());
+    EXPECT_FLOAT_EQ(parsed->finish_params.crop_m->max().z(), 1.2f);
+    EXPECT_EQ(parse({"mesh", "s", "-o", "f.ply", "--max-triangles", "20000"})->finish_params.max_triangles, 20000);
+    expectUsageError({"mesh", "s", "-o", "f.ply", "--max-triangles", "499"}, "at least 500");
+    expectUsageError({"mesh", "s", "-o", "f.ply", "--max-triangles", "tiny"}, "web (20000)");
+    expectUsageError({"mesh", "s", "-o", "f.ply", "--close", "watertight"}, "not available yet");
+    expectUsageError({"mesh", "s", "-o", "f.ply", "--keep", "torso"}, "head");
+    expectUsageError({"mesh", "s", "-o", "f.ply", "--crop", "1,2,3"}, "six numbers");
+    expectUsageError({"preview", "s", "-o", "f.png", "--max-triangles", "web"}, "unknown option --max-triangles");
+}
+
 TEST(CliArgs, SecurityTakesAnIdentityFolderForEveryCommand) {
     for (const std::string command : {"sessions", "watch", "view"}) {
         auto parsed = parse({command, "--security", "/etc/facescan/site/viewer"});

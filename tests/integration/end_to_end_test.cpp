@@ -133,6 +133,34 @@ TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
     EXPECT_EQ(decoded->triangleCount(), mesh.n_faces());
     EXPECT_TRUE(recon::countDefects(*decoded).clean());
 
+    // Finished here (recon/finishing.hpp): a triangle budget and closed holes, in PLY and in Draco (whose bytes
+    // must then be the finished model's, not the server's); clean, coloured, within the budget, and the report
+    // says how far the result lies from the full mesh.
+    const CliRun small =
+        runCli("mesh " + session + " -o " + (dir / "small.ply").string() + " --max-triangles 2000 --close holes" + dds);
+    ASSERT_EQ(small.exit_code, 0) << small.out;
+    EXPECT_TRUE(contains(small.out, "finished here: ")) << small.out;
+    EXPECT_TRUE(contains(small.out, "distance to the full mesh mean ")) << small.out;
+    recon::Mesh small_mesh;
+    OpenMesh::IO::Options small_opts = OpenMesh::IO::Options::VertexColor;
+    ASSERT_TRUE(OpenMesh::IO::read_mesh(small_mesh, (dir / "small.ply").string(), small_opts));
+    EXPECT_LE(small_mesh.n_faces(), 2000u);
+    EXPECT_GT(small_mesh.n_faces(), 1500u);
+    EXPECT_TRUE(small_opts.check(OpenMesh::IO::Options::VertexColor));
+    expectClean(small_mesh, "small.ply");
+    const CliRun small_drc =
+        runCli("mesh " + session + " -o " + (dir / "small.drc").string() + " --max-triangles 2000" + dds);
+    ASSERT_EQ(small_drc.exit_code, 0) << small_drc.out;
+    const std::string small_bytes = readText(dir / "small.drc");
+    auto small_decoded =
+        wire::decodeIndexedMesh(reinterpret_cast<const uint8_t*>(small_bytes.data()), small_bytes.size());
+    ASSERT_TRUE(small_decoded.isOk()) << small_decoded.status().toString();
+    EXPECT_LE(small_decoded->triangleCount(), 2000u);
+    const CliRun too_few =
+        runCli("mesh " + session + " -o " + (dir / "tiny.ply").string() + " --max-triangles 100" + dds);
+    EXPECT_EQ(too_few.exit_code, 2) << too_few.out;
+    EXPECT_TRUE(contains(too_few.out, "at least 500")) << too_few.out;
+
     const CliRun preview = runCli("preview " + session + " -o " + (dir / "preview.png").string() + dds);
     EXPECT_EQ(preview.exit_code, 0) << preview.out;
     EXPECT_TRUE(readText(dir / "preview.png").starts_with("\x89PNG")) << preview.out;

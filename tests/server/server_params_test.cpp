@@ -121,6 +121,33 @@ TEST(ServerParams, BadInputGivesClearErrors) {
     EXPECT_TRUE(parseServerArgs({"--help"})->help);
 }
 
+// The finished model's options: flags and config keys, presets, and a budget below a head refused at start.
+TEST(ServerParams, FinishingOptionsAreFlagsAndConfigKeys) {
+    auto defaults = parseServerArgs({});
+    ASSERT_TRUE(defaults.isOk());
+    EXPECT_EQ(defaults->params.finish.max_triangles, 0);
+    EXPECT_EQ(defaults->params.finish.keep, recon::KeepParts::kHead);
+    EXPECT_EQ(defaults->params.finish.close, recon::ClosingMode::kNone);
+    auto set = parseServerArgs({"--max-triangles", "web", "--keep", "all", "--close", "holes", "--crop",
+                                "-0.2,-0.2,0.3,0.2,0.2,1", "--set", "finish.max_hole_m=0.01"});
+    ASSERT_TRUE(set.isOk()) << set.status().toString();
+    EXPECT_EQ(set->params.finish.max_triangles, 20000);
+    EXPECT_EQ(set->params.finish.keep, recon::KeepParts::kAll);
+    EXPECT_EQ(set->params.finish.close, recon::ClosingMode::kHoles);
+    ASSERT_TRUE(set->params.finish.crop_m.has_value());
+    EXPECT_FLOAT_EQ(set->params.finish.crop_m->min().z(), 0.3f);
+    EXPECT_FLOAT_EQ(set->params.finish.max_hole_m, 0.01f);
+    auto too_few = parseServerArgs({"--max-triangles", "100"});
+    ASSERT_FALSE(too_few.isOk());
+    EXPECT_NE(too_few.status().message().find("at least 500"), std::string::npos) << too_few.status().message();
+    EXPECT_NE(too_few.status().message().find("--max-triangles"), std::string::npos) << too_few.status().message();
+    auto bad_close = parseServerArgs({"--close", "sometimes"});
+    ASSERT_FALSE(bad_close.isOk());
+    EXPECT_NE(bad_close.status().message().find("none or holes"), std::string::npos);
+    EXPECT_FALSE(parseServerArgs({"--crop", "1,2,3"}).isOk());
+    EXPECT_FALSE(parseServerArgs({"--set", "finish.max_hole_m=-1"}).isOk());
+}
+
 TEST(SessionStore, WritesAtomicallyAndLeavesNoTemporaryFiles) {
     const auto dir = tempDir("store");
     const auto path = dir / "summary.json";

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "recon/finishing.hpp"
 #include "recon/status.hpp"
 #include "wire/dds.hpp"
 
@@ -27,12 +28,16 @@ enum class Command { kSessions, kWatch, kStatus, kMesh, kPreview, kTrajectory, k
 
 struct CliOptions {
     Command command = Command::kSessions;
-    bool help = false;                          // --help: print the (command's) usage and exit 0
-    std::string help_topic;                     // the command named with --help; empty = the overview
-    bool version = false;                       // --version
-    std::string session;                        // SESSION argument (optional for watch)
-    std::string output;                         // -o FILE (mesh, preview; trajectory: empty = stdout)
-    bool finish = false;                        // mesh --finish: end the scan first
+    bool help = false;       // --help: print the (command's) usage and exit 0
+    std::string help_topic;  // the command named with --help; empty = the overview
+    bool version = false;    // --version
+    std::string session;     // SESSION argument (optional for watch)
+    std::string output;      // -o FILE (mesh, preview; trajectory: empty = stdout)
+    bool finish = false;     // mesh --finish: end the scan first
+    // mesh --max-triangles/--keep/--close/--crop: finish the fetched model here (recon/finishing.hpp). Without a
+    // head region on this side, keep = head means the largest part without its floating fragments.
+    recon::FinishParams finish_params;
+    bool finish_here = false;                   // any of those options was given
     std::string save_dir;                       // watch --save DIR: write each snapshot there
     std::string save_format = "ply";            // watch --save-format: ply|obj|stl|off|drc|glb
     bool json = false;                          // sessions/status --json: one JSON object per line

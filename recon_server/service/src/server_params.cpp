@@ -121,6 +121,33 @@ const std::map<std::string, Setter>& setters() {
         FLOAT("face.detector.face_width_min_m", p.face.detector.face_width_min_m),
         FLOAT("face.detector.face_width_max_m", p.face.detector.face_width_max_m),
         FLOAT("face.segmenter.grow_jump_m", p.face.segmenter.grow_jump_m),
+        // Finishing the final model (recon::FinishParams): the head alone, holes, a triangle budget.
+        {"finish.max_triangles",
+         [](ServerParams& p, const std::string&, const std::string& value) -> Status {
+             ASSIGN_OR_RETURN(p.finish.max_triangles, recon::parseTriangleBudget(value));
+             return Status::ok();
+         }},
+        {"finish.keep",
+         [](ServerParams& p, const std::string&, const std::string& value) -> Status {
+             ASSIGN_OR_RETURN(p.finish.keep, recon::parseKeepParts(value));
+             return Status::ok();
+         }},
+        {"finish.close",
+         [](ServerParams& p, const std::string&, const std::string& value) -> Status {
+             ASSIGN_OR_RETURN(p.finish.close, recon::parseClosingMode(value));
+             return Status::ok();
+         }},
+        {"finish.crop",
+         [](ServerParams& p, const std::string&, const std::string& value) -> Status {
+             if (value == "none") {
+                 p.finish.crop_m.reset();
+                 return Status::ok();
+             }
+             ASSIGN_OR_RETURN(p.finish.crop_m, recon::parseCropBox(value));
+             return Status::ok();
+         }},
+        FLOAT("finish.max_hole_m", p.finish.max_hole_m),
+        FLOAT("finish.min_part_share", p.finish.min_part_share),
         // The service.
         INT("snapshot_stride_vox", p.snapshot_stride_vox),
         FLOAT("snapshot_hz", p.snapshot_hz),
@@ -200,6 +227,7 @@ Status ServerParams::validate() const {
     if (preset != "face" && preset != "fast") return invalidArgument("preset must be face or fast");
     if (Status s = recon.validate(); !s.isOk()) return invalidArgument("recon parameters: " + s.message());
     if (Status s = face.validate(); !s.isOk()) return invalidArgument("face pipeline parameters: " + s.message());
+    if (Status s = finish.validate(); !s.isOk()) return invalidArgument("finishing: " + s.message());
     if (snapshot_stride_vox < 1 || snapshot_stride_vox > 8) return invalidArgument("snapshot_stride_vox: 1..8");
     if (!(snapshot_hz >= 0 && snapshot_hz <= 30)) return invalidArgument("--snapshot-hz must be in [0, 30]");
     if (!(snapshot_max_error_m > 0 && snapshot_max_error_m <= 0.005f)) {
@@ -281,6 +309,10 @@ StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args) {
                                                               {"--server-id", "server_id"},
                                                               {"--replica-interval-s", "replica_interval_s"},
                                                               {"--preset", "preset"},
+                                                              {"--max-triangles", "finish.max_triangles"},
+                                                              {"--keep", "finish.keep"},
+                                                              {"--close", "finish.close"},
+                                                              {"--crop", "finish.crop"},
                                                               {"--config", ""},
                                                               {"--set", ""}};
     std::vector<std::pair<std::string, std::string>> pairs;
@@ -355,6 +387,15 @@ std::string serverUsage() {
            "                          scanning, the results when finished; DIR/SESSION/owner.json names the owner\n"
            "  --server-id ID          this server's name on the domain, unique (default HOST-PID)\n"
            "  --replica-interval-s S  seconds between replicas of a scan to its standby and data dir (default 1)\n"
+           "  --max-triangles N|web|avatar|print|full\n"
+           "                          the final model's triangle budget (quadric decimation keeping colours and the\n"
+           "                          scan's rim; web 20000, avatar 50000, print 200000, full = no budget, the\n"
+           "                          default); at least 500. summary.json's \"finish\" says how far it lies from\n"
+           "                          the full mesh\n"
+           "  --keep head|all         the final model holds the tracked head alone (default: no torso, background\n"
+           "                          or floating fragments) or all the volume holds\n"
+           "  --close none|holes      holes: fill holes up to finish.max_hole_m (default 0.02 m) in the final model\n"
+           "  --crop X0,Y0,Z0,X1,Y1,Z1  keep only the final model inside this box (metres, the first camera's frame)\n"
            "  --check                 check the configuration (file, flags, DDS profile, data dir) and exit\n" +
            wire::ddsOptionsHelp(26) +
            "  --version               print the version and the git commit it was built from\n"

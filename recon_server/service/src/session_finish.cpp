@@ -58,6 +58,12 @@ bool Session::mayWrite() {
     }
 }
 
+void Session::nextWatchedStep() {
+    // Only while the worker is inside a step (finalize on the worker): a finalize on another thread (a session
+    // that never had a worker) must not start a step that nobody ends.
+    if (beat_ && beat_->busySinceNs() != 0) beat_->begin();
+}
+
 void Session::finalize(const std::string& why, const FinishCallback& done) {
     std::shared_ptr<recon::Reconstructor> rec;
     recon::Pose pose;
@@ -70,10 +76,30 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     MeshResult result;
     std::vector<uint8_t> png;
     Status status;
+    recon::FinishReport finish_report;
+    std::string finish_json = "null";
     if (rec) {
         recon::TsdfSnapshot grid;
         rec->copyVolume(grid);
-        const recon::IndexedMesh extracted = recon::extractTriangles(grid, params_.recon.mesh);
+        recon::MeshParams mesh_params = params_.recon.mesh;
+        // --keep all: everything the volume holds, the small pieces marching cubes would drop included.
+        if (params_.finish.keep == recon::KeepParts::kAll) mesh_params.min_fragment_share = 0;
+        recon::IndexedMesh extracted = recon::extractTriangles(grid, mesh_params);
+        // The finished model (the head alone, holes, the budget) on this worker, like the meshing: it never holds
+        // the intake or another session's worker. Its params were validated at start, so it cannot refuse; its
+        // notes (a budget not reached, holes left) go to the log and summary.json.
+        const recon::HeadRegion region = rec->headRegion();
+        nextWatchedStep();
+        auto finished = recon::finishMesh(extracted, params_.finish, &region);
+        nextWatchedStep();
+        if (finished.isOk()) {
+            finish_report = *finished;
+            finish_json = finish_report.json();
+            if (!finish_report.notes.empty() || finish_report.triangles_in != finish_report.triangles_out) {
+                std::fprintf(stderr, "facescan-server: session %s: finished model: %s\n", id_.c_str(),
+                             finish_report.summary().c_str());
+            }
+        }
         if (!extracted.triangles.empty()) {
             const auto params = meshCodecParams(grid, wire::MeshCodecParams{}.max_position_error_m);
             auto encoded = encodeMesh(extracted, params, &mesh);
@@ -100,7 +126,7 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     files.mesh = &mesh;
     files.draco = result.draco.get();
     files.trajectory_tum = trajectoryTum();
-    files.summary_json = summaryJson(s, result);
+    files.summary_json = summaryJson(s, result, finish_json);
     files.frames_tsv = frameTimingsTsv();
     files.preview_png = &png;
     std::filesystem::path written;
@@ -184,7 +210,7 @@ std::string Session::frameTimingsTsv() const {
     return tsv;
 }
 
-std::string Session::summaryJson(const SessionStats& s, const MeshResult& m) const {
+std::string Session::summaryJson(const SessionStats& s, const MeshResult& m, const std::string& finish_json) const {
     const recon::ReconParams& r = params_.recon;
     std::string camera = "null";
     {
@@ -224,6 +250,7 @@ std::string Session::summaryJson(const SessionStats& s, const MeshResult& m) con
          ", \"mesh_ms\": " + num(s.snapshot_mesh_ms) + ", \"encode_ms\": " + num(s.snapshot_encode_ms) + "},\n";
     j += "  \"mesh\": {\"vertices\": " + std::to_string(m.vertex_count) +
          ", \"triangles\": " + std::to_string(m.triangle_count) + "},\n";
+    j += "  \"finish\": " + finish_json + ",\n";
     j += "  \"camera\": " + camera + ",\n";
     j += "  \"params\": {\"preset\": \"" + params_.preset +
          "\", \"tsdf\": {\"resolution_vox\": " + std::to_string(r.tsdf.resolution_vox) +

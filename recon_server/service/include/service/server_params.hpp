@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "recon/face_pipeline.hpp"
+#include "recon/finishing.hpp"
 #include "recon/reconstructor.hpp"
 #include "recon/status.hpp"
 #include "wire/dds.hpp"
@@ -17,6 +18,7 @@ struct ServerParams {
     std::string preset = "face";  // face | fast: ReconParams::faceDefaults() or ReconParams::fast()
     recon::ReconParams recon = recon::ReconParams::faceDefaults();
     recon::FacePipelineParams face;  // detection and segmentation in front of the recon core
+    recon::FinishParams finish;      // the final model: the head alone, holes, a triangle budget (on finish)
     // Snapshots are meshed with cubes of this many voxels while scanning (2 = an eighth of the cubes); the final
     // mesh (GET_MESH, disk) is always full resolution (recon.mesh).
     int snapshot_stride_vox = 2;           // voxels

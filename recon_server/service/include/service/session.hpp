@@ -236,12 +236,16 @@ class Session {
     char processFrame(PendingFrame& pending);  // the frame's FrameTiming::outcome
     void copySnapshotIfAsked();
     void finalize(const std::string& why, const FinishCallback& done);
+    // Meshing, finishing the model and encoding it are one watchdog step each (a triangle budget on a loaded host
+    // takes seconds of its own): starts the next step of the worker's finish.
+    void nextWatchedStep();
     // finalize, before it writes: waits while the server's view is stale (hold_); false once the session was given up
     // (abandon) or is closing.
     bool mayWrite();
     void noteLoad();  // after a frame: the worker's load and recent skips into stats_
     void recordLatency(float ms);
-    std::string summaryJson(const SessionStats& s, const MeshResult& m) const;
+    // finish_json: the finishing stage's report (recon::FinishReport::json()), or null.
+    std::string summaryJson(const SessionStats& s, const MeshResult& m, const std::string& finish_json) const;
     std::string frameTimingsTsv() const;
 
     // First member, so last destroyed: a session counts as live until all of its memory is freed.

@@ -8,32 +8,15 @@
 #include <vector>
 
 #include "eval/accuracy.hpp"
+#include "recon/mesh_distance.hpp"
 
 namespace facescan::eval {
 namespace {
 
 using Vec3 = Eigen::Vector3f;
 
-// Closest point on triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
-Vec3 closestOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-    const Vec3 ab = b - a, ac = c - a, ap = p - a;
-    const float d1 = ab.dot(ap), d2 = ac.dot(ap);
-    if (d1 <= 0 && d2 <= 0) return a;
-    const Vec3 bp = p - b;
-    const float d3 = ab.dot(bp), d4 = ac.dot(bp);
-    if (d3 >= 0 && d4 <= d3) return b;
-    const float vc = d1 * d4 - d3 * d2;
-    if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
-    const Vec3 cp = p - c;
-    const float d5 = ab.dot(cp), d6 = ac.dot(cp);
-    if (d6 >= 0 && d5 <= d6) return c;
-    const float vb = d5 * d2 - d1 * d6;
-    if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
-    const float va = d3 * d6 - d5 * d4;
-    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-    const float denom = 1.0f / (va + vb + vc);
-    return a + ab * (vb * denom) + ac * (vc * denom);
-}
+// The recon core's closest point on a triangle (Ericson, Real-Time Collision Detection, 5.1.5).
+using recon::closestPointOnTriangle;
 
 struct Cloud {
     std::vector<Vec3> pts;
@@ -129,7 +112,7 @@ SurfaceDistance::Hit SurfaceDistance::nearest(const Vec3& p, const Vec3* facing)
             const int f = m.ring[r];
             if (facing && m.tri_normals[f].dot(*facing) <= 0) continue;
             const auto& t = m.tris[f];
-            const Vec3 q = closestOnTriangle(p, m.cloud.pts[t[0]], m.cloud.pts[t[1]], m.cloud.pts[t[2]]);
+            const Vec3 q = closestPointOnTriangle(p, m.cloud.pts[t[0]], m.cloud.pts[t[1]], m.cloud.pts[t[2]]);
             const float d = (q - p).norm();
             if (d < best) {
                 best = d;

@@ -1,0 +1,99 @@
+// Finishing: what turns the volume's raw extraction into the model a user takes away. Runs on the final mesh of a
+// scan, in the server's finish (with the head region the segmentation tracked) and in `facescan mesh` (on the
+// mesh it fetched). The steps, in order:
+//  1. the head alone: triangles outside the tracked head region (the torso below the chin plane, background) and
+//     outside an optional crop box go, then every connected part much smaller than the largest (floating
+//     fragments), unless keep = kAll;
+//  2. closing: holes up to a size filled with new triangles; the surface that was seen keeps every vertex where it
+//     was (closing only adds);
+//  3. a triangle budget: quadric error decimation (Garland and Heckbert 1997) through OpenMesh's Decimater,
+//     half-edge collapses only (a kept vertex keeps its measured position and colour), with the paper's boundary
+//     constraint planes, so the rim of the scan and the holes that were left stay where they were.
+// The report says what each step did and how far the result lies from the full mesh.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "recon/indexed_mesh.hpp"
+#include "recon/mesh_distance.hpp"
+#include "recon/model_segmenter.hpp"
+#include "recon/status.hpp"
+
+namespace facescan::recon {
+
+enum class KeepParts { kHead, kAll };
+enum class ClosingMode { kNone, kHoles };
+
+// Fewer triangles than this cannot hold a face (eyes, nose and mouth need a few hundred on their own).
+inline constexpr int kMinTriangleBudget = 500;
+
+struct FinishParams {
+    int max_triangles = 0;  // triangles; 0 = no budget (full resolution), else at least kMinTriangleBudget
+    KeepParts keep = KeepParts::kHead;
+    // ratio; with keep = kHead a connected part with fewer triangles than this share of the largest part is a
+    // floating fragment (1% of a 80k-triangle head is about 9 cm^2: an ear or the nose never come apart that small)
+    float min_part_share = 0.01f;
+    std::optional<Eigen::AlignedBox3f> crop_m;  // metres, the mesh's frame; triangles with a vertex outside go
+    ClosingMode close = ClosingMode::kNone;
+    // metres; closing fills a hole whose boundary loop fits in a ball of this diameter (nostrils, eye corners, pits
+    // the sensor did not see); the scan's outer rim is never filled by kHoles
+    float max_hole_m = 0.02f;
+    bool measure_distance = true;  // report the distance from the full mesh's vertices to the result's surface
+
+    Status validate() const;
+};
+
+// Named triangle budgets: web 20,000 (a page loads it in a moment), avatar 50,000 (a game engine's head),
+// print 200,000 (a printer wants the detail: above what a scan holds, so in effect full), full 0 (no budget).
+// InvalidArgument naming the presets for any other name.
+StatusOr<int> triangleBudgetPreset(const std::string& name);
+// "web", "avatar", "print", "full" or a count of triangles: the value of a --max-triangles option.
+StatusOr<int> parseTriangleBudget(const std::string& text);
+StatusOr<KeepParts> parseKeepParts(const std::string& text);          // head | all
+StatusOr<ClosingMode> parseClosingMode(const std::string& text);      // none | holes
+StatusOr<Eigen::AlignedBox3f> parseCropBox(const std::string& text);  // "x0,y0,z0,x1,y1,z1" in metres
+const char* keepPartsName(KeepParts keep);
+const char* closingModeName(ClosingMode close);
+
+struct FinishReport {
+    size_t triangles_in = 0;
+    size_t triangles_out = 0;
+    size_t vertices_out = 0;
+    size_t triangles_outside = 0;  // dropped outside the head region or the crop box
+    size_t parts_dropped = 0;      // floating fragments dropped
+    size_t parts_triangles = 0;    // their triangles
+    size_t holes_filled = 0;
+    size_t holes_left = 0;       // boundary loops left open (the rim, and holes larger than max_hole_m)
+    size_t triangles_added = 0;  // by closing
+    bool budget_reached = true;  // false when no legal collapse was left before the budget
+    // full mesh (after step 1) vertices, at most 30,000 of them evenly spread, -> result surface; zero when not
+    // measured
+    DistanceFigures distance;
+    double ms_parts = 0, ms_close = 0, ms_decimate = 0, ms_distance = 0;  // milliseconds, wall clock
+    std::vector<std::string> notes;  // what the user should know (a budget not reached, a hole too large, ...)
+
+    std::string summary() const;  // one line for logs and the command line
+    std::string json() const;     // one JSON object (summary.json's "finish")
+};
+
+// Finishes `mesh` in place (metres; colours and normals kept, normals recomputed where the mesh changed).
+// `head`: where the tracked head can be (the server's Reconstructor::headRegion()); null where it is not known
+// (`facescan mesh` on a fetched model): the head is then the largest part. InvalidArgument for bad params; an
+// empty mesh stays empty. Every other problem is a note: the user always gets a model.
+StatusOr<FinishReport> finishMesh(IndexedMesh& mesh, const FinishParams& params, const HeadRegion* head = nullptr);
+
+// The steps on their own (finishMesh calls them in order).
+// Drops triangles outside the region and the crop box, then, with keep = kHead, parts smaller than
+// min_part_share of the largest. Unreferenced vertices are removed.
+void keepHead(IndexedMesh& mesh, const FinishParams& params, const HeadRegion* head, FinishReport& report);
+// Fills holes whose boundary loop spans at most max_hole_m with a fan around a new vertex at the loop's centroid
+// (coloured as the loop's mean). Existing vertices and triangles are unchanged; only simple loops (no vertex twice)
+// are filled.
+void fillHoles(IndexedMesh& mesh, float max_hole_m, FinishReport& report);
+// Quadric decimation down to max_triangles (boundary constraint planes; no collapse that flips a normal).
+void decimate(IndexedMesh& mesh, int max_triangles, FinishReport& report);
+
+}  // namespace facescan::recon
