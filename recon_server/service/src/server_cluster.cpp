@@ -465,13 +465,14 @@ bool Server::witnessed(const std::string& session_id, int64_t owner_gone_for_ns)
     // A server cut off from the network sees every other server and every agent go at once. A takeover on that
     // view would win when the network heals (its epoch is higher) over the owner that went on scanning, and would
     // ask the agent for frames that it dropped once that owner had them confirmed: the scan would stall for good.
-    // So a takeover needs a witness that the owner, not this server, is the one gone: the session's agent still
-    // heard, or most of the servers this one knows. The grace covers an agent's lease that lapses a little after
-    // the owner's claim (the claim is asserted every lease/12, the agent's lease renewed by whatever it sends).
+    // So a takeover needs a witness that the owner, not this server, is the one gone: most of the servers this one
+    // knows still in view (a server cut off never has that), or else the session's agent still heard a moment
+    // after the owner's claim lapsed. The moment covers an agent's lease that lapses a little after the claim (the
+    // claim is asserted every lease/12, the agent's lease renewed by whatever it sends).
+    if (cluster_->seesMajority()) return true;
     if (owner_gone_for_ns < lease_ns_ / 8) return false;
     const auto agent = candidates_.find(session_id);
-    if (agent != candidates_.end() && agent->second.writer_alive) return true;
-    return cluster_->seesMajority();
+    return agent != candidates_.end() && agent->second.writer_alive;
 }
 
 void Server::takeOverFromFirstFrame(const std::string& session_id, const OwnerView& view) {

@@ -145,7 +145,7 @@ class Server {
     void takeOverFromFirstFrame(const std::string& session_id, const OwnerView& view);
     void requestReplays();
     void releaseStale();
-    // Whether a takeover may go ahead: the owner gone for a moment, seen so by the agent or most servers.
+    // Whether a takeover may go ahead: most servers still in view, or else the agent still heard a moment later.
     bool witnessed(const std::string& session_id, int64_t owner_gone_for_ns) const;
     // Whether this server is cut off, or back from it and re-observing the cluster before it takes anything over.
     bool rejoining();
