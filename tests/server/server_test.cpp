@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -94,9 +95,19 @@ void expectSessionWritten(const std::filesystem::path& dir, bool with_mesh) {
     EXPECT_EQ(summary.back(), '\n');
     EXPECT_TRUE(std::filesystem::exists(dir / "trajectory.txt"));
     EXPECT_TRUE(std::filesystem::exists(dir / "frames.tsv"));
+    // A face is personal data: the folder and every file in it are the owner's only, whatever the test's umask.
+    const auto mode = [](const std::filesystem::path& p) {
+        struct stat st {};
+        return ::stat(p.c_str(), &st) == 0 ? st.st_mode & 07777 : 0u;
+    };
+    EXPECT_EQ(mode(dir), 0700u) << dir;
+    EXPECT_EQ(mode(dir.parent_path()), 0700u) << "the data dir " << dir.parent_path();
     for (const auto& entry : std::filesystem::directory_iterator(dir)) {
         EXPECT_EQ(entry.path().extension(), entry.path().extension() == ".tmp" ? ".none" : entry.path().extension())
             << "temporary file left: " << entry.path();
+        if (entry.is_regular_file()) {
+            EXPECT_EQ(mode(entry.path()), 0600u) << entry.path();
+        }
     }
     if (!with_mesh) return;
     recon::Mesh ply;

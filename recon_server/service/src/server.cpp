@@ -11,6 +11,7 @@
 #include "service/frame_load.hpp"
 #include "service/replication.hpp"
 #include "service/session_store.hpp"
+#include "wire/private_files.hpp"
 
 namespace facescan::service {
 namespace {
@@ -42,6 +43,12 @@ StatusOr<std::unique_ptr<Server>> Server::create(const ServerParams& params) {
 Status Server::start() {
     RETURN_IF_ERROR(checkDataDir(params_.data_dir));
     ASSIGN_OR_RETURN(data_dir_lock_, DataDirLock::acquire(params_.data_dir, params_.server_id));
+    // What an older version (or a copy) left readable goes owner-only, like everything the server writes now.
+    ASSIGN_OR_RETURN(const int made_private, wire::makeTreePrivate(params_.data_dir));
+    if (made_private > 0) {
+        std::fprintf(stderr, "facescan-server: made %d file(s) and folder(s) in %s readable by this user only\n",
+                     made_private, params_.data_dir.c_str());
+    }
     using wire::boxed;
     ASSIGN_OR_RETURN(participant_, boxed(wire::Participant::create(params_.domain)));
     const wire::Participant& p = *participant_;

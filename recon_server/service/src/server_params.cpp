@@ -353,6 +353,9 @@ std::string serverUsage() {
            "                          as soon as its files are written, and its files answer its commands later\n"
            "  --data-dir DIR          sessions go to DIR/SESSION/ (default ./facescan-data): their replica while\n"
            "                          scanning, the results when finished; DIR/SESSION/owner.json names the owner\n"
+           "                          DIR is made 0700 and every file in it 0600, whoever runs the server: faces are\n"
+           "                          personal data. Nothing is encrypted at rest: use an encrypted file system\n"
+           "                          (LUKS) for the data dir where that is needed\n"
            "  --server-id ID          this server's name on the domain, unique (default HOST-PID)\n"
            "  --replica-interval-s S  seconds between replicas of a scan to its standby and data dir (default 1)\n"
            "  --check                 check the configuration (file, flags, DDS profile, data dir) and exit\n" +
