@@ -118,8 +118,8 @@ const std::vector<CommandSpec>& commandSpecs() {
          "view",
          0,
          0,
-         {"--port", "--bind", "--open"},
-         "Usage: facescan view [--port 8080] [--bind 127.0.0.1] [--open]\n"
+         {"--port", "--bind", "--open", "--insecure-http"},
+         "Usage: facescan view [--port 8080] [--bind 127.0.0.1] [--open] [--insecure-http]\n"
          "Serves a web page that shows every scan on the domain live: the sessions with state, frames, fps and\n"
          "server; a 3D view of a session's latest snapshot (drag to turn, wheel to zoom, right-drag to pan) that\n"
          "updates as the scan grows; progress and the server's messages; and downloads of the mesh as PLY, OBJ,\n"
@@ -127,7 +127,11 @@ const std::vector<CommandSpec>& commandSpecs() {
          "needed). Runs until Ctrl-C.\n"
          "  --port N        TCP port (default 8080; 0 picks a free one, printed at start)\n"
          "  --bind ADDRESS  IP address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: the LAN)\n"
-         "  --open          open the page in this desktop's browser\n"},
+         "  --open          open the page in this desktop's browser\n"
+         "  --insecure-http allow a --bind other machines reach although the page is plain HTTP without a login:\n"
+         "                  anyone on the network sees and downloads every scan. Refused without it; it warns at\n"
+         "                  every start. From another machine, an SSH tunnel to 127.0.0.1 is the safe way:\n"
+         "                  ssh -L 8080:127.0.0.1:8080 THIS-HOST, then open http://127.0.0.1:8080/ there\n"},
         {Command::kReset,
          "reset",
          1,
@@ -300,6 +304,8 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
             options.view_bind = value;
         } else if (option == "--open") {
             options.view_open = true;
+        } else if (option == "--insecure-http") {
+            options.view_insecure_http = true;
         }
     }
 
@@ -321,6 +327,7 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
     if (options.command == Command::kView) {
         ViewServerConfig server;
         server.bind = options.view_bind;
+        server.insecure_http = options.view_insecure_http;
         if (Status s = server.validate(); !s.isOk()) return s;
     }
     if (!values.count("--save") && values.count("--save-format")) {

@@ -64,13 +64,21 @@ int runView(const CliOptions& options) {
     config.bind = options.view_bind;
     config.port = options.view_port;
     config.web_root = *web_root;
+    config.insecure_http = options.view_insecure_http;
     auto server = ViewServer::start(config, hub, fetch_mesh);
     if (!server.isOk()) return fail(kExitCannotServe, server.status().message());
     const std::string url = (*server)->url();
     std::printf("facescan view: serving %s (%s; Ctrl-C stops)\n", url.c_str(), options.domain.describe().c_str());
     std::printf("facescan view: web files from %s\n", web_root->c_str());
-    if (options.view_bind == "127.0.0.1" || options.view_bind == "::1") {
-        std::printf("facescan view: this machine only; --bind 0.0.0.0 serves the LAN\n");
+    if (isLoopbackAddress(options.view_bind)) {
+        std::printf("facescan view: this machine only; from another one, use an SSH tunnel to it\n");
+    }
+    if (options.view_insecure_http) {
+        std::fprintf(
+            stderr,
+            "facescan view: WARNING: --insecure-http: plain HTTP without a login%s: whoever reaches this port sees "
+            "and downloads every scan, and the network carries the faces unencrypted\n",
+            isLoopbackAddress(options.view_bind) ? " (on this machine only, for now)" : "");
     }
     std::fflush(stdout);
     if (options.view_open) openInBrowser(url);

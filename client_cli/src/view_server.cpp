@@ -52,7 +52,24 @@ Status ViewServerConfig::validate() const {
             "--bind needs an IP address of this machine (127.0.0.1, 0.0.0.0 for the LAN, ::1), got '" + bind + "'");
     }
     if (threads < 4 || threads > 1024) return invalidArgument("ViewServerConfig: threads must be 4..1024");
+    if (!isLoopbackAddress(bind) && !insecure_http) {
+        return invalidArgument(
+            "--bind " + bind +
+            " would serve every scan (a face: personal data) in plain HTTP, without a login, to anyone who "
+            "reaches this port. Keep the viewer on 127.0.0.1 and reach it from another machine through SSH (ssh -L "
+            "8080:127.0.0.1:8080 THIS-HOST, then http://127.0.0.1:8080/ there), or give --insecure-http on a "
+            "network where every machine may see the scans (it warns at every start)");
+    }
     return Status::ok();
+}
+
+bool isLoopbackAddress(const std::string& ip) {
+    in_addr v4{};
+    if (::inet_pton(AF_INET, ip.c_str(), &v4) == 1) return (ntohl(v4.s_addr) >> 24) == 127;
+    in6_addr v6{};
+    if (::inet_pton(AF_INET6, ip.c_str(), &v6) != 1) return false;
+    if (IN6_IS_ADDR_LOOPBACK(&v6)) return true;
+    return IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127;
 }
 
 // One browser's WebSocket: its cursor in the hub and the thread that sends it what is new.

@@ -9,9 +9,13 @@
 #include <unistd.h>
 
 #include <array>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <thread>
 
+#include "child_process.hpp"
 #include "client/web_assets.hpp"
 #include "run_command.hpp"
 #include "test_domain.hpp"
@@ -78,6 +82,43 @@ TEST(CliErrors, ViewWithoutItsFilesOrItsPortExitsFive) {
     EXPECT_EQ(taken.exit_code, 5) << taken.out;
     EXPECT_TRUE(contains(taken.out, "facescan: error: cannot serve on 127.0.0.1:" + port)) << taken.out;
     EXPECT_TRUE(contains(taken.out, "--port")) << taken.out;
+}
+
+// A viewer that other machines reach over plain HTTP hands every scan (a face) to anyone on the network: refused,
+// with the safe way to reach it, unless the user says --insecure-http, and then it warns at every start.
+TEST(CliErrors, ViewOnTheNetworkInPlainHttpIsRefusedUnlessInsecureHttpWhichWarns) {
+    const std::string dds = " --profile loopback --domain " + privateDomain();
+    for (const std::string bind : {"0.0.0.0", "::", "192.168.1.20"}) {
+        const CliRun refused = runCli("view --port 0 --bind " + bind + dds);
+        EXPECT_EQ(refused.exit_code, 2) << bind << ": " << refused.out;
+        EXPECT_TRUE(contains(refused.out, "--bind " + bind + " would serve every scan")) << refused.out;
+        EXPECT_TRUE(contains(refused.out, "ssh -L 8080:127.0.0.1:8080")) << refused.out;
+        EXPECT_TRUE(contains(refused.out, "--insecure-http")) << refused.out;
+        EXPECT_FALSE(contains(refused.out, "serving http")) << refused.out;
+    }
+    if (!facescan::client::findWebRoot().isOk())
+        GTEST_SKIP() << "the viewer's npm packages are missing (deploy/install-deps.sh)";
+    const auto log = std::filesystem::temp_directory_path() / ("facescan_cli_insecure_" + std::to_string(::getpid()));
+    const auto text = [&] {
+        std::ifstream in(log);
+        return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    };
+    for (const std::string bind : {"0.0.0.0", "127.0.0.1"}) {
+        facescan::testing::ChildProcess view({FACESCAN_CLI, "view", "--port", "0", "--bind", bind, "--insecure-http",
+                                              "--profile", "loopback", "--domain", privateDomain()},
+                                             log);
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+        while (!contains(text(), "serving http://") && std::chrono::steady_clock::now() < deadline && view.running()) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        }
+        const std::string out = text();
+        EXPECT_TRUE(contains(out, "serving http://")) << out;
+        EXPECT_TRUE(contains(out, "WARNING: --insecure-http: plain HTTP without a login")) << bind << ": " << out;
+        EXPECT_EQ(contains(out, "on this machine only, for now"), bind == "127.0.0.1") << out;
+        view.signal(SIGINT);
+        EXPECT_EQ(view.wait(std::chrono::seconds(20)), 0) << text();
+    }
+    std::filesystem::remove(log);
 }
 
 TEST(CliErrors, NoServerExitsThreeAfterTheTimeout) {

@@ -34,9 +34,17 @@ struct ViewServerConfig {
     uint16_t port = 8080;            // 0: any free port (see ViewServer::port())
     std::filesystem::path web_root;  // the asset folder (findWebRoot())
     int threads = 64;                // CivetWeb workers; each open WebSocket holds one
+    // Plain HTTP without a login on an address other machines reach: every scan's face to anyone on the network.
+    // Refused by validate() unless set (--insecure-http); the viewer then warns at every start.
+    bool insecure_http = false;
 
+    // InvalidArgument for a bind that is not an IP address, a thread count out of range, or a non-loopback bind
+    // without insecure_http (the message says how to reach the viewer safely instead).
     Status validate() const;
 };
+
+// True for an address only this machine reaches: 127.0.0.0/8, ::1 and ::ffff:127.x.x.x.
+bool isLoopbackAddress(const std::string& ip);
 
 // The full-resolution mesh of a session as Draco bytes (ScanClient::request(GET_MESH) in the real viewer).
 // NotFound: unknown session; DeadlineExceeded or Unavailable: no server answered.
