@@ -118,8 +118,8 @@ const std::vector<CommandSpec>& commandSpecs() {
          "view",
          0,
          0,
-         {"--port", "--bind", "--open", "--insecure-http"},
-         "Usage: facescan view [--port 8080] [--bind 127.0.0.1] [--open] [--insecure-http]\n"
+         {"--port", "--bind", "--open", "--insecure-http", "--tls"},
+         "Usage: facescan view [--port 8080] [--bind 127.0.0.1] [--open] [--tls DIR/NAME | --insecure-http]\n"
          "Serves a web page that shows every scan on the domain live: the sessions with state, frames, fps and\n"
          "server; a 3D view of a session's latest snapshot (drag to turn, wheel to zoom, right-drag to pan) that\n"
          "updates as the scan grows; progress and the server's messages; and downloads of the mesh as PLY, OBJ,\n"
@@ -128,6 +128,10 @@ const std::vector<CommandSpec>& commandSpecs() {
          "  --port N        TCP port (default 8080; 0 picks a free one, printed at start)\n"
          "  --bind ADDRESS  IP address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: the LAN)\n"
          "  --open          open the page in this desktop's browser\n"
+         "  --tls DIR/NAME  HTTPS and WSS with a login: DIR/NAME/web.pem (facescan-site web SITE NAME --host\n"
+         "                  THIS-HOST) and DIR/NAME/logins (facescan-site login SITE NAME USER). Browsers must trust\n"
+         "                  the site's CA (SITE/identity_ca.pem); sessions end after 15 min unused (12 h at most);\n"
+         "                  after 5 wrong passwords from an address or for a user, each try waits (30 s, doubling)\n"
          "  --insecure-http allow a --bind other machines reach although the page is plain HTTP without a login:\n"
          "                  anyone on the network sees and downloads every scan. Refused without it; it warns at\n"
          "                  every start. From another machine, an SSH tunnel to 127.0.0.1 is the safe way:\n"
@@ -151,7 +155,8 @@ const CommandSpec* findSpec(const std::string& name) {
 }
 
 bool takesValue(const std::string& option) {
-    static const std::set<std::string> kValued = {"--timeout", "-o", "--save", "--save-format", "--port", "--bind"};
+    static const std::set<std::string> kValued = {"--timeout", "-o",     "--save", "--save-format",
+                                                  "--port",    "--bind", "--tls"};
     return kValued.count(option) > 0 || wire::isDdsOption(option);
 }
 
@@ -306,6 +311,9 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
             options.view_open = true;
         } else if (option == "--insecure-http") {
             options.view_insecure_http = true;
+        } else if (option == "--tls") {
+            if (value.empty()) return invalidArgument("--tls needs the viewer's identity folder DIR/NAME");
+            options.view_tls = value;
         }
     }
 
@@ -328,6 +336,10 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
         ViewServerConfig server;
         server.bind = options.view_bind;
         server.insecure_http = options.view_insecure_http;
+        server.tls_dir = options.view_tls;
+        if (!options.view_tls.empty() && options.view_insecure_http) {
+            return invalidArgument("--tls and --insecure-http contradict each other: choose one");
+        }
         if (Status s = server.validate(); !s.isOk()) return s;
     }
     if (!values.count("--save") && values.count("--save-format")) {

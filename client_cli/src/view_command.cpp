@@ -65,13 +65,22 @@ int runView(const CliOptions& options) {
     config.port = options.view_port;
     config.web_root = *web_root;
     config.insecure_http = options.view_insecure_http;
+    config.tls_dir = options.view_tls;
     auto server = ViewServer::start(config, hub, fetch_mesh);
     if (!server.isOk()) return fail(kExitCannotServe, server.status().message());
+    // Before the first line that says it serves: a Ctrl-C from then on stops it cleanly.
+    installInterruptHandler();
     const std::string url = (*server)->url();
     std::printf("facescan view: serving %s (%s; Ctrl-C stops)\n", url.c_str(), options.domain.describe().c_str());
     std::printf("facescan view: web files from %s\n", web_root->c_str());
+    if (!options.view_tls.empty()) {
+        std::printf(
+            "facescan view: HTTPS and WSS with the certificate and logins of %s; browsers must trust the "
+            "site's CA (identity_ca.pem)\n",
+            options.view_tls.c_str());
+    }
     if (isLoopbackAddress(options.view_bind)) {
-        std::printf("facescan view: this machine only; from another one, use an SSH tunnel to it\n");
+        std::printf("facescan view: this machine only; for others, --bind their network's address with --tls\n");
     }
     if (options.view_insecure_http) {
         std::fprintf(
@@ -82,7 +91,6 @@ int runView(const CliOptions& options) {
     }
     std::fflush(stdout);
     if (options.view_open) openInBrowser(url);
-    installInterruptHandler();
 
     std::map<std::string, SessionStatus> statuses;
     std::vector<MeshSnapshotData> snapshots;

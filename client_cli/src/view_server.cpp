@@ -10,10 +10,14 @@
 #include <cstring>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "client/mesh_file.hpp"
 #include "client/status_json.hpp"
+#include "client/tls_front.hpp"
+#include "client/view_logins.hpp"
+#include "view_auth.hpp"
 #include "wire/mesh_codec.hpp"
 #include "wire/messages.hpp"
 
@@ -52,13 +56,16 @@ Status ViewServerConfig::validate() const {
             "--bind needs an IP address of this machine (127.0.0.1, 0.0.0.0 for the LAN, ::1), got '" + bind + "'");
     }
     if (threads < 4 || threads > 1024) return invalidArgument("ViewServerConfig: threads must be 4..1024");
-    if (!isLoopbackAddress(bind) && !insecure_http) {
+    if (!isLoopbackAddress(bind) && !insecure_http && tls_dir.empty()) {
         return invalidArgument(
             "--bind " + bind +
             " would serve every scan (a face: personal data) in plain HTTP, without a login, to anyone who "
-            "reaches this port. Keep the viewer on 127.0.0.1 and reach it from another machine through SSH (ssh -L "
-            "8080:127.0.0.1:8080 THIS-HOST, then http://127.0.0.1:8080/ there), or give --insecure-http on a "
-            "network where every machine may see the scans (it warns at every start)");
+            "reaches this port. Serve it over TLS with a login: on the site's machine `facescan-site web SITE NAME "
+            "--host THIS-HOST` and `facescan-site login SITE NAME USER`, then `facescan view --bind " +
+            bind +
+            " --tls SITE/NAME`. Or keep it on 127.0.0.1 and reach it through SSH (ssh -L 8080:127.0.0.1:8080 "
+            "THIS-HOST, then http://127.0.0.1:8080/ there), or give --insecure-http on a network where every "
+            "machine may see the scans (it warns at every start)");
     }
     return Status::ok();
 }
@@ -87,6 +94,15 @@ struct ViewServer::Impl {
     mg_context* ctx = nullptr;
     mutable std::mutex browsers_mutex;
     std::map<const mg_connection*, std::unique_ptr<Browser>> browsers;
+    std::unique_ptr<LoginBook> logins;  // with TLS: who may see anything; null: plain HTTP, no login
+    std::unique_ptr<TlsFront> front;    // with TLS: the browsers' port; CivetWeb listens on loopback behind it
+
+    // With TLS, the browser's address for this connection; nullopt when it did not come through the TLS front
+    // (somebody on this machine at CivetWeb's loopback port).
+    std::optional<std::string> clientAddress(const mg_connection* conn) const {
+        const mg_request_info* ri = mg_get_request_info(conn);
+        return front ? front->clientAddress(static_cast<uint16_t>(ri->remote_port)) : std::nullopt;
+    }
 
     int handleRequest(mg_connection* conn);
     int handleApi(mg_connection* conn, std::string_view rest);
@@ -115,6 +131,13 @@ int ViewServer::Impl::handleRequest(mg_connection* conn) {
     const mg_request_info* ri = mg_get_request_info(conn);
     const std::string_view method = ri->request_method;
     const std::string_view uri = ri->local_uri ? ri->local_uri : "";
+    if (logins) {  // nothing but the login page without a session
+        const auto address = clientAddress(conn);
+        if (!address) return respondError(conn, 403, "connect with https:// to the viewer's port");
+        if (uri == "/login") return detail::handleLogin(conn, *logins, config.login.session_max_s, *address);
+        if (uri == "/logout" && method == "POST") return detail::handleLogout(conn, *logins);
+        if (!detail::sessionUser(conn, *logins)) return detail::refuseWithoutLogin(conn, std::string(uri));
+    }
     if (method != "GET" && method != "HEAD") {
         respond(conn, 405, "application/json", jsonError("only GET and HEAD are served, not " + std::string(method)),
                 {{"Allow", "GET, HEAD"}});
@@ -207,17 +230,22 @@ int onRequest(mg_connection* conn, void* data) { return static_cast<ViewServer::
 
 // Refuses a WebSocket opened by another site's page (cross-site WebSocket hijacking): browsers always send
 // Origin, and ours is the page this server served, so its host is the Host the browser asked for.
-bool sameOrigin(const char* origin, const char* host) {
+bool sameOrigin(const char* origin, const char* host, bool tls) {
     if (!origin) return true;  // not a browser (tests, tools): nothing to hijack
     if (!host) return false;
     std::string_view o(origin), h(host);
-    if (!o.starts_with("http://")) return false;
-    o.remove_prefix(7);
+    const std::string_view scheme = tls ? "https://" : "http://";
+    if (!o.starts_with(scheme)) return false;
+    o.remove_prefix(scheme.size());
     return o == h;
 }
 
-int onWsConnect(const mg_connection* conn, void*) {
-    return sameOrigin(mg_get_header(conn, "Origin"), mg_get_header(conn, "Host")) ? 0 : 1;
+// With TLS, a WebSocket needs the session cookie as much as a page does (the browser sends it with the upgrade).
+int onWsConnect(const mg_connection* conn, void* data) {
+    auto* impl = static_cast<ViewServer::Impl*>(data);
+    if (!sameOrigin(mg_get_header(conn, "Origin"), mg_get_header(conn, "Host"), impl->logins != nullptr)) return 1;
+    if (impl->logins && (!impl->clientAddress(conn) || !detail::sessionUser(conn, *impl->logins))) return 1;
+    return 0;
 }
 
 void onWsReady(mg_connection* conn, void* data) {
@@ -286,6 +314,18 @@ StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& 
                                                         MeshFetcher fetch_mesh) {
     RETURN_IF_ERROR(config.validate());
     ASSIGN_OR_RETURN(std::vector<LoadedAsset> assets, loadWebAssets(config.web_root));
+    std::unique_ptr<LoginBook> logins;
+    const std::filesystem::path certificate = config.tls_dir / "web.pem";
+    if (!config.tls_dir.empty()) {
+        std::error_code ec;
+        if (!std::filesystem::is_regular_file(certificate, ec)) {
+            return notFound("no TLS certificate for the viewer in " + certificate.string() +
+                            ": make one on the site's machine with `facescan-site web SITE NAME --host THIS-HOST` "
+                            "and copy SITE/NAME here");
+        }
+        logins = std::make_unique<LoginBook>(config.login);
+        RETURN_IF_ERROR(logins->load(config.tls_dir / "logins"));
+    }
     static std::once_flag init_once;
     std::call_once(init_once, [] { mg_init_library(0); });
 
@@ -296,9 +336,14 @@ StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& 
     impl.assets = std::move(assets);
     impl.hub = &hub;
     impl.fetch_mesh = std::move(fetch_mesh);
+    impl.logins = std::move(logins);
 
+    // With TLS, CivetWeb serves plain HTTP on a loopback port of its own behind the TLS front (client/tls_front.hpp:
+    // Debian's CivetWeb cannot load OpenSSL 3 for its own HTTPS).
     const bool v6 = config.bind.find(':') != std::string::npos;
-    const std::string listen = (v6 ? "[" + config.bind + "]" : config.bind) + ":" + std::to_string(config.port);
+    const std::string listen = impl.logins
+                                   ? std::string("127.0.0.1:0")
+                                   : (v6 ? "[" + config.bind + "]" : config.bind) + ":" + std::to_string(config.port);
     const std::string threads = std::to_string(config.threads);
     const char* options[] = {"listening_ports", listen.c_str(), "num_threads", threads.c_str(),
                              // No folder is served as such: only the routes above (no directory listing).
@@ -326,6 +371,21 @@ StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& 
     mg_server_port ports[4] = {};
     const int n = mg_get_server_ports(impl.ctx, 4, ports);
     server->port_ = n > 0 ? static_cast<uint16_t>(ports[0].port) : config.port;
+    if (impl.logins) {
+        TlsFront::Options front;
+        front.bind = config.bind;
+        front.port = config.port;
+        front.pem = certificate;
+        front.backend_port = server->port_;
+        front.max_connections = config.threads;
+        auto started = TlsFront::start(front);
+        if (!started.isOk()) {
+            server->stop();
+            return started.status();
+        }
+        impl.front = std::move(started).value();
+        server->port_ = impl.front->port();
+    }
     return server;
 }
 
@@ -333,6 +393,7 @@ ViewServer::~ViewServer() { stop(); }
 
 void ViewServer::stop() {
     if (!impl_ || !impl_->ctx) return;
+    if (impl_->front) impl_->front->stop();  // the browsers' connections first: nothing new reaches CivetWeb
     {
         std::lock_guard lock(impl_->browsers_mutex);
         for (auto& [conn, browser] : impl_->browsers) {
@@ -356,7 +417,7 @@ std::string ViewServer::url() const {
     } else if (host.find(':') != std::string::npos) {
         host = "[" + host + "]";
     }
-    return "http://" + host + ":" + std::to_string(port_) + "/";
+    return (impl_->logins ? "https://" : "http://") + host + ":" + std::to_string(port_) + "/";
 }
 
 int ViewServer::browsers() const {

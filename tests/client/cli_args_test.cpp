@@ -104,6 +104,13 @@ TEST(CliArgs, ViewListsOnLocalhostPort8080UnlessTold) {
     expectUsageError({"view", "--bind", "0.0.0.0"}, "would serve every scan");
     expectUsageError({"view", "--bind", "10.0.0.5"}, "--insecure-http");
     expectUsageError({"view", "--bind", "::"}, "ssh -L");
+    expectUsageError({"view", "--bind", "0.0.0.0"}, "facescan-site web SITE NAME --host THIS-HOST");
+    expectUsageError({"view", "--bind", "0.0.0.0", "--tls", "site/viewer", "--insecure-http"}, "contradict");
+    expectUsageError({"view", "--tls"}, "--tls needs a value");
+    auto tls = parse({"view", "--bind", "0.0.0.0", "--tls", "site/viewer"});
+    ASSERT_TRUE(tls.isOk()) << tls.status().toString();
+    EXPECT_EQ(tls->view_tls, "site/viewer");
+    EXPECT_FALSE(tls->view_insecure_http);
     EXPECT_TRUE(parse({"view", "--bind", "127.0.0.2"}).isOk()) << "all of 127/8 is this machine";
     EXPECT_TRUE(parse({"view", "--bind", "::1"}).isOk());
     EXPECT_TRUE(parse({"view", "--bind", "::ffff:127.0.0.1"}).isOk());

@@ -93,17 +93,20 @@ TEST(CliErrors, ViewOnTheNetworkInPlainHttpIsRefusedUnlessInsecureHttpWhichWarns
         EXPECT_EQ(refused.exit_code, 2) << bind << ": " << refused.out;
         EXPECT_TRUE(contains(refused.out, "--bind " + bind + " would serve every scan")) << refused.out;
         EXPECT_TRUE(contains(refused.out, "ssh -L 8080:127.0.0.1:8080")) << refused.out;
+        EXPECT_TRUE(contains(refused.out, "--tls SITE/NAME")) << refused.out;
         EXPECT_TRUE(contains(refused.out, "--insecure-http")) << refused.out;
         EXPECT_FALSE(contains(refused.out, "serving http")) << refused.out;
     }
     if (!facescan::client::findWebRoot().isOk())
         GTEST_SKIP() << "the viewer's npm packages are missing (deploy/install-deps.sh)";
-    const auto log = std::filesystem::temp_directory_path() / ("facescan_cli_insecure_" + std::to_string(::getpid()));
-    const auto text = [&] {
-        std::ifstream in(log);
-        return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    };
     for (const std::string bind : {"0.0.0.0", "127.0.0.1"}) {
+        // A log of its own per run: the first run's lines must not stand in for the second's.
+        const auto log = std::filesystem::temp_directory_path() /
+                         ("facescan_cli_insecure_" + std::to_string(::getpid()) + "_" + bind + ".log");
+        const auto text = [&] {
+            std::ifstream in(log);
+            return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        };
         facescan::testing::ChildProcess view({FACESCAN_CLI, "view", "--port", "0", "--bind", bind, "--insecure-http",
                                               "--profile", "loopback", "--domain", privateDomain()},
                                              log);
@@ -117,8 +120,19 @@ TEST(CliErrors, ViewOnTheNetworkInPlainHttpIsRefusedUnlessInsecureHttpWhichWarns
         EXPECT_EQ(contains(out, "on this machine only, for now"), bind == "127.0.0.1") << out;
         view.signal(SIGINT);
         EXPECT_EQ(view.wait(std::chrono::seconds(20)), 0) << text();
+        std::filesystem::remove(log);
     }
-    std::filesystem::remove(log);
+}
+
+// --tls names the viewer's identity folder: without its certificate the viewer does not start, and says what to run.
+TEST(CliErrors, ViewWithTlsButNoCertificateSaysWhatToRun) {
+    if (!facescan::client::findWebRoot().isOk())
+        GTEST_SKIP() << "the viewer's npm packages are missing (deploy/install-deps.sh)";
+    const CliRun run =
+        runCli("view --port 0 --bind 0.0.0.0 --tls /nonexistent/viewer --profile loopback --domain " + privateDomain());
+    EXPECT_EQ(run.exit_code, 5) << run.out;
+    EXPECT_TRUE(contains(run.out, "/nonexistent/viewer/web.pem")) << run.out;
+    EXPECT_TRUE(contains(run.out, "facescan-site web SITE NAME --host THIS-HOST")) << run.out;
 }
 
 TEST(CliErrors, NoServerExitsThreeAfterTheTimeout) {

@@ -40,6 +40,7 @@ struct CliOptions {
     std::string view_bind = "127.0.0.1";        // view --bind ADDRESS: this machine only unless told otherwise
     bool view_open = false;                     // view --open: open the page in the desktop's browser
     bool view_insecure_http = false;            // view --insecure-http: plain HTTP beyond loopback (warned)
+    std::string view_tls;                       // view --tls DIR/NAME: HTTPS + WSS with a login
     wire::DomainConfig domain{0, "lan"};        // --domain N, --profile P, --security DIR/NAME
     std::chrono::milliseconds timeout{10'000};  // --timeout SECONDS: how long to wait for a server
 

@@ -14,6 +14,11 @@
 //                                              (binary, client/view_hub.hpp); browser -> server: "follow ID"
 // Errors are JSON {"error": "..."}: 400 for a malformed request (bad session id, unknown format, bad method), 404
 // for an unknown session or page, 503 when no server answers. No DDS here: meshes come through a MeshFetcher.
+// With TLS (ViewServerConfig::tls_dir) the same over HTTPS and WSS, behind a login:
+//   GET /login, POST /login                    the login page and form (view_auth.hpp); a session cookie on success
+//   POST /logout                               ends the session
+// and without a session every other request gets nothing of the scans: / redirects to /login, the rest is 401,
+// and the WebSocket upgrade is refused.
 #pragma once
 
 #include <cstdint>
@@ -24,6 +29,7 @@
 #include <vector>
 
 #include "client/view_hub.hpp"
+#include "client/view_logins.hpp"
 #include "client/web_assets.hpp"
 #include "recon/status.hpp"
 
@@ -37,9 +43,14 @@ struct ViewServerConfig {
     // Plain HTTP without a login on an address other machines reach: every scan's face to anyone on the network.
     // Refused by validate() unless set (--insecure-http); the viewer then warns at every start.
     bool insecure_http = false;
+    // HTTPS and WSS with a login (--tls DIR/NAME): DIR/NAME/web.pem, the key and the certificate the site's CA signed
+    // (facescan-site web), and DIR/NAME/logins (facescan-site login). Every page but /login, every API call and the
+    // WebSocket then need a session. Empty: plain HTTP without a login.
+    std::filesystem::path tls_dir;
+    LoginParams login;  // session timeouts and the brake on wrong passwords
 
     // InvalidArgument for a bind that is not an IP address, a thread count out of range, or a non-loopback bind
-    // without insecure_http (the message says how to reach the viewer safely instead).
+    // without tls_dir or insecure_http (the message says how to set TLS and a login up).
     Status validate() const;
 };
 
@@ -62,7 +73,7 @@ class ViewServer {
     // Closes every WebSocket (a close frame, so browsers see the end at once) and stops listening.
     void stop();
     uint16_t port() const { return port_; }
-    // http://ADDRESS:PORT/ (for 0.0.0.0: this host's name, which the LAN can reach).
+    // http://ADDRESS:PORT/, https:// with TLS (for 0.0.0.0: this host's name, which the LAN can reach).
     std::string url() const;
     int browsers() const;  // open WebSockets
 
