@@ -27,5 +27,6 @@ void installInterruptHandler();
 
 int runWatch(const CliOptions& options);
 int runView(const CliOptions& options);
+int runAudit(const CliOptions& options);
 
 }  // namespace facescan::client::detail

@@ -90,7 +90,8 @@ double loginClockS() {
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-int handleLogin(mg_connection* conn, LoginBook& logins, double max_age_s, const std::string& address) {
+int handleLogin(mg_connection* conn, LoginBook& logins, double max_age_s, const std::string& address,
+                const std::function<void(const std::string&, const std::string&)>& audit) {
     const mg_request_info* ri = mg_get_request_info(conn);
     const std::string_view method = ri->request_method;
     if (method == "GET" || method == "HEAD") return sendLoginPage(conn, 200, "");
@@ -126,16 +127,19 @@ int handleLogin(mg_connection* conn, LoginBook& logins, double max_age_s, const 
                 std::string(kSessionCookie) + "=" + attempt.token +
                 "; Path=/; Secure; HttpOnly; SameSite=Strict; Max-Age=" + std::to_string(static_cast<long>(max_age_s));
             std::fprintf(stderr, "facescan view: %s logged in from %s\n", user, address.c_str());
+            audit(user, "ok (from " + address + ")");
             return redirect(conn, "/", {{"Set-Cookie", cookie}});
         }
         case LoginBook::Outcome::kLockedOut: {
             const long wait_s = static_cast<long>(std::ceil(attempt.retry_after_s));
+            audit(user, "error: locked out after wrong passwords (from " + address + ")");
             return sendLoginPage(conn, 429, "too many wrong passwords: try again in " + std::to_string(wait_s) + " s",
                                  {{"Retry-After", std::to_string(wait_s)}});
         }
         case LoginBook::Outcome::kWrong: break;
     }
     std::fprintf(stderr, "facescan view: a wrong user or password from %s\n", address.c_str());
+    audit(user, "error: wrong user or password (from " + address + ")");
     return sendLoginPage(conn, 401, "wrong user or password");
 }
 

@@ -5,6 +5,7 @@
 // (no script reads it), Secure and SameSite=Strict (never sent with a request another site starts).
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <string>
 
@@ -22,7 +23,9 @@ double loginClockS();
 // GET/HEAD /login: the page. POST /login: a form (user, password); 303 to / with the cookie, 401 with the page
 // again, or 429 with Retry-After while the brake is on. POST /logout: ends the session, 303 to /login.
 // `address` is the browser's (the brake on wrong passwords counts per address).
-int handleLogin(mg_connection* conn, LoginBook& logins, double max_age_s, const std::string& address);
+// `audit(user, outcome)` records each attempt.
+int handleLogin(mg_connection* conn, LoginBook& logins, double max_age_s, const std::string& address,
+                const std::function<void(const std::string&, const std::string&)>& audit);
 int handleLogout(mg_connection* conn, LoginBook& logins);
 
 // The user of the request's session cookie, or nullopt.

@@ -18,6 +18,7 @@
 #include "client/tls_front.hpp"
 #include "client/view_logins.hpp"
 #include "view_auth.hpp"
+#include "wire/audit_log.hpp"
 #include "wire/mesh_codec.hpp"
 #include "wire/messages.hpp"
 
@@ -82,6 +83,7 @@ bool isLoopbackAddress(const std::string& ip) {
 // One browser's WebSocket: its cursor in the hub and the thread that sends it what is new.
 struct Browser {
     mg_connection* conn = nullptr;
+    std::string who;  // the audit trail's identity: "login USER" or "http ADDRESS"
     ViewHub::Cursor cursor;
     std::thread sender;
 };
@@ -94,8 +96,32 @@ struct ViewServer::Impl {
     mg_context* ctx = nullptr;
     mutable std::mutex browsers_mutex;
     std::map<const mg_connection*, std::unique_ptr<Browser>> browsers;
-    std::unique_ptr<LoginBook> logins;  // with TLS: who may see anything; null: plain HTTP, no login
-    std::unique_ptr<TlsFront> front;    // with TLS: the browsers' port; CivetWeb listens on loopback behind it
+    std::unique_ptr<LoginBook> logins;      // with TLS: who may see anything; null: plain HTTP, no login
+    std::unique_ptr<TlsFront> front;        // with TLS: the browsers' port; CivetWeb listens on loopback behind it
+    std::unique_ptr<wire::AuditLog> audit;  // config.audit_file: downloads, snapshots, follows and logins
+    std::string recorder;                   // "viewer HOST"
+
+    // Who a request comes from, for the audit trail: the viewer login, or the address of a browser without one.
+    std::string who(const mg_connection* conn) const {
+        if (logins) {
+            if (auto user = detail::sessionUser(conn, *logins)) return "login " + *user;
+            return "login (none)";
+        }
+        return std::string("http ") + mg_get_request_info(conn)->remote_addr;
+    }
+    void record(const std::string& action, const std::string& session, const std::string& identity,
+                const std::string& outcome) const {
+        if (!audit) return;
+        wire::AuditRecord r;
+        r.action = action;
+        r.session = session;
+        r.identity = identity;
+        r.outcome = outcome;
+        r.recorder = recorder;
+        if (const Status s = audit->append(std::move(r)); !s.isOk()) {
+            std::fprintf(stderr, "facescan view: %s\n", s.message().c_str());
+        }
+    }
 
     // With TLS, the browser's address for this connection; nullopt when it did not come through the TLS front
     // (somebody on this machine at CivetWeb's loopback port).
@@ -134,7 +160,12 @@ int ViewServer::Impl::handleRequest(mg_connection* conn) {
     if (logins) {  // nothing but the login page without a session
         const auto address = clientAddress(conn);
         if (!address) return respondError(conn, 403, "connect with https:// to the viewer's port");
-        if (uri == "/login") return detail::handleLogin(conn, *logins, config.login.session_max_s, *address);
+        if (uri == "/login") {
+            return detail::handleLogin(conn, *logins, config.login.session_max_s, *address,
+                                       [this](const std::string& user, const std::string& outcome) {
+                                           record("login", "", "login " + user, outcome);
+                                       });
+        }
         if (uri == "/logout" && method == "POST") return detail::handleLogout(conn, *logins);
         if (!detail::sessionUser(conn, *logins)) return detail::refuseWithoutLogin(conn, std::string(uri));
     }
@@ -143,7 +174,22 @@ int ViewServer::Impl::handleRequest(mg_connection* conn) {
                 {{"Allow", "GET, HEAD"}});
         return 405;
     }
-    if (uri == "/api/sessions" || uri.starts_with("/api/sessions/")) return handleApi(conn, uri.substr(13));
+    if (uri == "/api/sessions" || uri.starts_with("/api/sessions/")) {
+        const int status = handleApi(conn, uri.substr(13));
+        // A scan's data leaving the viewer: its snapshot or its mesh, by whom, and whether it went.
+        const std::string_view rest = uri.substr(std::min<size_t>(uri.size(), 14));
+        const size_t slash = rest.find('/');
+        if (slash != std::string_view::npos) {
+            const std::string_view what = rest.substr(slash + 1);
+            const char* action = what == "snapshot.drc" ? "snapshot" : what.starts_with("mesh.") ? "download" : nullptr;
+            if (action) {
+                record(action + (what.starts_with("mesh.") ? " " + std::string(what.substr(5)) : std::string()),
+                       std::string(rest.substr(0, slash)), who(conn),
+                       status == 200 ? "ok" : "error: HTTP " + std::to_string(status));
+            }
+        }
+        return status;
+    }
     for (const LoadedAsset& asset : assets) {
         if (uri == asset.url) return sendAsset(conn, asset);
     }
@@ -252,6 +298,7 @@ void onWsReady(mg_connection* conn, void* data) {
     auto* impl = static_cast<ViewServer::Impl*>(data);
     auto browser = std::make_unique<Browser>();
     browser->conn = conn;
+    browser->who = impl->who(conn);
     Browser* raw = browser.get();
     std::lock_guard lock(impl->browsers_mutex);
     impl->browsers[conn] = std::move(browser);
@@ -276,6 +323,7 @@ int onWsData(mg_connection* conn, int flags, char* data, size_t size, void* cb) 
         const std::string session = text.substr(7);
         if (Status s = wire::validateSessionId(session); s.isOk()) {
             impl->hub->follow(browser->cursor, session);
+            impl->record("follow", session, browser->who, "ok");
             return 1;
         } else {
             error = "bad session id: " + s.message();
@@ -337,6 +385,11 @@ StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& 
     impl.hub = &hub;
     impl.fetch_mesh = std::move(fetch_mesh);
     impl.logins = std::move(logins);
+    if (!config.audit_file.empty()) {
+        ASSIGN_OR_RETURN(impl.audit, wire::AuditLog::open(config.audit_file));
+        char host[256] = {};
+        impl.recorder = std::string("viewer ") + (::gethostname(host, sizeof host - 1) == 0 ? host : "?");
+    }
 
     // With TLS, CivetWeb serves plain HTTP on a loopback port of its own behind the TLS front (client/tls_front.hpp:
     // Debian's CivetWeb cannot load OpenSSL 3 for its own HTTPS).

@@ -19,6 +19,7 @@
 #include "client/web_assets.hpp"
 #include "run_command.hpp"
 #include "test_domain.hpp"
+#include "wire/audit_log.hpp"
 namespace {
 
 using CliRun = facescan::testing::CommandRun;
@@ -133,6 +134,45 @@ TEST(CliErrors, ViewWithTlsButNoCertificateSaysWhatToRun) {
     EXPECT_EQ(run.exit_code, 5) << run.out;
     EXPECT_TRUE(contains(run.out, "/nonexistent/viewer/web.pem")) << run.out;
     EXPECT_TRUE(contains(run.out, "facescan-site web SITE NAME --host THIS-HOST")) << run.out;
+}
+
+// `facescan audit` reads the trails a server and a viewer wrote, oldest first, one session's with --session.
+TEST(CliErrors, AuditPrintsTheTrailsOfServersAndViewers) {
+    const auto dir = std::filesystem::temp_directory_path() / ("facescan_cli_audit_" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir / "data");
+    {
+        auto server = facescan::wire::AuditLog::open(dir / "data" / "audit.log");
+        auto viewer = facescan::wire::AuditLog::open(dir / "view.log");
+        ASSERT_TRUE(server.isOk() && viewer.isOk());
+        ASSERT_TRUE((*server)
+                        ->append({2'000'000'000'000'000'000, "reset", "s1", "client ana@pc:1:2", "ok", "server a"})
+                        .isOk());
+        ASSERT_TRUE(
+            (*viewer)->append({1'000'000'000'000'000'000, "download ply", "s1", "login bob", "ok", "viewer v"}).isOk());
+        ASSERT_TRUE((*server)
+                        ->append({3'000'000'000'000'000'000, "get_mesh", "s2", "client ana@pc:1:2",
+                                  "error: unknown session 's2'", "server a"})
+                        .isOk());
+    }
+    const CliRun all = runCli("audit " + (dir / "data").string() + " " + (dir / "view.log").string());
+    EXPECT_EQ(all.exit_code, 0) << all.out;
+    const size_t download = all.out.find("download ply"), reset = all.out.find("reset"), get = all.out.find("get_mesh");
+    ASSERT_NE(download, std::string::npos) << all.out;
+    EXPECT_LT(download, reset) << "oldest first, across files: " << all.out;
+    EXPECT_LT(reset, get) << all.out;
+    EXPECT_TRUE(contains(all.out, "login bob")) << all.out;
+    EXPECT_TRUE(contains(all.out, "client ana@pc:1:2")) << all.out;
+    EXPECT_TRUE(contains(all.out, "2001-09-09T01:46:40.000Z")) << all.out;
+    const CliRun one =
+        runCli("audit " + (dir / "data").string() + " " + (dir / "view.log").string() + " --session s2 --json");
+    EXPECT_EQ(one.exit_code, 0) << one.out;
+    EXPECT_EQ(one.out,
+              "{\"time\":\"2065-01-24T05:20:00.000Z\",\"action\":\"get_mesh\",\"session\":\"s2\",\"identity\":"
+              "\"client ana@pc:1:2\",\"outcome\":\"error: unknown session 's2'\",\"recorder\":\"server a\"}\n");
+    const CliRun missing = runCli("audit " + (dir / "nothing").string());
+    EXPECT_EQ(missing.exit_code, 2) << missing.out;
+    EXPECT_TRUE(contains(missing.out, "no audit trail at")) << missing.out;
+    std::filesystem::remove_all(dir);
 }
 
 TEST(CliErrors, NoServerExitsThreeAfterTheTimeout) {

@@ -14,6 +14,7 @@
 #include "client/view_server.hpp"
 #include "client/web_assets.hpp"
 #include "site_fixture.hpp"
+#include "wire/audit_log.hpp"
 #include "wire/mesh_codec.hpp"
 
 namespace {
@@ -59,7 +60,7 @@ struct Viewer {
 };
 
 // A viewer on 127.0.0.1 with the identity folder `tls_dir`, showing session "scan-7".
-std::unique_ptr<Viewer> startViewer(const fs::path& tls_dir, LoginParams login = {}) {
+std::unique_ptr<Viewer> startViewer(const fs::path& tls_dir, LoginParams login = {}, const fs::path& audit = {}) {
     auto viewer = std::make_unique<Viewer>();
     SessionStatus s;
     s.session_id = "scan-7";
@@ -76,6 +77,7 @@ std::unique_ptr<Viewer> startViewer(const fs::path& tls_dir, LoginParams login =
     config.web_root = *findWebRoot();
     config.tls_dir = tls_dir;
     config.login = login;
+    config.audit_file = audit;
     auto started =
         ViewServer::start(config, viewer->hub, [](const std::string& session) -> StatusOr<std::vector<uint8_t>> {
             if (session == "scan-7") return patchDraco();
@@ -167,7 +169,8 @@ TEST_F(TlsView, WithoutALoginEveryPageAndCallIsRefusedAndTheWebSocketToo) {
 TEST_F(TlsView, ALoginSeesTheScanUntilLogoutAndWrongPasswordsAreBraked) {
     LoginParams login;
     login.free_failures = 3;
-    auto viewer = startViewer(site_->identity("viewer"), login);
+    const fs::path audit = site_->root() / "view-audit.log";
+    auto viewer = startViewer(site_->identity("viewer"), login, audit);
     ASSERT_TRUE(viewer->server) << viewer->status.toString();
     const uint16_t port = viewer->server->port();
     const auto wrong = curl(ca(), "localhost", port, "/login", "-d 'user=alice&password=nope'");
@@ -216,6 +219,25 @@ TEST_F(TlsView, ALoginSeesTheScanUntilLogoutAndWrongPasswordsAreBraked) {
     EXPECT_EQ(httpCode(braked), 429) << braked.out;
     EXPECT_TRUE(std::regex_search(braked.out, std::regex("Retry-After: (29|30)"))) << braked.out;
     EXPECT_FALSE(contains(braked.out, "Set-Cookie")) << braked.out;
+
+    // The audit trail names the login for every fetch, and every login attempt with its outcome.
+    auto records = wire::readAuditLog(audit);
+    ASSERT_TRUE(records.isOk()) << records.status().toString();
+    std::vector<std::string> lines;
+    for (const wire::AuditRecord& r : *records) {
+        lines.push_back(r.action + " | " + r.session + " | " + r.identity + " | " + r.outcome);
+        EXPECT_TRUE(r.recorder.starts_with("viewer ")) << r.recorder;
+    }
+    const std::vector<std::string> expected = {
+        "login |  | login alice | error: wrong user or password (from 127.0.0.1)",
+        "login |  | login alice | ok (from 127.0.0.1)",
+        "snapshot | scan-7 | login alice | ok",
+        "download ply | scan-7 | login alice | ok",
+        "login |  | login alice | error: wrong user or password (from 127.0.0.1)",
+        "login |  | login alice | error: wrong user or password (from 127.0.0.1)",
+        "login |  | login alice | error: wrong user or password (from 127.0.0.1)",
+        "login |  | login alice | error: locked out after wrong passwords (from 127.0.0.1)"};
+    EXPECT_EQ(lines, expected);
 }
 
 TEST_F(TlsView, ACertificateOfAnotherSiteExpiredOrForAnotherHostIsRejectedByAClientThatTrustsTheSite) {

@@ -23,6 +23,7 @@
 #include "server_rig.hpp"
 #include "service/frame_load.hpp"
 #include "test_agent.hpp"
+#include "wire/audit_log.hpp"
 #include "wire/mesh_codec.hpp"
 
 namespace facescan::service {
@@ -265,16 +266,39 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
     auto final_status = rig.client->waitForStatus(
         "live-1", [](const StatusCopy& s) { return s.state == facescan_wire_STATE_FINISHED; }, 5s);
     EXPECT_TRUE(final_status);
+    // The audit trail: every command above, in order, with the client that sent it and the outcome.
+    auto audit = wire::readAuditLog(params.data_dir / "audit.log");
+    ASSERT_TRUE(audit.isOk()) << audit.status().toString();
+    std::vector<std::string> actions;
+    for (const wire::AuditRecord& r : *audit) {
+        actions.push_back(r.action);
+        EXPECT_EQ(r.session, "live-1");
+        EXPECT_EQ(r.identity, "client server_test");
+        EXPECT_EQ(r.outcome, "ok");
+        EXPECT_EQ(r.recorder, "server test-server");
+        EXPECT_GT(r.time_ns, 1'700'000'000'000'000'000);
+    }
+    EXPECT_EQ(actions, (std::vector<std::string>{"get_trajectory", "get_mesh", "get_preview", "finish", "get_mesh"}));
+    struct stat st {};
+    ASSERT_EQ(::stat((params.data_dir / "audit.log").c_str(), &st), 0);
+    EXPECT_EQ(st.st_mode & 07777, 0600u);
 }
 
 TEST(ServerSession, UnknownSessionsAndBadRequestsGetErrorReplies) {
     const uint32_t domain = privateDomain(12);
-    Rig rig = makeRig(testParams(domain, "errors"));
+    const ServerParams params = testParams(domain, "errors");
+    Rig rig = makeRig(params);
     ASSERT_TRUE(rig.server && rig.client);
     auto unknown = rig.client->command("nobody", facescan_wire_CMD_GET_MESH, 5s);
     ASSERT_TRUE(unknown.isOk()) << "silence instead of an error reply";
     EXPECT_FALSE(unknown->ok);
     EXPECT_EQ(unknown->error, "unknown session 'nobody'");
+    auto audit = wire::readAuditLog(params.data_dir / "audit.log");
+    ASSERT_TRUE(audit.isOk()) << audit.status().toString();
+    ASSERT_FALSE(audit->empty());
+    EXPECT_EQ(audit->front().action, "get_mesh");
+    EXPECT_EQ(audit->front().session, "nobody");
+    EXPECT_EQ(audit->front().outcome, "error: unknown session 'nobody'") << "refusals are recorded too";
     // An enum value outside CommandKind cannot even be serialised by DDS; an empty request id can be sent.
     const std::string empty;
     auto bad = rig.client->command("nobody", facescan_wire_CMD_GET_STATUS, 5s, &empty);

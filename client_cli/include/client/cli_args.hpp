@@ -23,7 +23,19 @@ enum ExitCode : int {
     kExitInterrupted = 130,  // Ctrl-C (128 + SIGINT, the shell convention)
 };
 
-enum class Command { kSessions, kWatch, kStatus, kMesh, kPreview, kTrajectory, kFinish, kReset, kView, kServers };
+enum class Command {
+    kSessions,
+    kWatch,
+    kStatus,
+    kMesh,
+    kPreview,
+    kTrajectory,
+    kFinish,
+    kReset,
+    kView,
+    kServers,
+    kAudit
+};
 
 struct CliOptions {
     Command command = Command::kSessions;
@@ -41,6 +53,8 @@ struct CliOptions {
     bool view_open = false;                     // view --open: open the page in the desktop's browser
     bool view_insecure_http = false;            // view --insecure-http: plain HTTP beyond loopback (warned)
     std::string view_tls;                       // view --tls DIR/NAME: HTTPS + WSS with a login
+    std::string view_audit;                     // view --audit FILE: its audit trail (default: defaultViewAudit)
+    std::vector<std::string> audit_files;       // audit FILE|DATA_DIR...: the trails to read
     wire::DomainConfig domain{0, "lan"};        // --domain N, --profile P, --security DIR/NAME
     std::chrono::milliseconds timeout{10'000};  // --timeout SECONDS: how long to wait for a server
 

@@ -48,6 +48,9 @@ struct ViewServerConfig {
     // WebSocket then need a session. Empty: plain HTTP without a login.
     std::filesystem::path tls_dir;
     LoginParams login;  // session timeouts and the brake on wrong passwords
+    // The audit trail (wire/audit_log.hpp): snapshots and meshes fetched, sessions followed, logins, each with the
+    // viewer login (or the address of a browser without one). Empty: none.
+    std::filesystem::path audit_file;
 
     // InvalidArgument for a bind that is not an IP address, a thread count out of range, or a non-loopback bind
     // without tls_dir or insecure_http (the message says how to set TLS and a login up).

@@ -44,6 +44,7 @@ Status Server::start() {
     RETURN_IF_ERROR(checkDataDir(params_.data_dir));
     ASSIGN_OR_RETURN(data_dir_lock_, DataDirLock::acquire(params_.data_dir, params_.server_id));
     // What an older version (or a copy) left readable goes owner-only, like everything the server writes now.
+    ASSIGN_OR_RETURN(audit_, wire::AuditLog::open(params_.data_dir / "audit.log"));
     ASSIGN_OR_RETURN(const int made_private, wire::makeTreePrivate(params_.data_dir));
     if (made_private > 0) {
         std::fprintf(stderr, "facescan-server: made %d file(s) and folder(s) in %s readable by this user only\n",
@@ -303,7 +304,7 @@ void Server::takeCommands() {
     auto n = command_reader_->take([&](const facescan_wire_ScanCommand& msg, const dds_sample_info_t& info) {
         if (!info.valid_data) return;
         got.push_back({wire::fromDds(msg.session_id), wire::fromDds(msg.request_id), static_cast<uint32_t>(msg.kind),
-                       steadyNowNs()});
+                       steadyNowNs(), wire::fromDds(msg.client_id)});
     });
     if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
     if (!viewFresh()) {
@@ -469,6 +470,7 @@ void Server::reply(const Command& c, const Status& status, const MeshResult* mes
     if (const Status s = reply_writer_->write(r); !s.isOk()) {
         std::fprintf(stderr, "facescan-server: reply to %s: %s\n", c.request_id.c_str(), s.toString().c_str());
     }
+    audit(c, status);
 }
 
 void Server::publishStatus(const SessionStats& s) {

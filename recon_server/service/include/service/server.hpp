@@ -37,6 +37,7 @@
 #include "service/server_params.hpp"
 #include "service/session.hpp"
 #include "service/watchdog.hpp"
+#include "wire/audit_log.hpp"
 #include "wire/topics.hpp"
 
 namespace facescan::service {
@@ -94,6 +95,7 @@ class Server {
         std::string session_id, request_id;
         uint32_t kind = 0;
         int64_t received_ns = 0;
+        std::string client_id;  // as the client sent it (its DDS Security identity's name first, when it has one)
     };
     struct Candidate {  // a CameraInfo of a session nobody owns yet
         wire::CameraInfoData camera;
@@ -119,6 +121,8 @@ class Server {
     void statusLoop();
     bool waitForTick(std::chrono::steady_clock::time_point& next, std::chrono::duration<double> period);
     void runCommand(const Command& c);
+    // Appends the answered command to the audit trail (server_audit.cpp); a status query is not recorded.
+    void audit(const Command& c, const Status& status);
     void reply(const Command& c, const Status& status, const MeshResult* mesh = nullptr,
                const std::vector<uint8_t>* payload = nullptr);
     void publishStatus(const SessionStats& s);
@@ -174,7 +178,8 @@ class Server {
     std::vector<std::shared_ptr<OwnedSession>> ownedSessions() const;
 
     ServerParams params_;
-    DataDirLock data_dir_lock_;  // held for the server's life (released last)
+    DataDirLock data_dir_lock_;              // held for the server's life (released last)
+    std::unique_ptr<wire::AuditLog> audit_;  // DATA_DIR/audit.log: every command answered (wire/audit_log.hpp)
     std::unique_ptr<wire::Participant> participant_;
     std::unique_ptr<Cluster> cluster_;
     std::unique_ptr<Replicator> replicator_;
