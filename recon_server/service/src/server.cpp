@@ -117,6 +117,7 @@ Status Server::start() {
         const dds_return_t rc = dds_waitset_attach(ws, c, c);
         if (rc < 0) return wire::ddsStatus(rc, "attach condition");
     }
+    startRetention();  // before the resume: an expired replica is erased, not resumed
     loadResumable();
     RETURN_IF_ERROR(join());
     joined_ = true;

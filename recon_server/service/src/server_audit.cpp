@@ -1,5 +1,6 @@
 // The server's audit trail (wire/audit_log.hpp): every command it answers about a scan's data or model, with the
-// client that sent it, the session and the outcome, in DATA_DIR/audit.log.
+// client that sent it, the session and the outcome, in DATA_DIR/audit.log; and its retention (service/erasure.hpp),
+// whose erasures are recorded there too.
 #include <cstdio>
 
 #include "service/server.hpp"
@@ -32,6 +33,37 @@ void Server::audit(const Command& c, const Status& status) {
     if (const Status s = audit_->append(std::move(r)); !s.isOk()) {
         std::fprintf(stderr, "facescan-server: %s\n", s.message().c_str());
     }
+}
+
+void Server::startRetention() {
+    if (params_.retain_days <= 0) return;
+    const int days = params_.retain_days;
+    std::fprintf(stderr, "facescan-server: retention: sessions whose newest file is older than %d day(s) are erased\n",
+                 days);
+    retention_ = std::make_unique<RetentionSweeper>(
+        params_.data_dir, std::chrono::seconds(int64_t(days) * 86400), std::chrono::hours(1),
+        [this, days](const ErasureReport& report, const Status& status) {
+            std::string what = std::to_string(report.removed.size()) + " file(s)";
+            if (!report.removed.empty())
+                what += " (" + report.removed.front() + (report.removed.size() > 1 ? ", ..." : "") + ")";
+            if (status.isOk()) {
+                std::fprintf(stderr, "facescan-server: retention (%d days): erased session %s from %s: removed %s\n",
+                             days, report.session_id.c_str(), params_.data_dir.c_str(), what.c_str());
+            } else {
+                std::fprintf(stderr, "facescan-server: retention (%d days): cannot erase session %s: %s\n", days,
+                             report.session_id.c_str(), status.message().c_str());
+            }
+            if (!audit_) return;
+            wire::AuditRecord r;
+            r.action = "delete";
+            r.session = report.session_id;
+            r.identity = "retention " + std::to_string(days) + " days";
+            r.outcome = status.isOk() ? "ok: removed " + what : "error: " + status.message();
+            r.recorder = "server " + params_.server_id;
+            if (const Status s = audit_->append(std::move(r)); !s.isOk()) {
+                std::fprintf(stderr, "facescan-server: %s\n", s.message().c_str());
+            }
+        });
 }
 
 }  // namespace facescan::service

@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "recon/mesh_writer.hpp"
+#include "service/erasure.hpp"
 #include "wire/private_files.hpp"
 
 namespace facescan::service {
@@ -135,6 +136,11 @@ std::optional<std::pair<std::string, uint32_t>> readSessionOwner(const std::file
 
 StatusOr<std::filesystem::path> claimSessionDir(const std::filesystem::path& data_dir, const std::string& session_id,
                                                 const std::string& server_id, uint32_t epoch, std::string* note) {
+    // An erased scan is never written again: not by a late replica, a finish or a resume.
+    if (isErased(data_dir, session_id)) {
+        return permissionDenied("session " + session_id + " was erased from " + data_dir.string() +
+                                " (its tombstone is in @erased/): nothing of it is written again");
+    }
     std::filesystem::path dir = data_dir / session_id;
     RETURN_IF_ERROR(wire::createPrivateDir(dir));
     const auto current = readSessionOwner(dir);

@@ -32,6 +32,7 @@
 
 #include "service/cluster.hpp"
 #include "service/data_dir_lock.hpp"
+#include "service/erasure.hpp"
 #include "service/finished_sessions.hpp"
 #include "service/retirer.hpp"
 #include "service/server_params.hpp"
@@ -178,8 +179,10 @@ class Server {
     std::vector<std::shared_ptr<OwnedSession>> ownedSessions() const;
 
     ServerParams params_;
-    DataDirLock data_dir_lock_;              // held for the server's life (released last)
-    std::unique_ptr<wire::AuditLog> audit_;  // DATA_DIR/audit.log: every command answered (wire/audit_log.hpp)
+    DataDirLock data_dir_lock_;                    // held for the server's life (released last)
+    std::unique_ptr<wire::AuditLog> audit_;        // DATA_DIR/audit.log: every command answered (wire/audit_log.hpp)
+    std::unique_ptr<RetentionSweeper> retention_;  // --retain-days (server_audit.cpp starts it); stops before audit_
+    void startRetention();
     std::unique_ptr<wire::Participant> participant_;
     std::unique_ptr<Cluster> cluster_;
     std::unique_ptr<Replicator> replicator_;
