@@ -138,6 +138,17 @@ const std::vector<CommandSpec>& commandSpecs() {
          "                  anyone on the network sees and downloads every scan. Refused without it; it warns at\n"
          "                  every start. From another machine, an SSH tunnel to 127.0.0.1 is the safe way:\n"
          "                  ssh -L 8080:127.0.0.1:8080 THIS-HOST, then open http://127.0.0.1:8080/ there\n"},
+        {Command::kDelete,
+         "delete",
+         1,
+         1,
+         {"--force"},
+         "Usage: facescan delete SESSION [--force]\n"
+         "Erases a scan from every server on the domain (a person's right to erasure): its results, replicas and\n"
+         "the files of every owner it had, in each server's data dir, and prints what each server removed. Each\n"
+         "server keeps a tombstone, so nothing writes the scan again, and passes the request on: a server that is\n"
+         "down now erases its copy when it comes back. A scan still being scanned is refused unless --force.\n"
+         "  --force         finish the scan first if it is still running, then erase it\n"},
         {Command::kAudit,
          "audit",
          1,
@@ -209,6 +220,7 @@ std::string usageText(const std::string& command) {
                "  finish SESSION                 end a scan now\n"
                "  reset SESSION                  clear a scan's model and start again\n"
                "  view [--port N] [--open]       watch every scan in a web browser (live 3D, downloads)\n"
+               "  delete SESSION                 erase a scan from every server (--force: even a running one)\n"
                "  audit FILE|DATA_DIR...         who fetched, reset or finished which scan (--session S)\n"
                "\n") +
            globalOptions() + "\n" + kExitCodes + "\n'facescan COMMAND --help' describes one command.\n";
@@ -305,6 +317,8 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
             options.output = value;
         } else if (option == "--finish") {
             options.finish = true;
+        } else if (option == "--force") {
+            options.force = true;
         } else if (option == "--save") {
             if (value.empty()) return invalidArgument("--save needs a folder");
             options.save_dir = value;

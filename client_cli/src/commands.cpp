@@ -314,6 +314,7 @@ int runCommand(const CliOptions& options) {
         case Command::kView: return runView(options);
         case Command::kServers: return runServers(options);
         case Command::kAudit: return runAudit(options);
+        case Command::kDelete: return runDelete(options);
     }
     return kExitUsage;
 }

@@ -152,19 +152,22 @@ EOF
 # The cluster's public topics (servers announce themselves and claim sessions) are published by servers and read
 # by everyone (an agent streams to its session's owner); facescan/cluster/* is between servers only.
 CLUSTER_PUBLIC="facescan/ServerAnnounce facescan/SessionOwner"
+# Erasure: a client asks (EraseRequest), servers pass the request on (so a server that was down learns it) and
+# report (EraseReport). Identities enrolled before these topics existed need their permissions made again.
+ERASURE="facescan/EraseRequest facescan/EraseReport"
 role_publishes() {
     case $1 in
         agent) echo "facescan/CameraInfo facescan/RgbdFrame" ;;
-        server) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/cluster/*" ;;
-        client) echo "facescan/ScanCommand" ;;
+        server) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/cluster/* $ERASURE" ;;
+        client) echo "facescan/ScanCommand facescan/EraseRequest" ;;
         viewer) echo "" ;;
     esac
 }
 role_subscribes() {
     case $1 in
         agent) echo "facescan/ScanStatus facescan/ScanReply $CLUSTER_PUBLIC" ;;
-        server) echo "facescan/CameraInfo facescan/RgbdFrame facescan/ScanCommand $CLUSTER_PUBLIC facescan/cluster/*" ;;
-        client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC" ;;
+        server) echo "facescan/CameraInfo facescan/RgbdFrame facescan/ScanCommand $CLUSTER_PUBLIC facescan/cluster/* facescan/EraseRequest" ;;
+        client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/EraseReport" ;;
         viewer) echo "facescan/ScanStatus facescan/MeshSnapshot $CLUSTER_PUBLIC" ;;
     esac
 }

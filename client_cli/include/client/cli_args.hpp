@@ -34,7 +34,8 @@ enum class Command {
     kReset,
     kView,
     kServers,
-    kAudit
+    kAudit,
+    kDelete
 };
 
 struct CliOptions {
@@ -45,6 +46,7 @@ struct CliOptions {
     std::string session;                        // SESSION argument (optional for watch)
     std::string output;                         // -o FILE (mesh, preview; trajectory: empty = stdout)
     bool finish = false;                        // mesh --finish: end the scan first
+    bool force = false;                         // delete --force: finish a running scan, then delete it
     std::string save_dir;                       // watch --save DIR: write each snapshot there
     std::string save_format = "ply";            // watch --save-format: ply|obj|stl|off|drc|glb
     bool json = false;                          // sessions/status --json: one JSON object per line

@@ -60,6 +60,17 @@ bool isErased(const fs::path& data_dir, const std::string& session_id) {
     return wire::validateSessionId(session_id).isOk() && fs::exists(data_dir / kTombstones / session_id, ec);
 }
 
+std::vector<std::string> erasedSessions(const fs::path& data_dir) {
+    std::vector<std::string> out;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(data_dir / kTombstones, ec)) {
+        const std::string name = e.path().filename().string();
+        if (wire::validateSessionId(name).isOk() && !name.ends_with(".tmp")) out.push_back(name);
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
 std::vector<std::string> sessionsOlderThan(const fs::path& data_dir, std::chrono::seconds max_age,
                                            fs::file_time_type now) {
     std::vector<std::string> old;

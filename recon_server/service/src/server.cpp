@@ -117,7 +117,8 @@ Status Server::start() {
         const dds_return_t rc = dds_waitset_attach(ws, c, c);
         if (rc < 0) return wire::ddsStatus(rc, "attach condition");
     }
-    startRetention();  // before the resume: an expired replica is erased, not resumed
+    startRetention();                 // before the resume: an expired replica is erased, not resumed
+    RETURN_IF_ERROR(startErasure());  // and so is one the domain asks to erase
     loadResumable();
     RETURN_IF_ERROR(join());
     joined_ = true;
@@ -515,6 +516,8 @@ void Server::publishRefused(const std::string& session_id, const std::string& de
 }
 
 void Server::publishSnapshot(const std::string& session_id, const SnapshotResult& snap) {
+    // An erased scan's geometry never goes out again, not even the final snapshot of a scan finished to be erased.
+    if (isErased(params_.data_dir, session_id)) return;
     facescan_wire_MeshSnapshot m{};
     m.session_id = wire::stringView(session_id);
     m.seq = snap.seq;

@@ -1,6 +1,7 @@
 // The server's audit trail (wire/audit_log.hpp): every command it answers about a scan's data or model, with the
 // client that sent it, the session and the outcome, in DATA_DIR/audit.log; and its retention (service/erasure.hpp),
 // whose erasures are recorded there too.
+#include <algorithm>
 #include <cstdio>
 
 #include "service/server.hpp"
@@ -64,6 +65,58 @@ void Server::startRetention() {
                 std::fprintf(stderr, "facescan-server: %s\n", s.message().c_str());
             }
         });
+}
+
+Status Server::startErasure() {
+    ErasureService::Hooks hooks;
+    hooks.scanning_here = [this](const std::string& session) {
+        std::lock_guard lk(sessions_mutex_);
+        const auto it = owned_.find(session);
+        return it != owned_.end() && it->second->session && it->second->session->open();
+    };
+    hooks.erased = [this](const std::string& client, const Status& status, const ErasureReport& report) {
+        if (status.isOk() && snapshot_writer_) {
+            // The last snapshot of the scan is still in this server's durable writer, for readers that join later:
+            // let the instance go, so no viewer starting now gets its geometry.
+            facescan_wire_MeshSnapshot key{};
+            key.session_id = wire::stringView(report.session_id);
+            // Unregistering drops the instance from the writer's durable history (and disposes of it for readers).
+            if (const Status u = snapshot_writer_->unregister(key); !u.isOk() && u.code() != StatusCode::kNotFound) {
+                std::fprintf(stderr, "facescan-server: erasing %s: the last snapshot: %s\n", report.session_id.c_str(),
+                             u.toString().c_str());
+            }
+        }
+        if (status.isOk()) {
+            std::fprintf(stderr, "facescan-server: erased session %s (asked by %s): removed %zu file(s)\n",
+                         report.session_id.c_str(), client.c_str(), report.removed.size());
+        } else {
+            std::fprintf(stderr, "facescan-server: not erasing session %s (asked by %s): %s\n",
+                         report.session_id.c_str(), client.c_str(), status.message().c_str());
+        }
+        if (!audit_) return;
+        wire::AuditRecord r;
+        r.action = "delete";
+        r.session = report.session_id;
+        r.identity = client.starts_with("server ") ? client : "client " + client;
+        r.outcome = status.isOk() ? "ok: removed " + std::to_string(report.removed.size()) + " file(s)"
+                                  : "error: " + status.message();
+        r.recorder = "server " + params_.server_id;
+        if (const Status s = audit_->append(std::move(r)); !s.isOk()) {
+            std::fprintf(stderr, "facescan-server: %s\n", s.message().c_str());
+        }
+    };
+    auto started = ErasureService::start(*participant_, params_.data_dir, params_.server_id, std::move(hooks),
+                                         std::min(1.0, double(params_.join_settle_s)));
+    if (!started.isOk()) {
+        // An identity enrolled before erasure existed may not use its topics: the server still scans.
+        std::fprintf(stderr,
+                     "facescan-server: WARNING: facescan delete cannot reach this server (%s); with DDS Security, "
+                     "enrol its identity again (site.sh add) so that its permissions name the erasure topics\n",
+                     started.status().message().c_str());
+        return Status::ok();
+    }
+    erasure_ = std::move(started).value();
+    return Status::ok();
 }
 
 }  // namespace facescan::service

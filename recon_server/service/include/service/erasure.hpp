@@ -31,6 +31,8 @@ StatusOr<ErasureReport> eraseSession(const std::filesystem::path& data_dir, cons
                                      const std::string& reason);
 // Whether SESSION was erased here (its tombstone exists).
 bool isErased(const std::filesystem::path& data_dir, const std::string& session_id);
+// Every session erased here (the tombstones), sorted.
+std::vector<std::string> erasedSessions(const std::filesystem::path& data_dir);
 
 // The sessions in data_dir whose newest file is older than max_age (by modification time): finished scans and
 // replicas left behind alike. A session still being scanned writes its replica every second and is never old.

@@ -33,6 +33,7 @@
 #include "service/cluster.hpp"
 #include "service/data_dir_lock.hpp"
 #include "service/erasure.hpp"
+#include "service/erasure_service.hpp"
 #include "service/finished_sessions.hpp"
 #include "service/retirer.hpp"
 #include "service/server_params.hpp"
@@ -232,6 +233,9 @@ class Server {
     bool shut_down_ = false;
     bool joined_ = false;  // the join completed (this server's id is its own)
     std::thread intake_, command_, snapshot_, status_;
+    // `facescan delete` (server_audit.cpp starts it). Last: its thread stops before anything it uses goes.
+    std::unique_ptr<ErasureService> erasure_;
+    Status startErasure();
 };
 
 }  // namespace facescan::service
