@@ -158,5 +158,75 @@ TEST(Erasure, ARunningScanIsRefusedUnlessForceWhichFinishesAndErasesIt) {
     fs::remove_all(a.data_dir);
 }
 
+// During a cluster run: an owner, a standby holding the scan's replica in memory and on disk. After the delete
+// (--force: it was still running) no file, replica or memory copy of it is left on either, and the standby
+// restarted afterwards does not bring it back.
+TEST(Erasure, DeleteDuringAClusterRunLeavesNoCopyOnOwnerOrStandby) {
+    const uint32_t domain = testing::privateDomain(43);
+    ServerParams a = params(domain, "srv-one"), b = params(domain, "srv-two");
+    for (ServerParams* p : {&a, &b}) {
+        fs::remove_all(p->data_dir);
+        p->replica_interval_s = 0.2f;
+    }
+    auto server_a = Server::create(a);
+    auto server_b = Server::create(b);
+    ASSERT_TRUE(server_a.isOk() && server_b.isOk());
+    static const testing::EncodedSequence seq = testing::renderSequence(30);
+    auto agent = testing::TestAgent::create(domain, "clu-1", seq.intrinsics, false);
+    ASSERT_TRUE(agent.isOk()) << agent.status().toString();
+    ASSERT_TRUE((*agent)->waitForServer(10s));
+    ASSERT_TRUE((*agent)->sendCamera().isOk());
+    ASSERT_TRUE((*agent)->stream(seq, 30, 30.0f, /*end_of_stream=*/false).isOk());
+    // One of them stands by for the scan: its replica in memory, and the owner's (and the standby's) on disk.
+    Server* standby = nullptr;
+    for (int i = 0; i < 200 && !standby; ++i) {
+        if ((*server_a)->standbySessions() == 1) standby = server_a->get();
+        if ((*server_b)->standbySessions() == 1) standby = server_b->get();
+        if (!standby) std::this_thread::sleep_for(50ms);
+    }
+    ASSERT_TRUE(standby) << "no standby took the scan's replica";
+    const ServerParams& sp = standby == server_a->get() ? a : b;
+    const ServerParams& op = standby == server_a->get() ? b : a;
+    for (int i = 0; i < 100 && !fs::exists(op.data_dir / "clu-1" / "replica.log"); ++i)
+        std::this_thread::sleep_for(50ms);
+    ASSERT_TRUE(fs::exists(op.data_dir / "clu-1" / "replica.log")) << "the owner's replica on disk";
+
+    const auto run = cli(domain, "delete clu-1 --force");
+    EXPECT_EQ(run.exit_code, 0) << run.out;
+    EXPECT_TRUE(contains(run.out, "finished clu-1 on " + op.server_id)) << run.out;
+    EXPECT_TRUE(contains(run.out, "clu-1: erased on 2 of 2 server(s)")) << run.out;
+    for (int i = 0; i < 100 && (*server_a)->standbySessions() + (*server_b)->standbySessions() > 0; ++i) {
+        std::this_thread::sleep_for(50ms);
+    }
+    EXPECT_EQ(standby->standbySessions(), 0) << "the standby's replica in memory";
+    EXPECT_EQ((*server_a)->openSessions() + (*server_b)->openSessions(), 0);
+    const auto listed = [&] {
+        for (const auto* server : {server_a->get(), server_b->get()}) {
+            for (const auto& s : server->sessions()) {
+                if (s.session_id == "clu-1") return true;
+            }
+        }
+        return false;
+    };
+    for (int i = 0; i < 60 && listed(); ++i) std::this_thread::sleep_for(50ms);  // the status thread's next tick
+    EXPECT_FALSE(listed()) << "its record is still in a server's memory";
+    for (const ServerParams* p : {&a, &b}) {
+        EXPECT_FALSE(fs::exists(p->data_dir / "clu-1")) << p->server_id;
+        EXPECT_TRUE(isErased(p->data_dir, "clu-1")) << p->server_id;
+    }
+    // The standby restarts: nothing of the scan comes back, in its data dir or its list.
+    (standby == server_a->get() ? server_a : server_b)->reset();
+    auto again = Server::create(sp);
+    ASSERT_TRUE(again.isOk()) << again.status().toString();
+    std::this_thread::sleep_for(1s);
+    EXPECT_FALSE(fs::exists(sp.data_dir / "clu-1"));
+    for (const auto& s : (*again)->sessions()) EXPECT_NE(s.session_id, "clu-1");
+    agent->reset();
+    again->reset();
+    server_a->reset();
+    server_b->reset();
+    for (const ServerParams* p : {&a, &b}) fs::remove_all(p->data_dir);
+}
+
 }  // namespace
 }  // namespace facescan::service

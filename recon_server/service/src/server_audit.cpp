@@ -75,6 +75,10 @@ Status Server::startErasure() {
         return it != owned_.end() && it->second->session && it->second->session->open();
     };
     hooks.erased = [this](const std::string& client, const Status& status, const ErasureReport& report) {
+        // Its record in memory goes too: unlisted at once, its last status and snapshot out of the writers.
+        if (status.isOk()) {
+            if (auto record = finished_.remove(report.session_id)) forgetFinished(*record);
+        }
         if (status.isOk() && snapshot_writer_) {
             // The last snapshot of the scan is still in this server's durable writer, for readers that join later:
             // let the instance go, so no viewer starting now gets its geometry.
