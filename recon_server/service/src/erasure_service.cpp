@@ -29,10 +29,11 @@ StatusOr<std::unique_ptr<ErasureService>> ErasureService::start(const wire::Part
         s->republish(session, "tombstone", "server " + s->server_id_);
     // Requests already on the domain (from live servers' writers) before the server resumes anything.
     const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(settle_s);
-    do {
-        s->takeRequests();
+    s->takeRequests();
+    while (std::chrono::steady_clock::now() < until) {
         std::this_thread::sleep_for(50ms);
-    } while (std::chrono::steady_clock::now() < until);
+        s->takeRequests();
+    }
     ErasureService* raw = s.get();
     s->thread_ = std::thread([raw] {
         recon::nameThisThread("fs-erasure");

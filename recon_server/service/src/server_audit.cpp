@@ -3,6 +3,7 @@
 // whose erasures are recorded there too.
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 
 #include "service/server.hpp"
 
@@ -109,8 +110,15 @@ Status Server::startErasure() {
             std::fprintf(stderr, "facescan-server: %s\n", s.message().c_str());
         }
     };
+    // Requests already on the domain are waited for only when there is a replica to resume (the resume must not
+    // bring back an erased scan); finished files are erased as the requests arrive, start-up does not wait.
+    bool resumable = false;
+    std::error_code ec;
+    for (const auto& entry : std::filesystem::directory_iterator(params_.data_dir, ec)) {
+        resumable = resumable || std::filesystem::exists(entry.path() / "replica.log", ec);
+    }
     auto started = ErasureService::start(*participant_, params_.data_dir, params_.server_id, std::move(hooks),
-                                         std::min(1.0, double(params_.join_settle_s)));
+                                         resumable ? std::min(1.0, double(params_.join_settle_s)) : 0.0);
     if (!started.isOk()) {
         // An identity enrolled before erasure existed may not use its topics: the server still scans.
         std::fprintf(stderr,

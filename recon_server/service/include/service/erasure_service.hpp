@@ -25,8 +25,8 @@ class ErasureService {
         // After each request handled: the client that asked, the outcome and the report (log, audit trail).
         std::function<void(const std::string& client, const Status&, const ErasureReport&)> erased;
     };
-    // Creates the endpoints, takes the requests already on the domain for up to `settle_s` (before the server
-    // resumes anything from its data dir), then keeps taking them on a thread of its own.
+    // Creates the endpoints, takes the requests already on the domain for `settle_s` (0: only what has arrived;
+    // more when the server has replicas to resume), then keeps taking them on a thread of its own.
     static StatusOr<std::unique_ptr<ErasureService>> start(const wire::Participant& participant,
                                                            std::filesystem::path data_dir, std::string server_id,
                                                            Hooks hooks, double settle_s);
