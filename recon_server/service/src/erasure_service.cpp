@@ -75,15 +75,15 @@ void ErasureService::handle(const std::string& session, const std::string& reque
         const Status refused =
             Status(StatusCode::kUnavailable, "session " + session + " is still being scanned on server " + server_id_ +
                                                  ": finish it first (facescan finish " + session + "), then delete it");
-        report(session, request_id, refused, {});
         if (hooks_.erased) hooks_.erased(client_id, refused, ErasureReport{session, {}, false});
+        report(session, request_id, refused, {});
         return;
     }
     auto erased = eraseSession(data_dir_, session, "asked by " + client_id + " (request " + request_id + ")");
     const Status status = erased.status();
     const ErasureReport result = erased.isOk() ? *erased : ErasureReport{session, {}, false};
+    if (hooks_.erased) hooks_.erased(client_id, status, result);  // on record before the client hears of it
     report(session, request_id, status, result.removed);
-    if (hooks_.erased) hooks_.erased(client_id, status, result);
     if (status.isOk() && !known) republish(session, request_id, client_id);
 }
 

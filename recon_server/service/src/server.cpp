@@ -469,10 +469,10 @@ void Server::reply(const Command& c, const Status& status, const MeshResult* mes
         r.triangle_count = mesh->triangle_count;
     }
     if (payload) r.payload = wire::octetView(payload->data(), payload->size());
+    audit(c, status);  // on record before the answer (and any scan data in it) leaves
     if (const Status s = reply_writer_->write(r); !s.isOk()) {
         std::fprintf(stderr, "facescan-server: reply to %s: %s\n", c.request_id.c_str(), s.toString().c_str());
     }
-    audit(c, status);
 }
 
 void Server::publishStatus(const SessionStats& s) {
