@@ -217,7 +217,8 @@ TEST_F(TlsView, ALoginSeesTheScanUntilLogoutAndWrongPasswordsAreBraked) {
         curl(ca(), "localhost", port, "/login",
              "--data-urlencode 'user=alice' --data-urlencode 'password=" + std::string(kPassword) + "'");
     EXPECT_EQ(httpCode(braked), 429) << braked.out;
-    EXPECT_TRUE(std::regex_search(braked.out, std::regex("Retry-After: (29|30)"))) << braked.out;
+    // 30 s less what has passed since the brake came on (a busy machine may take seconds between requests).
+    EXPECT_TRUE(std::regex_search(braked.out, std::regex("Retry-After: ([1-9]|[12][0-9]|30)\r"))) << braked.out;
     EXPECT_FALSE(contains(braked.out, "Set-Cookie")) << braked.out;
 
     // The audit trail names the login for every fetch, and every login attempt with its outcome.
