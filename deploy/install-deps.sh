@@ -26,12 +26,15 @@ PACKAGES=(
     libopenni2-dev
     # codecs and nearest-neighbour search
     libzstd-dev libturbojpeg0-dev libjpeg62-turbo-dev libnanoflann-dev
-    # DDS Security: identity checks (OpenSSL), the site script (openssl); the plugins come with cyclonedds-dev
+    # DDS Security: identity checks (OpenSSL), the site script (openssl); the plugins come with cyclonedds-dev.
+    # Also the viewer's HTTPS (linked: Debian's CivetWeb cannot load OpenSSL 3 itself) and its login hashes
     libssl-dev openssl
     # the client: GLB export (glTF 2.0) and the web viewer's HTTP/WebSocket server
     libtinygltf-dev libcivetweb-dev zlib1g-dev
     # tests, benchmarks, fuzzers, formatting
     libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format
+    # the viewer's TLS test: a client that trusts only the site's CA (curl; openssl s_client for the WebSocket)
+    curl
     # the cross-machine cluster test: network namespaces, a bridge and veths (ip), packet loss (nft numgen)
     iproute2 nftables
     # the .deb and its test: dpkg-shlibdeps (dependencies), systemd-analyze and systemd-sysusers (units, user)

@@ -129,8 +129,8 @@ const std::vector<CommandSpec>& commandSpecs() {
          "view",
          0,
          0,
-         {"--port", "--bind", "--open"},
-         "Usage: facescan view [--port 8080] [--bind 127.0.0.1] [--open]\n"
+         {"--port", "--bind", "--open", "--insecure-http", "--tls", "--audit"},
+         "Usage: facescan view [--port 8080] [--bind 127.0.0.1] [--open] [--tls DIR/NAME | --insecure-http]\n"
          "Serves a web page that shows every scan on the domain live: the sessions with state, frames, fps and\n"
          "server; a 3D view of a session's latest snapshot (drag to turn, wheel to zoom, right-drag to pan) that\n"
          "updates as the scan grows; progress and the server's messages; and downloads of the mesh as PLY, OBJ,\n"
@@ -138,7 +138,39 @@ const std::vector<CommandSpec>& commandSpecs() {
          "needed). Runs until Ctrl-C.\n"
          "  --port N        TCP port (default 8080; 0 picks a free one, printed at start)\n"
          "  --bind ADDRESS  IP address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: the LAN)\n"
-         "  --open          open the page in this desktop's browser\n"},
+         "  --open          open the page in this desktop's browser\n"
+         "  --tls DIR/NAME  HTTPS and WSS with a login: DIR/NAME/web.pem (facescan-site web SITE NAME --host\n"
+         "                  THIS-HOST) and DIR/NAME/logins (facescan-site login SITE NAME USER). Browsers must trust\n"
+         "                  the site's CA (SITE/identity_ca.pem); sessions end after 15 min unused (12 h at most);\n"
+         "                  after 5 wrong passwords from an address or for a user, each try waits (30 s, doubling)\n"
+         "  --audit FILE    the viewer's audit trail: every snapshot and mesh fetched, session followed and login,\n"
+         "                  with the login (default $XDG_STATE_HOME/facescan/view-audit.log; facescan audit reads it)\n"
+         "  --insecure-http allow a --bind other machines reach although the page is plain HTTP without a login:\n"
+         "                  anyone on the network sees and downloads every scan. Refused without it; it warns at\n"
+         "                  every start. From another machine, an SSH tunnel to 127.0.0.1 is the safe way:\n"
+         "                  ssh -L 8080:127.0.0.1:8080 THIS-HOST, then open http://127.0.0.1:8080/ there\n"},
+        {Command::kDelete,
+         "delete",
+         1,
+         1,
+         {"--force"},
+         "Usage: facescan delete SESSION [--force]\n"
+         "Erases a scan from every server on the domain (a person's right to erasure): its results, replicas and\n"
+         "the files of every owner it had, in each server's data dir, and prints what each server removed. Each\n"
+         "server keeps a tombstone, so nothing writes the scan again, and passes the request on: a server that is\n"
+         "down now erases its copy when it comes back. A scan still being scanned is refused unless --force.\n"
+         "  --force         finish the scan first if it is still running, then erase it\n"},
+        {Command::kAudit,
+         "audit",
+         1,
+         16,
+         {"--session", "--json"},
+         "Usage: facescan audit FILE|DATA_DIR... [--session SESSION] [--json]\n"
+         "Prints audit trails: a server's (DATA_DIR/audit.log: every command it answered, with the client that\n"
+         "sent it, its DDS Security identity's name first) and the viewer's (view --audit: every snapshot and mesh\n"
+         "fetched, session followed and login, with the viewer login), oldest first. Nothing here changes them.\n"
+         "  --session S     only the records of session S\n"
+         "  --json          one JSON object per record\n"},
         {Command::kReset,
          "reset",
          1,
@@ -158,9 +190,9 @@ const CommandSpec* findSpec(const std::string& name) {
 }
 
 bool takesValue(const std::string& option) {
-    static const std::set<std::string> kValued = {"--timeout", "-o",     "--save",          "--save-format",
-                                                  "--port",    "--bind", "--max-triangles", "--keep",
-                                                  "--close",   "--crop"};
+    static const std::set<std::string> kValued = {
+        "--timeout", "-o",      "--save", "--save-format", "--port",  "--bind",   "--max-triangles",
+        "--keep",    "--close", "--crop", "--tls",         "--audit", "--session"};
     return kValued.count(option) > 0 || wire::isDdsOption(option);
 }
 
@@ -200,6 +232,8 @@ std::string usageText(const std::string& command) {
                "  finish SESSION                 end a scan now\n"
                "  reset SESSION                  clear a scan's model and start again\n"
                "  view [--port N] [--open]       watch every scan in a web browser (live 3D, downloads)\n"
+               "  delete SESSION                 erase a scan from every server (--force: even a running one)\n"
+               "  audit FILE|DATA_DIR...         who fetched, reset or finished which scan (--session S)\n"
                "\n") +
            globalOptions() + "\n" + kExitCodes + "\n'facescan COMMAND --help' describes one command.\n";
 }
@@ -307,6 +341,8 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
         } else if (option == "--crop") {
             ASSIGN_OR_RETURN(options.finish_params.crop_m, recon::parseCropBox(value));
             options.finish_here = true;
+        } else if (option == "--force") {
+            options.force = true;
         } else if (option == "--save") {
             if (value.empty()) return invalidArgument("--save needs a folder");
             options.save_dir = value;
@@ -325,13 +361,29 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
             options.view_bind = value;
         } else if (option == "--open") {
             options.view_open = true;
+        } else if (option == "--insecure-http") {
+            options.view_insecure_http = true;
+        } else if (option == "--audit") {
+            if (value.empty()) return invalidArgument("--audit needs a file name");
+            options.view_audit = value;
+        } else if (option == "--session") {
+            if (Status s = wire::validateSessionId(value); !s.isOk())
+                return invalidArgument("--session: " + s.message());
+            options.session = value;
+        } else if (option == "--tls") {
+            if (value.empty()) return invalidArgument("--tls needs the viewer's identity folder DIR/NAME");
+            options.view_tls = value;
         }
     }
 
     const int n = static_cast<int>(positional.size());
     if (n < spec->min_args) return invalidArgument(std::string("'") + spec->name + "' needs a SESSION");
     if (n > spec->max_args) return invalidArgument("unexpected argument '" + positional[spec->max_args] + "'");
-    if (n > 0) options.session = positional[0];
+    if (options.command == Command::kAudit) {
+        options.audit_files = positional;
+    } else if (n > 0) {
+        options.session = positional[0];
+    }
 
     if (options.command == Command::kMesh) {
         if (options.output.empty()) return invalidArgument("'mesh' needs -o FILE (.ply .obj .stl .off .drc .glb)");
@@ -346,6 +398,11 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
     if (options.command == Command::kView) {
         ViewServerConfig server;
         server.bind = options.view_bind;
+        server.insecure_http = options.view_insecure_http;
+        server.tls_dir = options.view_tls;
+        if (!options.view_tls.empty() && options.view_insecure_http) {
+            return invalidArgument("--tls and --insecure-http contradict each other: choose one");
+        }
         if (Status s = server.validate(); !s.isOk()) return s;
     }
     if (!values.count("--save") && values.count("--save-format")) {

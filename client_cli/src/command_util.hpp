@@ -27,5 +27,7 @@ void installInterruptHandler();
 
 int runWatch(const CliOptions& options);
 int runView(const CliOptions& options);
+int runAudit(const CliOptions& options);
+int runDelete(const CliOptions& options);
 
 }  // namespace facescan::client::detail

@@ -324,6 +324,8 @@ int runCommand(const CliOptions& options) {
         case Command::kReset: return runSimpleCommand(options, facescan_wire_CMD_RESET);
         case Command::kView: return runView(options);
         case Command::kServers: return runServers(options);
+        case Command::kAudit: return runAudit(options);
+        case Command::kDelete: return runDelete(options);
     }
     return kExitUsage;
 }

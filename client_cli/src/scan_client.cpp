@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "wire/dds_options.hpp"
+#include "wire/security.hpp"
 
 namespace facescan::client {
 namespace {
@@ -106,6 +107,13 @@ StatusOr<std::unique_ptr<ScanClient>> ScanClient::connect(const ClientConfig& co
     char host[64] = {};
     ::gethostname(host, sizeof(host) - 1);
     client->client_id_ = std::string(host) + ":" + std::to_string(::getpid()) + ":" + std::to_string(rd() % 1000000);
+    // Servers record who sent each command in their audit trail: the DDS Security identity's name leads the id
+    // (only enrolled identities may send commands on a secured domain).
+    if (!config.domain.security.empty()) {
+        if (auto identity = wire::checkIdentity(config.domain.security); identity.isOk()) {
+            client->client_id_ = identity->name + "@" + client->client_id_;
+        }
+    }
     return client;
 }
 

@@ -5,12 +5,15 @@
 #include <sys/wait.h>
 
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
 #include <mutex>
 #include <thread>
 
 #include "client/view_hub.hpp"
 #include "client/view_server.hpp"
 #include "command_util.hpp"
+#include "wire/private_files.hpp"
 
 extern char** environ;
 
@@ -26,6 +29,18 @@ void openInBrowser(const std::string& url) {
         return;
     }
     std::thread([pid] { ::waitpid(pid, nullptr, 0); }).detach();  // reaped when it is done, never a zombie
+}
+
+// $XDG_STATE_HOME/facescan/view-audit.log, else ~/.local/state/facescan/view-audit.log (the XDG default), else
+// ./facescan-view-audit.log.
+std::filesystem::path defaultViewAudit() {
+    if (const char* state = std::getenv("XDG_STATE_HOME"); state != nullptr && *state == '/') {
+        return std::filesystem::path(state) / "facescan" / "view-audit.log";
+    }
+    if (const char* home = std::getenv("HOME"); home != nullptr && *home == '/') {
+        return std::filesystem::path(home) / ".local" / "state" / "facescan" / "view-audit.log";
+    }
+    return std::filesystem::current_path() / "facescan-view-audit.log";
 }
 
 }  // namespace
@@ -64,17 +79,37 @@ int runView(const CliOptions& options) {
     config.bind = options.view_bind;
     config.port = options.view_port;
     config.web_root = *web_root;
+    config.insecure_http = options.view_insecure_http;
+    config.tls_dir = options.view_tls;
+    config.audit_file = options.view_audit.empty() ? defaultViewAudit() : std::filesystem::path(options.view_audit);
+    if (Status s = wire::createPrivateDir(config.audit_file.parent_path()); !s.isOk()) {
+        return fail(kExitCannotServe, "the audit trail's folder: " + s.message());
+    }
     auto server = ViewServer::start(config, hub, fetch_mesh);
     if (!server.isOk()) return fail(kExitCannotServe, server.status().message());
+    // Before the first line that says it serves: a Ctrl-C from then on stops it cleanly.
+    installInterruptHandler();
     const std::string url = (*server)->url();
     std::printf("facescan view: serving %s (%s; Ctrl-C stops)\n", url.c_str(), options.domain.describe().c_str());
-    std::printf("facescan view: web files from %s\n", web_root->c_str());
-    if (options.view_bind == "127.0.0.1" || options.view_bind == "::1") {
-        std::printf("facescan view: this machine only; --bind 0.0.0.0 serves the LAN\n");
+    std::printf("facescan view: web files from %s; audit trail %s\n", web_root->c_str(), config.audit_file.c_str());
+    if (!options.view_tls.empty()) {
+        std::printf(
+            "facescan view: HTTPS and WSS with the certificate and logins of %s; browsers must trust the "
+            "site's CA (identity_ca.pem)\n",
+            options.view_tls.c_str());
+    }
+    if (isLoopbackAddress(options.view_bind)) {
+        std::printf("facescan view: this machine only; for others, --bind their network's address with --tls\n");
+    }
+    if (options.view_insecure_http) {
+        std::fprintf(
+            stderr,
+            "facescan view: WARNING: --insecure-http: plain HTTP without a login%s: whoever reaches this port sees "
+            "and downloads every scan, and the network carries the faces unencrypted\n",
+            isLoopbackAddress(options.view_bind) ? " (on this machine only, for now)" : "");
     }
     std::fflush(stdout);
     if (options.view_open) openInBrowser(url);
-    installInterruptHandler();
 
     std::map<std::string, SessionStatus> statuses;
     std::vector<MeshSnapshotData> snapshots;

@@ -10,10 +10,15 @@
 #include <cstring>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "client/mesh_file.hpp"
 #include "client/status_json.hpp"
+#include "client/tls_front.hpp"
+#include "client/view_logins.hpp"
+#include "view_auth.hpp"
+#include "wire/audit_log.hpp"
 #include "wire/mesh_codec.hpp"
 #include "wire/messages.hpp"
 
@@ -52,12 +57,33 @@ Status ViewServerConfig::validate() const {
             "--bind needs an IP address of this machine (127.0.0.1, 0.0.0.0 for the LAN, ::1), got '" + bind + "'");
     }
     if (threads < 4 || threads > 1024) return invalidArgument("ViewServerConfig: threads must be 4..1024");
+    if (!isLoopbackAddress(bind) && !insecure_http && tls_dir.empty()) {
+        return invalidArgument(
+            "--bind " + bind +
+            " would serve every scan (a face: personal data) in plain HTTP, without a login, to anyone who "
+            "reaches this port. Serve it over TLS with a login: on the site's machine `facescan-site web SITE NAME "
+            "--host THIS-HOST` and `facescan-site login SITE NAME USER`, then `facescan view --bind " +
+            bind +
+            " --tls SITE/NAME`. Or keep it on 127.0.0.1 and reach it through SSH (ssh -L 8080:127.0.0.1:8080 "
+            "THIS-HOST, then http://127.0.0.1:8080/ there), or give --insecure-http on a network where every "
+            "machine may see the scans (it warns at every start)");
+    }
     return Status::ok();
+}
+
+bool isLoopbackAddress(const std::string& ip) {
+    in_addr v4{};
+    if (::inet_pton(AF_INET, ip.c_str(), &v4) == 1) return (ntohl(v4.s_addr) >> 24) == 127;
+    in6_addr v6{};
+    if (::inet_pton(AF_INET6, ip.c_str(), &v6) != 1) return false;
+    if (IN6_IS_ADDR_LOOPBACK(&v6)) return true;
+    return IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127;
 }
 
 // One browser's WebSocket: its cursor in the hub and the thread that sends it what is new.
 struct Browser {
     mg_connection* conn = nullptr;
+    std::string who;  // the audit trail's identity: "login USER" or "http ADDRESS"
     ViewHub::Cursor cursor;
     std::thread sender;
 };
@@ -70,6 +96,39 @@ struct ViewServer::Impl {
     mg_context* ctx = nullptr;
     mutable std::mutex browsers_mutex;
     std::map<const mg_connection*, std::unique_ptr<Browser>> browsers;
+    std::unique_ptr<LoginBook> logins;      // with TLS: who may see anything; null: plain HTTP, no login
+    std::unique_ptr<TlsFront> front;        // with TLS: the browsers' port; CivetWeb listens on loopback behind it
+    std::unique_ptr<wire::AuditLog> audit;  // config.audit_file: downloads, snapshots, follows and logins
+    std::string recorder;                   // "viewer HOST"
+
+    // Who a request comes from, for the audit trail: the viewer login, or the address of a browser without one.
+    std::string who(const mg_connection* conn) const {
+        if (logins) {
+            if (auto user = detail::sessionUser(conn, *logins)) return "login " + *user;
+            return "login (none)";
+        }
+        return std::string("http ") + mg_get_request_info(conn)->remote_addr;
+    }
+    void record(const std::string& action, const std::string& session, const std::string& identity,
+                const std::string& outcome) const {
+        if (!audit) return;
+        wire::AuditRecord r;
+        r.action = action;
+        r.session = session;
+        r.identity = identity;
+        r.outcome = outcome;
+        r.recorder = recorder;
+        if (const Status s = audit->append(std::move(r)); !s.isOk()) {
+            std::fprintf(stderr, "facescan view: %s\n", s.message().c_str());
+        }
+    }
+
+    // With TLS, the browser's address for this connection; nullopt when it did not come through the TLS front
+    // (somebody on this machine at CivetWeb's loopback port).
+    std::optional<std::string> clientAddress(const mg_connection* conn) const {
+        const mg_request_info* ri = mg_get_request_info(conn);
+        return front ? front->clientAddress(static_cast<uint16_t>(ri->remote_port)) : std::nullopt;
+    }
 
     int handleRequest(mg_connection* conn);
     int handleApi(mg_connection* conn, std::string_view rest);
@@ -98,12 +157,39 @@ int ViewServer::Impl::handleRequest(mg_connection* conn) {
     const mg_request_info* ri = mg_get_request_info(conn);
     const std::string_view method = ri->request_method;
     const std::string_view uri = ri->local_uri ? ri->local_uri : "";
+    if (logins) {  // nothing but the login page without a session
+        const auto address = clientAddress(conn);
+        if (!address) return respondError(conn, 403, "connect with https:// to the viewer's port");
+        if (uri == "/login") {
+            return detail::handleLogin(conn, *logins, config.login.session_max_s, *address,
+                                       [this](const std::string& user, const std::string& outcome) {
+                                           record("login", "", "login " + user, outcome);
+                                       });
+        }
+        if (uri == "/logout" && method == "POST") return detail::handleLogout(conn, *logins);
+        if (!detail::sessionUser(conn, *logins)) return detail::refuseWithoutLogin(conn, std::string(uri));
+    }
     if (method != "GET" && method != "HEAD") {
         respond(conn, 405, "application/json", jsonError("only GET and HEAD are served, not " + std::string(method)),
                 {{"Allow", "GET, HEAD"}});
         return 405;
     }
-    if (uri == "/api/sessions" || uri.starts_with("/api/sessions/")) return handleApi(conn, uri.substr(13));
+    if (uri == "/api/sessions" || uri.starts_with("/api/sessions/")) {
+        const int status = handleApi(conn, uri.substr(13));
+        // A scan's data leaving the viewer: its snapshot or its mesh, by whom, and whether it went.
+        const std::string_view rest = uri.substr(std::min<size_t>(uri.size(), 14));
+        const size_t slash = rest.find('/');
+        if (slash != std::string_view::npos) {
+            const std::string_view what = rest.substr(slash + 1);
+            const char* action = what == "snapshot.drc" ? "snapshot" : what.starts_with("mesh.") ? "download" : nullptr;
+            if (action) {
+                record(action + (what.starts_with("mesh.") ? " " + std::string(what.substr(5)) : std::string()),
+                       std::string(rest.substr(0, slash)), who(conn),
+                       status == 200 ? "ok" : "error: HTTP " + std::to_string(status));
+            }
+        }
+        return status;
+    }
     for (const LoadedAsset& asset : assets) {
         if (uri == asset.url) return sendAsset(conn, asset);
     }
@@ -190,23 +276,29 @@ int onRequest(mg_connection* conn, void* data) { return static_cast<ViewServer::
 
 // Refuses a WebSocket opened by another site's page (cross-site WebSocket hijacking): browsers always send
 // Origin, and ours is the page this server served, so its host is the Host the browser asked for.
-bool sameOrigin(const char* origin, const char* host) {
+bool sameOrigin(const char* origin, const char* host, bool tls) {
     if (!origin) return true;  // not a browser (tests, tools): nothing to hijack
     if (!host) return false;
     std::string_view o(origin), h(host);
-    if (!o.starts_with("http://")) return false;
-    o.remove_prefix(7);
+    const std::string_view scheme = tls ? "https://" : "http://";
+    if (!o.starts_with(scheme)) return false;
+    o.remove_prefix(scheme.size());
     return o == h;
 }
 
-int onWsConnect(const mg_connection* conn, void*) {
-    return sameOrigin(mg_get_header(conn, "Origin"), mg_get_header(conn, "Host")) ? 0 : 1;
+// With TLS, a WebSocket needs the session cookie as much as a page does (the browser sends it with the upgrade).
+int onWsConnect(const mg_connection* conn, void* data) {
+    auto* impl = static_cast<ViewServer::Impl*>(data);
+    if (!sameOrigin(mg_get_header(conn, "Origin"), mg_get_header(conn, "Host"), impl->logins != nullptr)) return 1;
+    if (impl->logins && (!impl->clientAddress(conn) || !detail::sessionUser(conn, *impl->logins))) return 1;
+    return 0;
 }
 
 void onWsReady(mg_connection* conn, void* data) {
     auto* impl = static_cast<ViewServer::Impl*>(data);
     auto browser = std::make_unique<Browser>();
     browser->conn = conn;
+    browser->who = impl->who(conn);
     Browser* raw = browser.get();
     std::lock_guard lock(impl->browsers_mutex);
     impl->browsers[conn] = std::move(browser);
@@ -231,6 +323,7 @@ int onWsData(mg_connection* conn, int flags, char* data, size_t size, void* cb) 
         const std::string session = text.substr(7);
         if (Status s = wire::validateSessionId(session); s.isOk()) {
             impl->hub->follow(browser->cursor, session);
+            impl->record("follow", session, browser->who, "ok");
             return 1;
         } else {
             error = "bad session id: " + s.message();
@@ -269,6 +362,18 @@ StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& 
                                                         MeshFetcher fetch_mesh) {
     RETURN_IF_ERROR(config.validate());
     ASSIGN_OR_RETURN(std::vector<LoadedAsset> assets, loadWebAssets(config.web_root));
+    std::unique_ptr<LoginBook> logins;
+    const std::filesystem::path certificate = config.tls_dir / "web.pem";
+    if (!config.tls_dir.empty()) {
+        std::error_code ec;
+        if (!std::filesystem::is_regular_file(certificate, ec)) {
+            return notFound("no TLS certificate for the viewer in " + certificate.string() +
+                            ": make one on the site's machine with `facescan-site web SITE NAME --host THIS-HOST` "
+                            "and copy SITE/NAME here");
+        }
+        logins = std::make_unique<LoginBook>(config.login);
+        RETURN_IF_ERROR(logins->load(config.tls_dir / "logins"));
+    }
     static std::once_flag init_once;
     std::call_once(init_once, [] { mg_init_library(0); });
 
@@ -279,9 +384,19 @@ StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& 
     impl.assets = std::move(assets);
     impl.hub = &hub;
     impl.fetch_mesh = std::move(fetch_mesh);
+    impl.logins = std::move(logins);
+    if (!config.audit_file.empty()) {
+        ASSIGN_OR_RETURN(impl.audit, wire::AuditLog::open(config.audit_file));
+        char host[256] = {};
+        impl.recorder = std::string("viewer ") + (::gethostname(host, sizeof host - 1) == 0 ? host : "?");
+    }
 
+    // With TLS, CivetWeb serves plain HTTP on a loopback port of its own behind the TLS front (client/tls_front.hpp:
+    // Debian's CivetWeb cannot load OpenSSL 3 for its own HTTPS).
     const bool v6 = config.bind.find(':') != std::string::npos;
-    const std::string listen = (v6 ? "[" + config.bind + "]" : config.bind) + ":" + std::to_string(config.port);
+    const std::string listen = impl.logins
+                                   ? std::string("127.0.0.1:0")
+                                   : (v6 ? "[" + config.bind + "]" : config.bind) + ":" + std::to_string(config.port);
     const std::string threads = std::to_string(config.threads);
     const char* options[] = {"listening_ports", listen.c_str(), "num_threads", threads.c_str(),
                              // No folder is served as such: only the routes above (no directory listing).
@@ -309,6 +424,21 @@ StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& 
     mg_server_port ports[4] = {};
     const int n = mg_get_server_ports(impl.ctx, 4, ports);
     server->port_ = n > 0 ? static_cast<uint16_t>(ports[0].port) : config.port;
+    if (impl.logins) {
+        TlsFront::Options front;
+        front.bind = config.bind;
+        front.port = config.port;
+        front.pem = certificate;
+        front.backend_port = server->port_;
+        front.max_connections = config.threads;
+        auto started = TlsFront::start(front);
+        if (!started.isOk()) {
+            server->stop();
+            return started.status();
+        }
+        impl.front = std::move(started).value();
+        server->port_ = impl.front->port();
+    }
     return server;
 }
 
@@ -316,6 +446,7 @@ ViewServer::~ViewServer() { stop(); }
 
 void ViewServer::stop() {
     if (!impl_ || !impl_->ctx) return;
+    if (impl_->front) impl_->front->stop();  // the browsers' connections first: nothing new reaches CivetWeb
     {
         std::lock_guard lock(impl_->browsers_mutex);
         for (auto& [conn, browser] : impl_->browsers) {
@@ -339,7 +470,7 @@ std::string ViewServer::url() const {
     } else if (host.find(':') != std::string::npos) {
         host = "[" + host + "]";
     }
-    return "http://" + host + ":" + std::to_string(port_) + "/";
+    return (impl_->logins ? "https://" : "http://") + host + ":" + std::to_string(port_) + "/";
 }
 
 int ViewServer::browsers() const {

@@ -260,7 +260,7 @@ for (const button of document.querySelectorAll('.downloads button')) {
 // --- the WebSocket, reconnected when the viewer restarts ----------------------------------------------------------
 let socket = null;
 function connect() {
-  socket = new WebSocket(`ws://${location.host}/ws`);
+  socket = new WebSocket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws`);
   socket.binaryType = 'arraybuffer';
   socket.onopen = () => {
     $('connection').textContent = 'live';

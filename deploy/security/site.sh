@@ -17,6 +17,7 @@ ROLES="agent server client viewer"
 # Written by the build into the installed copy (deploy/CMakeLists.txt); empty in the source tree, where
 # --version asks the checkout instead.
 VERSION_LINE=""
+LOGIN_ITERATIONS=600000  # PBKDF2-HMAC-SHA256 rounds of a viewer login (OWASP's 2023 figure for this hash)
 
 usage() {
     cat <<EOF
@@ -25,6 +26,8 @@ usage: $PROG init DIR [--name SITE] [--days N]
        $PROG revoke DIR NAME
        $PROG list DIR
        $PROG --version
+       $PROG web DIR NAME --host HOST [--host HOST...] [--days N] [--from DATE] [--until DATE]
+       $PROG login DIR NAME USER [--remove]
        $PROG --help
 
 Makes and runs a facescan DDS Security site in DIR with openssl: only enrolled machines join the DDS domain,
@@ -48,8 +51,17 @@ every frame, status and mesh is encrypted, and each role may do only its job.
                 identity folder of DIR) and its permissions are re-issued to allow nothing. Copy the new
                 crl.pem to every machine's identity folder; each peer rejects NAME from its next start.
   list          the identities of DIR: role, validity, revoked or not.
+  web           a TLS certificate for the web viewer that runs with identity DIR/NAME (normally a viewer), signed
+                by the site's identity CA, for each --host (a name or an IP address browsers use to reach it):
+                DIR/NAME/web.pem (its key and certificate, private) and web.crt. Browsers must trust the site's
+                CA (DIR/identity_ca.pem: import it once). Valid as for add (default $DEFAULT_DAYS days).
+  login         adds a viewer login USER to DIR/NAME/logins, or changes its password (asked twice on a terminal,
+                else one line on standard input; at least 10 characters); --remove removes it. Stored as a salted
+                PBKDF2-HMAC-SHA256 hash ($LOGIN_ITERATIONS iterations, openssl enc -pbkdf2), never the password.
+                The viewer reads the file again at the next login, and a removed user's sessions end.
 
 Every program takes the identity folder: --security DIR/NAME (facescan-agent, facescan-server, facescan).
+The web viewer over HTTPS with a login: facescan view --bind 0.0.0.0 --security DIR/NAME --tls DIR/NAME.
 
 Enrol a new capture PC (here: capture-3) in three commands:
   $PROG add /etc/facescan/site agent capture-3            # on the machine that holds the site
@@ -144,19 +156,22 @@ EOF
 # The cluster's public topics (servers announce themselves and claim sessions) are published by servers and read
 # by everyone (an agent streams to its session's owner); facescan/cluster/* is between servers only.
 CLUSTER_PUBLIC="facescan/ServerAnnounce facescan/SessionOwner"
+# Erasure: a client asks (EraseRequest), servers pass the request on (so a server that was down learns it) and
+# report (EraseReport). Identities enrolled before these topics existed need their permissions made again.
+ERASURE="facescan/EraseRequest facescan/EraseReport"
 role_publishes() {
     case $1 in
         agent) echo "facescan/CameraInfo facescan/RgbdFrame" ;;
-        server) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/cluster/*" ;;
-        client) echo "facescan/ScanCommand" ;;
+        server) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/cluster/* $ERASURE" ;;
+        client) echo "facescan/ScanCommand facescan/EraseRequest" ;;
         viewer) echo "" ;;
     esac
 }
 role_subscribes() {
     case $1 in
         agent) echo "facescan/ScanStatus facescan/ScanReply $CLUSTER_PUBLIC" ;;
-        server) echo "facescan/CameraInfo facescan/RgbdFrame facescan/ScanCommand $CLUSTER_PUBLIC facescan/cluster/*" ;;
-        client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC" ;;
+        server) echo "facescan/CameraInfo facescan/RgbdFrame facescan/ScanCommand $CLUSTER_PUBLIC facescan/cluster/* facescan/EraseRequest" ;;
+        client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/EraseReport" ;;
         viewer) echo "facescan/ScanStatus facescan/MeshSnapshot $CLUSTER_PUBLIC" ;;
     esac
 }
@@ -388,6 +403,108 @@ print_version() {
     echo "$PROG $VERSION_LINE"
 }
 
+# A TLS server certificate for the web viewer, signed by the identity CA (browsers import DIR/identity_ca.pem).
+cmd_web() {
+    [ $# -ge 2 ] || usage_error "web needs DIR NAME --host HOST"
+    local dir=$1 name=$2 days=$DEFAULT_DAYS from="" until="" hosts=()
+    shift 2
+    while [ $# -gt 0 ]; do
+        case $1 in
+            --host) [ $# -ge 2 ] || usage_error "--host needs a name or an IP address"; hosts+=("$2"); shift 2 ;;
+            --days) [ $# -ge 2 ] || usage_error "--days needs a value"; days=$2; shift 2 ;;
+            --from) [ $# -ge 2 ] || usage_error "--from needs a date"; from=$2; shift 2 ;;
+            --until) [ $# -ge 2 ] || usage_error "--until needs a date"; until=$2; shift 2 ;;
+            *) usage_error "unknown option '$1' for web" ;;
+        esac
+    done
+    need_site "$dir"
+    valid_name "$name" && [ "$name" != ca ] || usage_error "'$name' is not an identity name"
+    local id="$dir/$name"
+    [ -d "$id" ] || die "no identity '$name' in $dir (enrol the viewer first: $PROG add $dir viewer $name)"
+    [ ${#hosts[@]} -gt 0 ] || usage_error "web needs at least one --host: the name or address browsers use"
+    [[ $days =~ ^[0-9]+$ ]] && [ "$days" -ge 1 ] || usage_error "--days takes a positive number of days"
+    local san="" host
+    for host in "${hosts[@]}"; do
+        if [[ $host =~ ^[0-9]{1,3}(\.[0-9]{1,3}){3}$ ]] || [[ $host =~ ^[0-9A-Fa-f:]*:[0-9A-Fa-f:.]*$ ]]; then
+            san+="${san:+, }IP:$host"
+        elif [[ $host =~ ^[A-Za-z0-9][A-Za-z0-9.-]{0,252}$ ]]; then
+            san+="${san:+, }DNS:$host"
+        else
+            usage_error "'$host' is neither a host name nor an IP address"
+        fi
+    done
+    local start end
+    start=$(if [ -n "$from" ]; then epoch_of "$from"; else date -u +%s; fi)
+    end=$(if [ -n "$until" ]; then epoch_of "$until"; else echo $((start + days * 86400)); fi)
+    [ "$end" -gt "$start" ] || usage_error "the certificate would end before it starts"
+    printf '%s\n' "[ web_cert ]" "basicConstraints = critical, CA:FALSE" "keyUsage = critical, digitalSignature" \
+        "extendedKeyUsage = serverAuth" "subjectAltName = $san" "subjectKeyIdentifier = hash" \
+        "authorityKeyIdentifier = keyid" >"$id/web.ext"
+    openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:prime256v1 -out "$id/web.key" 2>/dev/null \
+        || die "cannot make a key for the web certificate of $name"
+    openssl req -new -key "$id/web.key" -subj "/O=$(site_conf "$dir" name)/OU=web/CN=${hosts[0]}" -out "$id/web.csr" \
+        || die "cannot make a certificate request for the web certificate of $name"
+    site_ca "$dir" -in "../$name/web.csr" -out "../$name/web.crt" -notext -extfile "../$name/web.ext" \
+        -extensions web_cert -startdate "$(asn1_time "$start")" -enddate "$(asn1_time "$end")"
+    # CivetWeb reads the key and the certificate from one file.
+    cat "$id/web.key" "$id/web.crt" >"$id/web.pem"
+    rm -f "$id/web.csr" "$id/web.ext" "$id/web.key"
+    chmod 600 "$id/web.pem"
+    chmod 644 "$id/web.crt"
+    echo "$PROG: web certificate for ${hosts[*]}, valid $(xml_time "$start") to $(xml_time "$end") UTC: $id/web.pem"
+    echo "$PROG: browsers must trust $dir/identity_ca.pem; add logins with: $PROG login $dir $name USER"
+}
+
+# A viewer login: USER:pbkdf2-sha256:ITERATIONS:SALT:KEY in DIR/NAME/logins (client/view_logins.hpp reads it).
+cmd_login() {
+    [ $# -ge 3 ] || usage_error "login needs DIR NAME USER"
+    local dir=$1 name=$2 user=$3 remove=0
+    shift 3
+    while [ $# -gt 0 ]; do
+        case $1 in
+            --remove) remove=1; shift ;;
+            *) usage_error "unknown option '$1' for login" ;;
+        esac
+    done
+    need_site "$dir"
+    valid_name "$name" && [ "$name" != ca ] || usage_error "'$name' is not an identity name"
+    local id="$dir/$name" file="$dir/$name/logins"
+    [ -d "$id" ] || die "no identity '$name' in $dir"
+    [[ $user =~ ^[A-Za-z0-9._@-]{1,64}$ ]] || usage_error "'$user' is not a valid user name (letters, digits, . _ @ -)"
+    local others=""
+    if [ -f "$file" ]; then others=$(grep -v "^$user:" "$file" || true); fi
+    if [ "$remove" = 1 ]; then
+        [ -f "$file" ] && grep -q "^$user:" "$file" || die "no login '$user' in $file"
+        printf '%s\n' "$others" | sed '/^$/d' >"$file.tmp"
+        chmod 600 "$file.tmp"
+        mv "$file.tmp" "$file"
+        echo "$PROG: removed login $user from $file (its sessions end at their next request)"
+        return
+    fi
+    local password="" again=""
+    if [ -t 0 ]; then
+        read -rsp "password for $user: " password && echo
+        read -rsp "again: " again && echo
+        [ "$password" = "$again" ] || die "the two passwords differ"
+    else
+        IFS= read -r password || [ -n "$password" ] || die "no password on standard input"
+    fi
+    [ ${#password} -ge 10 ] || die "a password needs at least 10 characters"
+    local salt key
+    salt=$(openssl rand -hex 8) || die "openssl rand failed"
+    # The password goes through a pipe (printf is a shell builtin): never on a command line, where ps shows it.
+    key=$(printf '%s\n' "$password" | openssl enc -aes-256-cbc -pbkdf2 -md sha256 -iter "$LOGIN_ITERATIONS" \
+        -S "$salt" -pass stdin -P | sed -n 's/^key=//p') || die "openssl enc -pbkdf2 failed"
+    [ ${#key} -eq 64 ] || die "openssl enc -pbkdf2 gave no key"
+    {
+        if [ -n "$others" ]; then printf '%s\n' "$others"; fi
+        printf '%s:pbkdf2-sha256:%s:%s:%s\n' "$user" "$LOGIN_ITERATIONS" "$salt" "$key"
+    } >"$file.tmp"
+    chmod 600 "$file.tmp"
+    mv "$file.tmp" "$file"
+    echo "$PROG: login $user in $file (copy it to the viewer's DIR/NAME; it reads it again at the next login)"
+}
+
 case ${1:-} in
     -h | --help | help) usage ;;
     --version) print_version ;;
@@ -395,6 +512,8 @@ case ${1:-} in
     add) shift; cmd_add "$@" ;;
     revoke) shift; cmd_revoke "$@" ;;
     list) shift; cmd_list "$@" ;;
+    web) shift; cmd_web "$@" ;;
+    login) shift; cmd_login "$@" ;;
     "") usage_error "no command given" ;;
     *) usage_error "unknown command '$1'" ;;
 esac

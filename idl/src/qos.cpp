@@ -29,6 +29,8 @@ Qos noAutoDispose(Qos q) {
 }
 }  // namespace
 
+Qos erasureQos() { return noAutoDispose(reliable(DDS_DURABILITY_TRANSIENT_LOCAL, DDS_HISTORY_KEEP_LAST, 1)); }
+
 Qos serverAnnounceQos() { return noAutoDispose(reliable(DDS_DURABILITY_TRANSIENT_LOCAL, DDS_HISTORY_KEEP_LAST, 1)); }
 Qos sessionOwnerQos() {
     Qos q = noAutoDispose(reliable(DDS_DURABILITY_TRANSIENT_LOCAL, DDS_HISTORY_KEEP_LAST, 1));

@@ -11,6 +11,7 @@
 #include "service/session_store.hpp"
 #include "wire/dds.hpp"
 #include "wire/dds_options.hpp"
+#include "wire/private_files.hpp"
 
 int main(int argc, char** argv) {
     using namespace facescan;
@@ -62,6 +63,7 @@ int main(int argc, char** argv) {
                  p.server_id.c_str(), p.domain.describe().c_str(), p.preset.c_str(), p.max_sessions,
                  static_cast<double>(p.snapshot_hz), p.data_dir.c_str());
     std::fprintf(stderr, "facescan-server: %s\n", wire::securitySummary(p.domain).c_str());
+    std::fprintf(stderr, "facescan-server: files: %s\n", wire::kFileProtectionSummary);
     int sig = 0;
     sigwait(&stop_signals, &sig);
     std::fprintf(stderr, "facescan-server: %s: finishing %d open session(s)\n", sig == SIGINT ? "SIGINT" : "SIGTERM",

@@ -2,6 +2,7 @@
 // that stops taking frames is reported and does not keep the agent from stopping within 2 s of SIGTERM; the
 // frames no owner confirmed are saved as a TUM folder that `--source tum:DIR` streams again, bit-exact.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -247,6 +248,19 @@ TEST_F(AgentStop, UnconfirmedFramesAreSavedAndReplayIntoAnotherOwnerBitExact) {
     EXPECT_EQ(frames, 24 - static_cast<int>(kConfirmed)) << text;
     EXPECT_NE(text.find("(frames 10-23 of session " + session + ")"), std::string::npos) << text;
     EXPECT_TRUE(fs::exists(saved / "intrinsics.txt"));
+    // The saved frames are a face: owner-only folders and files, whatever the agent's umask.
+    const auto mode = [](const fs::path& p) {
+        struct stat st {};
+        return ::lstat(p.c_str(), &st) == 0 ? st.st_mode & 07777 : 0u;
+    };
+    EXPECT_EQ(mode(saved.parent_path()), 0700u) << saved.parent_path();
+    EXPECT_EQ(mode(saved), 0700u) << saved;
+    int private_files = 0;
+    for (const auto& entry : fs::recursive_directory_iterator(saved)) {
+        EXPECT_EQ(mode(entry.path()), entry.is_directory() ? 0700u : 0600u) << entry.path();
+        private_files += entry.is_regular_file() ? 1 : 0;
+    }
+    EXPECT_GE(private_files, frames + 2) << "a depth image per frame, depth.txt and intrinsics.txt";
 
     // Another agent streams the folder into another owner: the same frames, bit-exact, in order.
     const std::string replay_session = "replay-" + std::to_string(getpid());

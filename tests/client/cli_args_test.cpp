@@ -121,11 +121,27 @@ TEST(CliArgs, ViewListsOnLocalhostPort8080UnlessTold) {
     EXPECT_EQ(plain->view_port, 8080);
     EXPECT_EQ(plain->view_bind, "127.0.0.1");
     EXPECT_FALSE(plain->view_open);
-    auto lan = parse({"view", "--port", "0", "--bind", "0.0.0.0", "--open", "--domain", "7"});
+    EXPECT_FALSE(plain->view_insecure_http);
+    // Plain HTTP to the network only when the user says so (see CliErrors for the message).
+    expectUsageError({"view", "--bind", "0.0.0.0"}, "would serve every scan");
+    expectUsageError({"view", "--bind", "10.0.0.5"}, "--insecure-http");
+    expectUsageError({"view", "--bind", "::"}, "ssh -L");
+    expectUsageError({"view", "--bind", "0.0.0.0"}, "facescan-site web SITE NAME --host THIS-HOST");
+    expectUsageError({"view", "--bind", "0.0.0.0", "--tls", "site/viewer", "--insecure-http"}, "contradict");
+    expectUsageError({"view", "--tls"}, "--tls needs a value");
+    auto tls = parse({"view", "--bind", "0.0.0.0", "--tls", "site/viewer"});
+    ASSERT_TRUE(tls.isOk()) << tls.status().toString();
+    EXPECT_EQ(tls->view_tls, "site/viewer");
+    EXPECT_FALSE(tls->view_insecure_http);
+    EXPECT_TRUE(parse({"view", "--bind", "127.0.0.2"}).isOk()) << "all of 127/8 is this machine";
+    EXPECT_TRUE(parse({"view", "--bind", "::1"}).isOk());
+    EXPECT_TRUE(parse({"view", "--bind", "::ffff:127.0.0.1"}).isOk());
+    auto lan = parse({"view", "--port", "0", "--bind", "0.0.0.0", "--open", "--insecure-http", "--domain", "7"});
     ASSERT_TRUE(lan.isOk()) << lan.status().toString();
     EXPECT_EQ(lan->view_port, 0);
     EXPECT_EQ(lan->view_bind, "0.0.0.0");
     EXPECT_TRUE(lan->view_open);
+    EXPECT_TRUE(lan->view_insecure_http);
     EXPECT_EQ(lan->domain.domain_id, 7u);
     expectUsageError({"view", "--port", "65536"}, "--port must be a TCP port");
     expectUsageError({"view", "--port", "http"}, "--port must be a TCP port");

@@ -9,12 +9,17 @@
 #include <unistd.h>
 
 #include <array>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <thread>
 
+#include "child_process.hpp"
 #include "client/web_assets.hpp"
 #include "run_command.hpp"
 #include "test_domain.hpp"
+#include "wire/audit_log.hpp"
 namespace {
 
 using CliRun = facescan::testing::CommandRun;
@@ -78,6 +83,96 @@ TEST(CliErrors, ViewWithoutItsFilesOrItsPortExitsFive) {
     EXPECT_EQ(taken.exit_code, 5) << taken.out;
     EXPECT_TRUE(contains(taken.out, "facescan: error: cannot serve on 127.0.0.1:" + port)) << taken.out;
     EXPECT_TRUE(contains(taken.out, "--port")) << taken.out;
+}
+
+// A viewer that other machines reach over plain HTTP hands every scan (a face) to anyone on the network: refused,
+// with the safe way to reach it, unless the user says --insecure-http, and then it warns at every start.
+TEST(CliErrors, ViewOnTheNetworkInPlainHttpIsRefusedUnlessInsecureHttpWhichWarns) {
+    const std::string dds = " --profile loopback --domain " + privateDomain();
+    for (const std::string bind : {"0.0.0.0", "::", "192.168.1.20"}) {
+        const CliRun refused = runCli("view --port 0 --bind " + bind + dds);
+        EXPECT_EQ(refused.exit_code, 2) << bind << ": " << refused.out;
+        EXPECT_TRUE(contains(refused.out, "--bind " + bind + " would serve every scan")) << refused.out;
+        EXPECT_TRUE(contains(refused.out, "ssh -L 8080:127.0.0.1:8080")) << refused.out;
+        EXPECT_TRUE(contains(refused.out, "--tls SITE/NAME")) << refused.out;
+        EXPECT_TRUE(contains(refused.out, "--insecure-http")) << refused.out;
+        EXPECT_FALSE(contains(refused.out, "serving http")) << refused.out;
+    }
+    if (!facescan::client::findWebRoot().isOk())
+        GTEST_SKIP() << "the viewer's npm packages are missing (deploy/install-deps.sh)";
+    for (const std::string bind : {"0.0.0.0", "127.0.0.1"}) {
+        // A log of its own per run: the first run's lines must not stand in for the second's.
+        const auto log = std::filesystem::temp_directory_path() /
+                         ("facescan_cli_insecure_" + std::to_string(::getpid()) + "_" + bind + ".log");
+        const auto text = [&] {
+            std::ifstream in(log);
+            return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        };
+        facescan::testing::ChildProcess view({FACESCAN_CLI, "view", "--port", "0", "--bind", bind, "--insecure-http",
+                                              "--profile", "loopback", "--domain", privateDomain()},
+                                             log);
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+        while (!contains(text(), "serving http://") && std::chrono::steady_clock::now() < deadline && view.running()) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        }
+        const std::string out = text();
+        EXPECT_TRUE(contains(out, "serving http://")) << out;
+        EXPECT_TRUE(contains(out, "WARNING: --insecure-http: plain HTTP without a login")) << bind << ": " << out;
+        EXPECT_EQ(contains(out, "on this machine only, for now"), bind == "127.0.0.1") << out;
+        view.signal(SIGINT);
+        EXPECT_EQ(view.wait(std::chrono::seconds(20)), 0) << text();
+        std::filesystem::remove(log);
+    }
+}
+
+// --tls names the viewer's identity folder: without its certificate the viewer does not start, and says what to run.
+TEST(CliErrors, ViewWithTlsButNoCertificateSaysWhatToRun) {
+    if (!facescan::client::findWebRoot().isOk())
+        GTEST_SKIP() << "the viewer's npm packages are missing (deploy/install-deps.sh)";
+    const CliRun run =
+        runCli("view --port 0 --bind 0.0.0.0 --tls /nonexistent/viewer --profile loopback --domain " + privateDomain());
+    EXPECT_EQ(run.exit_code, 5) << run.out;
+    EXPECT_TRUE(contains(run.out, "/nonexistent/viewer/web.pem")) << run.out;
+    EXPECT_TRUE(contains(run.out, "facescan-site web SITE NAME --host THIS-HOST")) << run.out;
+}
+
+// `facescan audit` reads the trails a server and a viewer wrote, oldest first, one session's with --session.
+TEST(CliErrors, AuditPrintsTheTrailsOfServersAndViewers) {
+    const auto dir = std::filesystem::temp_directory_path() / ("facescan_cli_audit_" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir / "data");
+    {
+        auto server = facescan::wire::AuditLog::open(dir / "data" / "audit.log");
+        auto viewer = facescan::wire::AuditLog::open(dir / "view.log");
+        ASSERT_TRUE(server.isOk() && viewer.isOk());
+        ASSERT_TRUE((*server)
+                        ->append({2'000'000'000'000'000'000, "reset", "s1", "client ana@pc:1:2", "ok", "server a"})
+                        .isOk());
+        ASSERT_TRUE(
+            (*viewer)->append({1'000'000'000'000'000'000, "download ply", "s1", "login bob", "ok", "viewer v"}).isOk());
+        ASSERT_TRUE((*server)
+                        ->append({3'000'000'000'000'000'000, "get_mesh", "s2", "client ana@pc:1:2",
+                                  "error: unknown session 's2'", "server a"})
+                        .isOk());
+    }
+    const CliRun all = runCli("audit " + (dir / "data").string() + " " + (dir / "view.log").string());
+    EXPECT_EQ(all.exit_code, 0) << all.out;
+    const size_t download = all.out.find("download ply"), reset = all.out.find("reset"), get = all.out.find("get_mesh");
+    ASSERT_NE(download, std::string::npos) << all.out;
+    EXPECT_LT(download, reset) << "oldest first, across files: " << all.out;
+    EXPECT_LT(reset, get) << all.out;
+    EXPECT_TRUE(contains(all.out, "login bob")) << all.out;
+    EXPECT_TRUE(contains(all.out, "client ana@pc:1:2")) << all.out;
+    EXPECT_TRUE(contains(all.out, "2001-09-09T01:46:40.000Z")) << all.out;
+    const CliRun one =
+        runCli("audit " + (dir / "data").string() + " " + (dir / "view.log").string() + " --session s2 --json");
+    EXPECT_EQ(one.exit_code, 0) << one.out;
+    EXPECT_EQ(one.out,
+              "{\"time\":\"2065-01-24T05:20:00.000Z\",\"action\":\"get_mesh\",\"session\":\"s2\",\"identity\":"
+              "\"client ana@pc:1:2\",\"outcome\":\"error: unknown session 's2'\",\"recorder\":\"server a\"}\n");
+    const CliRun missing = runCli("audit " + (dir / "nothing").string());
+    EXPECT_EQ(missing.exit_code, 2) << missing.out;
+    EXPECT_TRUE(contains(missing.out, "no audit trail at")) << missing.out;
+    std::filesystem::remove_all(dir);
 }
 
 TEST(CliErrors, NoServerExitsThreeAfterTheTimeout) {

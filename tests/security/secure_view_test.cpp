@@ -6,6 +6,7 @@
 #include <tiny_gltf.h>
 
 #include <filesystem>
+#include <fstream>
 #include <regex>
 
 #include "child_process.hpp"
@@ -111,6 +112,41 @@ TEST(SecureView, TheViewerIdentityWatchesAScanAndDownloadsItsFinalSnapshot) {
     // Without an identity, the same viewer on the same domain sees nothing of the secured scan.
     EXPECT_FALSE(contains(ft::httpRequest(outsider_port, "/api/sessions").body, session));
     EXPECT_EQ(ft::httpRequest(outsider_port, "/api/sessions/" + session).status, 404);
+}
+
+// facescan delete on a secured site: the client role may erase a scan (and the server's audit trail names the
+// client's identity); the read-only viewer role may not.
+TEST(SecureDelete, TheClientRoleErasesAScanAndTheViewerRoleMayNot) {
+    ft::TempSite site("delete");
+    ASSERT_TRUE(site.ok()) << site.initOutput();
+    const uint32_t domain = ft::privateDomain(24);
+    const fs::path data = site.root() / "data";
+    for (const std::string id : {"secure-gone", "secure-kept"}) {
+        fs::create_directories(data / id);
+        std::ofstream(data / id / "mesh.ply") << "ply";
+        std::ofstream(data / id / "summary.json") << "{}";
+    }
+    ft::ChildProcess server(
+        withDds({FACESCAN_SERVER_BIN, "--data-dir", data.string()}, domain, site.identity("server")),
+        site.root() / "server.log");
+    const auto cli = [&](const std::string& args, const std::string& identity) {
+        return ft::runCommand(std::string(FACESCAN_CLI) + " " + args + " --profile loopback --domain " +
+                              std::to_string(domain) + " --timeout 20 --security " + site.identity(identity).string() +
+                              " 2>&1");
+    };
+    const auto denied = cli("delete secure-kept", "viewer");
+    EXPECT_EQ(denied.exit_code, 6) << denied.out;
+    EXPECT_TRUE(fs::exists(data / "secure-kept" / "mesh.ply")) << ft::readText(site.root() / "server.log");
+
+    const auto erased = cli("delete secure-gone", "client");
+    EXPECT_EQ(erased.exit_code, 0) << erased.out << ft::readText(site.root() / "server.log");
+    EXPECT_TRUE(contains(erased.out, "removed 2 file(s):")) << erased.out;
+    EXPECT_FALSE(fs::exists(data / "secure-gone"));
+    EXPECT_TRUE(fs::exists(data / "secure-kept" / "mesh.ply"));
+    const auto audit = ft::runCommand(std::string(FACESCAN_CLI) + " audit " + data.string() + " --session secure-gone");
+    EXPECT_EQ(audit.exit_code, 0) << audit.out;
+    EXPECT_TRUE(contains(audit.out, "delete")) << audit.out;
+    EXPECT_TRUE(contains(audit.out, "client client@")) << "the client's identity name leads its id: " << audit.out;
 }
 
 }  // namespace

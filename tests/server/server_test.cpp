@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -23,6 +24,7 @@
 #include "server_rig.hpp"
 #include "service/frame_load.hpp"
 #include "test_agent.hpp"
+#include "wire/audit_log.hpp"
 #include "wire/mesh_codec.hpp"
 
 namespace facescan::service {
@@ -95,9 +97,19 @@ void expectSessionWritten(const std::filesystem::path& dir, bool with_mesh) {
     EXPECT_EQ(summary.back(), '\n');
     EXPECT_TRUE(std::filesystem::exists(dir / "trajectory.txt"));
     EXPECT_TRUE(std::filesystem::exists(dir / "frames.tsv"));
+    // A face is personal data: the folder and every file in it are the owner's only, whatever the test's umask.
+    const auto mode = [](const std::filesystem::path& p) {
+        struct stat st {};
+        return ::stat(p.c_str(), &st) == 0 ? st.st_mode & 07777 : 0u;
+    };
+    EXPECT_EQ(mode(dir), 0700u) << dir;
+    EXPECT_EQ(mode(dir.parent_path()), 0700u) << "the data dir " << dir.parent_path();
     for (const auto& entry : std::filesystem::directory_iterator(dir)) {
         EXPECT_EQ(entry.path().extension(), entry.path().extension() == ".tmp" ? ".none" : entry.path().extension())
             << "temporary file left: " << entry.path();
+        if (entry.is_regular_file()) {
+            EXPECT_EQ(mode(entry.path()), 0600u) << entry.path();
+        }
     }
     if (!with_mesh) return;
     recon::Mesh ply;
@@ -255,16 +267,39 @@ TEST(ServerSession, LiveSessionIntegratesAndAnswersCommandsWithTheirRequestIds) 
     auto final_status = rig.client->waitForStatus(
         "live-1", [](const StatusCopy& s) { return s.state == facescan_wire_STATE_FINISHED; }, 5s);
     EXPECT_TRUE(final_status);
+    // The audit trail: every command above, in order, with the client that sent it and the outcome.
+    auto audit = wire::readAuditLog(params.data_dir / "audit.log");
+    ASSERT_TRUE(audit.isOk()) << audit.status().toString();
+    std::vector<std::string> actions;
+    for (const wire::AuditRecord& r : *audit) {
+        actions.push_back(r.action);
+        EXPECT_EQ(r.session, "live-1");
+        EXPECT_EQ(r.identity, "client server_test");
+        EXPECT_EQ(r.outcome, "ok");
+        EXPECT_EQ(r.recorder, "server test-server");
+        EXPECT_GT(r.time_ns, 1'700'000'000'000'000'000);
+    }
+    EXPECT_EQ(actions, (std::vector<std::string>{"get_trajectory", "get_mesh", "get_preview", "finish", "get_mesh"}));
+    struct stat st {};
+    ASSERT_EQ(::stat((params.data_dir / "audit.log").c_str(), &st), 0);
+    EXPECT_EQ(st.st_mode & 07777, 0600u);
 }
 
 TEST(ServerSession, UnknownSessionsAndBadRequestsGetErrorReplies) {
     const uint32_t domain = privateDomain(12);
-    Rig rig = makeRig(testParams(domain, "errors"));
+    const ServerParams params = testParams(domain, "errors");
+    Rig rig = makeRig(params);
     ASSERT_TRUE(rig.server && rig.client);
     auto unknown = rig.client->command("nobody", facescan_wire_CMD_GET_MESH, 5s);
     ASSERT_TRUE(unknown.isOk()) << "silence instead of an error reply";
     EXPECT_FALSE(unknown->ok);
     EXPECT_EQ(unknown->error, "unknown session 'nobody'");
+    auto audit = wire::readAuditLog(params.data_dir / "audit.log");
+    ASSERT_TRUE(audit.isOk()) << audit.status().toString();
+    ASSERT_FALSE(audit->empty());
+    EXPECT_EQ(audit->front().action, "get_mesh");
+    EXPECT_EQ(audit->front().session, "nobody");
+    EXPECT_EQ(audit->front().outcome, "error: unknown session 'nobody'") << "refusals are recorded too";
     // An enum value outside CommandKind cannot even be serialised by DDS; an empty request id can be sent.
     const std::string empty;
     auto bad = rig.client->command("nobody", facescan_wire_CMD_GET_STATUS, 5s, &empty);

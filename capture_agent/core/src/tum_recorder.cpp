@@ -6,6 +6,8 @@
 #include <iomanip>
 #include <opencv2/imgcodecs.hpp>
 
+#include "wire/private_files.hpp"
+
 namespace facescan::capture {
 namespace {
 namespace fs = std::filesystem;
@@ -23,9 +25,11 @@ StatusOr<TumRecorder> TumRecorder::create(const fs::path& dir, const SourceInfo&
     if (fs::exists(dir, ec) && !fs::is_empty(dir, ec)) {
         return Status(StatusCode::kAlreadyExists, dir.string() + " already exists and is not empty");
     }
-    fs::create_directories(dir / "depth", ec);
-    if (!ec) fs::create_directories(dir / "rgb", ec);
-    if (ec) return unavailable("cannot create " + dir.string() + ": " + ec.message());
+    // A recording is a face: owner-only folders, and each file made 0600 as soon as it is written
+    // (wire/private_files.hpp); nobody else can enter the folders in between.
+    RETURN_IF_ERROR(wire::createPrivateDir(dir / "depth"));
+    RETURN_IF_ERROR(wire::createPrivateDir(dir / "rgb"));
+    RETURN_IF_ERROR(wire::createPrivateDir(dir));
     TumRecorder r;
     r.dir_ = dir;
     r.source_ = source;
@@ -37,6 +41,8 @@ StatusOr<TumRecorder> TumRecorder::create(const fs::path& dir, const SourceInfo&
     r.depth_list_ << "# depth images, 16-bit PNG, 5000 units per metre (from " << source.description << ")\n"
                   << "# timestamp filename\n";
     if (!intrinsics.flush() || !r.depth_list_.flush()) return unavailable("cannot write in " + dir.string());
+    RETURN_IF_ERROR(wire::makeFilePrivate(dir / "intrinsics.txt"));
+    RETURN_IF_ERROR(wire::makeFilePrivate(dir / "depth.txt"));
     return r;
 }
 
@@ -63,6 +69,7 @@ Status TumRecorder::addDepth(const cv::Mat& raw, int64_t timestamp_ns, std::stri
     if (!cv::imwrite((dir_ / "depth" / (name + ".png")).string(), depth_tum_, kPngParams)) {
         return unavailable("cannot write " + (dir_ / "depth" / (name + ".png")).string());
     }
+    RETURN_IF_ERROR(wire::makeFilePrivate(dir_ / "depth" / (name + ".png")));
     // Timestamps as the source gave them; one frame period on where a source gives none (or repeats one), so
     // that the lists stay in time order and pair colour with its own depth.
     double t = static_cast<double>(timestamp_ns) * 1e-9;
@@ -84,10 +91,13 @@ Status TumRecorder::addColour(const std::string& name, const std::string& extens
                    extension == ".jpg" ? std::vector<int>{cv::IMWRITE_JPEG_QUALITY, jpeg_quality_} : kPngParams)) {
         return unavailable("cannot write " + file.string());
     }
+    RETURN_IF_ERROR(wire::makeFilePrivate(file));
     if (!has_rgb_list_) {
         rgb_list_.open(dir_ / "rgb.txt");
         rgb_list_ << "# colour images (registered to depth)\n# timestamp filename\n";
         has_rgb_list_ = true;
+        if (!rgb_list_.flush()) return unavailable("cannot write " + (dir_ / "rgb.txt").string());
+        RETURN_IF_ERROR(wire::makeFilePrivate(dir_ / "rgb.txt"));
     }
     rgb_list_ << std::fixed << std::setprecision(6) << last_timestamp_s_ << " rgb/" << name << extension << '\n';
     if (!rgb_list_.flush()) return unavailable("cannot write " + (dir_ / "rgb.txt").string());
@@ -126,11 +136,15 @@ Status TumRecorder::add(const CapturedFrame& frame) {
 
 StatusOr<fs::path> createFreshDir(const fs::path& parent, const std::string& name) {
     std::error_code ec;
-    fs::create_directories(parent, ec);
+    RETURN_IF_ERROR(wire::createPrivateDir(parent));  // the saved frames of every scan: owner-only
     for (int n = 1; n < 1000; ++n) {
         const fs::path dir = parent / (n == 1 ? name : name + "-" + std::to_string(n));
         // create_directory is false for a folder that exists: never one that someone else made.
-        if (fs::create_directory(dir, ec)) return dir;
+        if (fs::create_directory(dir, ec)) {
+            fs::permissions(dir, fs::perms::owner_all, ec);  // before anything is written in it
+            if (ec) return unavailable("cannot make " + dir.string() + " private: " + ec.message());
+            return dir;
+        }
         if (ec) return unavailable("cannot create " + dir.string() + ": " + ec.message());
     }
     return unavailable("no free folder name for " + name + " in " + parent.string());

@@ -24,7 +24,20 @@ enum ExitCode : int {
     kExitInterrupted = 130,  // Ctrl-C (128 + SIGINT, the shell convention)
 };
 
-enum class Command { kSessions, kWatch, kStatus, kMesh, kPreview, kTrajectory, kFinish, kReset, kView, kServers };
+enum class Command {
+    kSessions,
+    kWatch,
+    kStatus,
+    kMesh,
+    kPreview,
+    kTrajectory,
+    kFinish,
+    kReset,
+    kView,
+    kServers,
+    kAudit,
+    kDelete
+};
 
 struct CliOptions {
     Command command = Command::kSessions;
@@ -38,12 +51,17 @@ struct CliOptions {
     // head region on this side, keep = head means the largest part without its floating fragments.
     recon::FinishParams finish_params;
     bool finish_here = false;                   // any of those options was given
+    bool force = false;                         // delete --force: finish a running scan, then delete it
     std::string save_dir;                       // watch --save DIR: write each snapshot there
     std::string save_format = "ply";            // watch --save-format: ply|obj|stl|off|drc|glb
     bool json = false;                          // sessions/status --json: one JSON object per line
     uint16_t view_port = 8080;                  // view --port (0: any free port)
     std::string view_bind = "127.0.0.1";        // view --bind ADDRESS: this machine only unless told otherwise
     bool view_open = false;                     // view --open: open the page in the desktop's browser
+    bool view_insecure_http = false;            // view --insecure-http: plain HTTP beyond loopback (warned)
+    std::string view_tls;                       // view --tls DIR/NAME: HTTPS + WSS with a login
+    std::string view_audit;                     // view --audit FILE: its audit trail (default: defaultViewAudit)
+    std::vector<std::string> audit_files;       // audit FILE|DATA_DIR...: the trails to read
     wire::DomainConfig domain{0, "lan"};        // --domain N, --profile P, --security DIR/NAME
     std::chrono::milliseconds timeout{10'000};  // --timeout SECONDS: how long to wait for a server
 

@@ -118,6 +118,9 @@ class ScanClient {
     Status poll(std::chrono::milliseconds wait, std::map<std::string, SessionStatus>& statuses,
                 const std::string& snapshot_session, std::vector<MeshSnapshotData>* snapshots);
 
+    // This client's id as its commands carry it (its DDS Security identity's name first, when it has one).
+    const std::string& clientId() const { return client_id_; }
+
  private:
     explicit ScanClient(ClientConfig config);
     Status ensureStatusReader();

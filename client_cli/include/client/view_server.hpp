@@ -14,6 +14,11 @@
 //                                              (binary, client/view_hub.hpp); browser -> server: "follow ID"
 // Errors are JSON {"error": "..."}: 400 for a malformed request (bad session id, unknown format, bad method), 404
 // for an unknown session or page, 503 when no server answers. No DDS here: meshes come through a MeshFetcher.
+// With TLS (ViewServerConfig::tls_dir) the same over HTTPS and WSS, behind a login:
+//   GET /login, POST /login                    the login page and form (view_auth.hpp); a session cookie on success
+//   POST /logout                               ends the session
+// and without a session every other request gets nothing of the scans: / redirects to /login, the rest is 401,
+// and the WebSocket upgrade is refused.
 #pragma once
 
 #include <cstdint>
@@ -24,6 +29,7 @@
 #include <vector>
 
 #include "client/view_hub.hpp"
+#include "client/view_logins.hpp"
 #include "client/web_assets.hpp"
 #include "recon/status.hpp"
 
@@ -34,9 +40,25 @@ struct ViewServerConfig {
     uint16_t port = 8080;            // 0: any free port (see ViewServer::port())
     std::filesystem::path web_root;  // the asset folder (findWebRoot())
     int threads = 64;                // CivetWeb workers; each open WebSocket holds one
+    // Plain HTTP without a login on an address other machines reach: every scan's face to anyone on the network.
+    // Refused by validate() unless set (--insecure-http); the viewer then warns at every start.
+    bool insecure_http = false;
+    // HTTPS and WSS with a login (--tls DIR/NAME): DIR/NAME/web.pem, the key and the certificate the site's CA signed
+    // (facescan-site web), and DIR/NAME/logins (facescan-site login). Every page but /login, every API call and the
+    // WebSocket then need a session. Empty: plain HTTP without a login.
+    std::filesystem::path tls_dir;
+    LoginParams login;  // session timeouts and the brake on wrong passwords
+    // The audit trail (wire/audit_log.hpp): snapshots and meshes fetched, sessions followed, logins, each with the
+    // viewer login (or the address of a browser without one). Empty: none.
+    std::filesystem::path audit_file;
 
+    // InvalidArgument for a bind that is not an IP address, a thread count out of range, or a non-loopback bind
+    // without tls_dir or insecure_http (the message says how to set TLS and a login up).
     Status validate() const;
 };
+
+// True for an address only this machine reaches: 127.0.0.0/8, ::1 and ::ffff:127.x.x.x.
+bool isLoopbackAddress(const std::string& ip);
 
 // The full-resolution mesh of a session as Draco bytes (ScanClient::request(GET_MESH) in the real viewer).
 // NotFound: unknown session; DeadlineExceeded or Unavailable: no server answered.
@@ -54,7 +76,7 @@ class ViewServer {
     // Closes every WebSocket (a close frame, so browsers see the end at once) and stops listening.
     void stop();
     uint16_t port() const { return port_; }
-    // http://ADDRESS:PORT/ (for 0.0.0.0: this host's name, which the LAN can reach).
+    // http://ADDRESS:PORT/, https:// with TLS (for 0.0.0.0: this host's name, which the LAN can reach).
     std::string url() const;
     int browsers() const;  // open WebSockets
 

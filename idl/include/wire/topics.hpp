@@ -18,6 +18,9 @@ Qos serverAnnounceQos();  // reliable, transient-local, keep-last 1
 Qos sessionOwnerQos();    // reliable, transient-local, keep-last 1, EXCLUSIVE ownership
 Qos replicaQos();         // reliable, volatile, keep-all with a small bound: a delta is never lost silently
 Qos replicaAckQos();      // reliable, volatile, keep-last 4
+// Erasure: reliable, transient-local, keep-last 1 per key, no auto-dispose (a request stays while any server that
+// acted on it lives; a report stays for the client that waits for it).
+Qos erasureQos();
 // A claim writer's QoS: sessionOwnerQos with this ownership strength (claimStrength).
 Qos claimWriterQos(int32_t strength);
 // A server's announcement and claims stay alive only while the server makes progress: MANUAL_BY_PARTICIPANT
@@ -51,6 +54,8 @@ FACESCAN_TOPIC(facescan_wire_ServerAnnounce, "facescan/ServerAnnounce", serverAn
 FACESCAN_TOPIC(facescan_wire_SessionOwner, "facescan/SessionOwner", sessionOwnerQos);
 FACESCAN_TOPIC(facescan_wire_SessionReplica, "facescan/cluster/SessionReplica", replicaQos);
 FACESCAN_TOPIC(facescan_wire_ReplicaAck, "facescan/cluster/ReplicaAck", replicaAckQos);
+FACESCAN_TOPIC(facescan_wire_EraseRequest, "facescan/EraseRequest", erasureQos);
+FACESCAN_TOPIC(facescan_wire_EraseReport, "facescan/EraseReport", erasureQos);
 
 #undef FACESCAN_TOPIC
 

@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -25,6 +26,11 @@ StatusOr<DataDirLock> DataDirLock::acquire(const std::filesystem::path& dir, con
         return unavailable("data dir " + dir.string() + ": cannot open " + path.string() + ": " + std::strerror(errno));
     DataDirLock lock;
     lock.fd_ = fd;
+    // It names the server's host and pid: owner-only like every file in the data dir, even one an older version made.
+    if (::fchmod(fd, 0600) != 0) {
+        return unavailable("data dir " + dir.string() + ": cannot make " + path.string() +
+                           " private: " + std::strerror(errno));
+    }
     if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
         const int err = errno;
         char holder[512] = {};

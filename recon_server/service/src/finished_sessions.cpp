@@ -32,6 +32,17 @@ std::optional<FinishedSession> FinishedSessions::find(const std::string& session
     return std::nullopt;
 }
 
+std::optional<FinishedSession> FinishedSessions::remove(const std::string& session_id) {
+    std::lock_guard lk(mutex_);
+    for (auto it = list_.begin(); it != list_.end(); ++it) {
+        if (it->stats.session_id != session_id) continue;
+        FinishedSession gone = std::move(*it);
+        list_.erase(it);
+        return gone;
+    }
+    return std::nullopt;
+}
+
 std::vector<SessionStats> FinishedSessions::stats() const {
     std::lock_guard lk(mutex_);
     std::vector<SessionStats> out;

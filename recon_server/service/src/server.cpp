@@ -11,6 +11,7 @@
 #include "service/frame_load.hpp"
 #include "service/replication.hpp"
 #include "service/session_store.hpp"
+#include "wire/private_files.hpp"
 
 namespace facescan::service {
 namespace {
@@ -42,6 +43,13 @@ StatusOr<std::unique_ptr<Server>> Server::create(const ServerParams& params) {
 Status Server::start() {
     RETURN_IF_ERROR(checkDataDir(params_.data_dir));
     ASSIGN_OR_RETURN(data_dir_lock_, DataDirLock::acquire(params_.data_dir, params_.server_id));
+    // What an older version (or a copy) left readable goes owner-only, like everything the server writes now.
+    ASSIGN_OR_RETURN(audit_, wire::AuditLog::open(params_.data_dir / "audit.log"));
+    ASSIGN_OR_RETURN(const int made_private, wire::makeTreePrivate(params_.data_dir));
+    if (made_private > 0) {
+        std::fprintf(stderr, "facescan-server: made %d file(s) and folder(s) in %s readable by this user only\n",
+                     made_private, params_.data_dir.c_str());
+    }
     using wire::boxed;
     ASSIGN_OR_RETURN(participant_, boxed(wire::Participant::create(params_.domain)));
     const wire::Participant& p = *participant_;
@@ -109,6 +117,8 @@ Status Server::start() {
         const dds_return_t rc = dds_waitset_attach(ws, c, c);
         if (rc < 0) return wire::ddsStatus(rc, "attach condition");
     }
+    startRetention();                 // before the resume: an expired replica is erased, not resumed
+    RETURN_IF_ERROR(startErasure());  // and so is one the domain asks to erase
     loadResumable();
     RETURN_IF_ERROR(join());
     joined_ = true;
@@ -296,7 +306,7 @@ void Server::takeCommands() {
     auto n = command_reader_->take([&](const facescan_wire_ScanCommand& msg, const dds_sample_info_t& info) {
         if (!info.valid_data) return;
         got.push_back({wire::fromDds(msg.session_id), wire::fromDds(msg.request_id), static_cast<uint32_t>(msg.kind),
-                       steadyNowNs()});
+                       steadyNowNs(), wire::fromDds(msg.client_id)});
     });
     if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
     if (!viewFresh()) {
@@ -459,6 +469,7 @@ void Server::reply(const Command& c, const Status& status, const MeshResult* mes
         r.triangle_count = mesh->triangle_count;
     }
     if (payload) r.payload = wire::octetView(payload->data(), payload->size());
+    audit(c, status);  // on record before the answer (and any scan data in it) leaves
     if (const Status s = reply_writer_->write(r); !s.isOk()) {
         std::fprintf(stderr, "facescan-server: reply to %s: %s\n", c.request_id.c_str(), s.toString().c_str());
     }
@@ -505,6 +516,8 @@ void Server::publishRefused(const std::string& session_id, const std::string& de
 }
 
 void Server::publishSnapshot(const std::string& session_id, const SnapshotResult& snap) {
+    // An erased scan's geometry never goes out again, not even the final snapshot of a scan finished to be erased.
+    if (isErased(params_.data_dir, session_id)) return;
     facescan_wire_MeshSnapshot m{};
     m.session_id = wire::stringView(session_id);
     m.seq = snap.seq;

@@ -49,6 +49,11 @@ void Server::retireFinished(std::map<std::string, bool>& final_sent) {
     std::erase_if(final_sent, [&](const auto& entry) { return !owned_ids.count(entry.first); });
     all.clear();
     for (const FinishedSession& f : finished_.expire(now)) forgetFinished(f);
+    // An erased scan (service/erasure.hpp) is not kept listed, whichever came first, its retirement or the erasure.
+    for (const SessionStats& s : finished_.stats()) {
+        if (!isErased(params_.data_dir, s.session_id)) continue;
+        if (auto f = finished_.remove(s.session_id)) forgetFinished(*f);
+    }
     if (!retired) return;
     // The retired sessions leave memory on the retiring thread, in the order of everything else given up there, and
     // never on a session's own worker (a Session's destructor joins its worker). A session's buffers were allocated

@@ -157,6 +157,7 @@ const std::map<std::string, Setter>& setters() {
         FLOAT("idle_timeout_s", p.idle_timeout_s),
         INT("keep_finished", p.keep_finished),
         FLOAT("keep_finished_s", p.keep_finished_s),
+        INT("retain_days", p.retain_days),
         FLOAT("replica_interval_s", p.replica_interval_s),
         INT("replica_full_every", p.replica_full_every),
         INT("replica_zstd_level", p.replica_zstd_level),
@@ -242,6 +243,7 @@ Status ServerParams::validate() const {
     if (!(keep_finished_s >= 0 && keep_finished_s <= 30 * 86400)) {
         return invalidArgument("--keep-finished-s must be in [0, 2592000] seconds (30 days)");
     }
+    if (retain_days < 0 || retain_days > 36500) return invalidArgument("--retain-days must be in [0, 36500] days");
     if (queue_frames < 1 || queue_frames > 64) return invalidArgument("queue_frames must be in [1, 64]");
     if (data_dir.empty()) return invalidArgument("--data-dir must not be empty");
     if (Status s = wire::validateServerId(server_id); !s.isOk()) return invalidArgument("--server-id: " + s.message());
@@ -302,6 +304,7 @@ StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args) {
                                                               {"--idle-timeout-s", "idle_timeout_s"},
                                                               {"--keep-finished", "keep_finished"},
                                                               {"--keep-finished-s", "keep_finished_s"},
+                                                              {"--retain-days", "retain_days"},
                                                               {"--data-dir", "data_dir"},
                                                               {"--profile", "profile"},
                                                               {"--domain", "domain"},
@@ -385,6 +388,13 @@ std::string serverUsage() {
            "                          as soon as its files are written, and its files answer its commands later\n"
            "  --data-dir DIR          sessions go to DIR/SESSION/ (default ./facescan-data): their replica while\n"
            "                          scanning, the results when finished; DIR/SESSION/owner.json names the owner\n"
+           "                          DIR is made 0700 and every file in it 0600, whoever runs the server: faces are\n"
+           "                          personal data. Nothing is encrypted at rest: use an encrypted file system\n"
+           "                          (LUKS) for the data dir where that is needed\n"
+           "  --retain-days N         erase the sessions whose newest file in DIR is older than N days (finished "
+           "scans\n"
+           "                          and replicas left behind), at start and every hour, and say so in the log and\n"
+           "                          DIR/audit.log; an erased session is never written again (default 0: keep)\n"
            "  --server-id ID          this server's name on the domain, unique (default HOST-PID)\n"
            "  --replica-interval-s S  seconds between replicas of a scan to its standby and data dir (default 1)\n"
            "  --max-triangles N|web|avatar|print|full\n"

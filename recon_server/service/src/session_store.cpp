@@ -1,6 +1,7 @@
 #include "service/session_store.hpp"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -10,6 +11,8 @@
 #include <sstream>
 
 #include "recon/mesh_writer.hpp"
+#include "service/erasure.hpp"
+#include "wire/private_files.hpp"
 
 namespace facescan::service {
 namespace {
@@ -20,8 +23,14 @@ Status errnoStatus(const std::string& what) { return internalError(what + ": " +
 
 Status writeFileAtomic(const std::filesystem::path& path, const void* bytes, size_t size) {
     const std::filesystem::path tmp = path.string() + ".tmp";
-    const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    // Owner-only (wire/private_files.hpp); fchmod as well, for a NAME.tmp that an older version left readable.
+    const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
     if (fd < 0) return errnoStatus("cannot create " + tmp.string());
+    if (::fchmod(fd, 0600) != 0) {
+        const Status s = errnoStatus("cannot make " + tmp.string() + " private");
+        ::close(fd);
+        return s;
+    }
     const auto* p = static_cast<const char*>(bytes);
     size_t left = size;
     while (left > 0) {
@@ -64,9 +73,7 @@ StatusOr<std::string> meshToPly(const recon::IndexedMesh& mesh) {
 }
 
 Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& files) {
-    std::error_code ec;
-    std::filesystem::create_directories(dir, ec);
-    if (ec) return internalError("cannot create " + dir.string() + ": " + ec.message());
+    RETURN_IF_ERROR(wire::createPrivateDir(dir));
     if (files.mesh && !files.mesh->triangles.empty()) {
         ASSIGN_OR_RETURN(const std::string ply, meshToPly(*files.mesh));
         RETURN_IF_ERROR(writeFileAtomic(dir / "mesh.ply", ply));
@@ -84,8 +91,10 @@ Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& f
 
 Status checkDataDir(const std::filesystem::path& dir) {
     std::error_code ec;
-    std::filesystem::create_directories(dir, ec);
-    if (ec) return unavailable("data dir " + dir.string() + ": cannot create it: " + ec.message());
+    if (Status s = wire::createPrivateDir(dir); !s.isOk()) {
+        return Status(s.code() == StatusCode::kInvalidArgument ? s.code() : StatusCode::kUnavailable,
+                      "data dir " + dir.string() + ": " + s.message());
+    }
     const std::filesystem::path probe = dir / (".write-test-" + std::to_string(::getpid()));
     const Status s = writeFileAtomic(probe, std::string("facescan"));
     std::filesystem::remove(probe, ec);
@@ -127,18 +136,20 @@ std::optional<std::pair<std::string, uint32_t>> readSessionOwner(const std::file
 
 StatusOr<std::filesystem::path> claimSessionDir(const std::filesystem::path& data_dir, const std::string& session_id,
                                                 const std::string& server_id, uint32_t epoch, std::string* note) {
+    // An erased scan is never written again: not by a late replica, a finish or a resume.
+    if (isErased(data_dir, session_id)) {
+        return permissionDenied("session " + session_id + " was erased from " + data_dir.string() +
+                                " (its tombstone is in @erased/): nothing of it is written again");
+    }
     std::filesystem::path dir = data_dir / session_id;
-    std::error_code ec;
-    std::filesystem::create_directories(dir, ec);
-    if (ec) return internalError("cannot create " + dir.string() + ": " + ec.message());
+    RETURN_IF_ERROR(wire::createPrivateDir(dir));
     const auto current = readSessionOwner(dir);
     std::string previous;
     if (current && current->first != server_id) {
         if (current->second >= epoch) {
             // Another server owns this folder at our epoch or later: write beside it, never over it.
             dir /= server_id + ".e" + std::to_string(epoch);
-            std::filesystem::create_directories(dir, ec);
-            if (ec) return internalError("cannot create " + dir.string() + ": " + ec.message());
+            RETURN_IF_ERROR(wire::createPrivateDir(dir));
             if (note) {
                 *note = "session " + session_id + ": " + (data_dir / session_id).string() + " belongs to server '" +
                         current->first + "' (epoch " + std::to_string(current->second) +

@@ -27,4 +27,5 @@ claim_private_domain || { echo "viewer_browser_test: no free DDS domain in 100..
 out=${OUT_DIR:-$(mktemp -d "${TMPDIR:-/tmp}/facescan-browser.XXXXXX")}
 echo "viewer_browser_test: domain $domain, output in $out"
 cd "$here"
-node viewer_browser_test.mjs "$out" "$domain"
+# The script to run: the scan test by default, or the one named (viewer_login_browser_test.mjs).
+node "${1:-viewer_browser_test.mjs}" "$out" "$domain"

@@ -42,6 +42,8 @@ class FinishedSessions {
     size_t size() const;
     // Removes and returns the records beyond the newest `keep` and those older than keep_s at now_ns.
     std::vector<FinishedSession> expire(int64_t now_ns);
+    // Removes and returns the record of `session_id` (an erased scan), with its claim; nullopt when none.
+    std::optional<FinishedSession> remove(const std::string& session_id);
 
  private:
     const size_t keep_;

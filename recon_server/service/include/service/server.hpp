@@ -32,11 +32,14 @@
 
 #include "service/cluster.hpp"
 #include "service/data_dir_lock.hpp"
+#include "service/erasure.hpp"
+#include "service/erasure_service.hpp"
 #include "service/finished_sessions.hpp"
 #include "service/retirer.hpp"
 #include "service/server_params.hpp"
 #include "service/session.hpp"
 #include "service/watchdog.hpp"
+#include "wire/audit_log.hpp"
 #include "wire/topics.hpp"
 
 namespace facescan::service {
@@ -95,6 +98,7 @@ class Server {
         std::string session_id, request_id;
         uint32_t kind = 0;
         int64_t received_ns = 0;
+        std::string client_id;  // as the client sent it (its DDS Security identity's name first, when it has one)
     };
     struct Candidate {  // a CameraInfo of a session nobody owns yet
         wire::CameraInfoData camera;
@@ -120,6 +124,8 @@ class Server {
     void statusLoop();
     bool waitForTick(std::chrono::steady_clock::time_point& next, std::chrono::duration<double> period);
     void runCommand(const Command& c);
+    // Appends the answered command to the audit trail (server_audit.cpp); a status query is not recorded.
+    void audit(const Command& c, const Status& status);
     void reply(const Command& c, const Status& status, const MeshResult* mesh = nullptr,
                const std::vector<uint8_t>* payload = nullptr);
     void publishStatus(const SessionStats& s);
@@ -180,7 +186,10 @@ class Server {
     std::vector<std::shared_ptr<OwnedSession>> ownedSessions() const;
 
     ServerParams params_;
-    DataDirLock data_dir_lock_;  // held for the server's life (released last)
+    DataDirLock data_dir_lock_;                    // held for the server's life (released last)
+    std::unique_ptr<wire::AuditLog> audit_;        // DATA_DIR/audit.log: every command answered (wire/audit_log.hpp)
+    std::unique_ptr<RetentionSweeper> retention_;  // --retain-days (server_audit.cpp starts it); stops before audit_
+    void startRetention();
     std::unique_ptr<wire::Participant> participant_;
     std::unique_ptr<Cluster> cluster_;
     std::unique_ptr<Replicator> replicator_;
@@ -234,6 +243,9 @@ class Server {
     bool shut_down_ = false;
     bool joined_ = false;  // the join completed (this server's id is its own)
     std::thread intake_, command_, snapshot_, status_;
+    // `facescan delete` (server_audit.cpp starts it). Last: its thread stops before anything it uses goes.
+    std::unique_ptr<ErasureService> erasure_;
+    Status startErasure();
 };
 
 }  // namespace facescan::service

@@ -32,7 +32,10 @@ struct ServerParams {
     // keep_finished_s, and its files in the data dir answer its commands after that too.
     int keep_finished = 16;          // count; finished sessions listed at most
     float keep_finished_s = 600.0f;  // seconds; a finished session is listed at most this long
-    int queue_frames = 8;            // frames; bounded per-session queue of a recording (every_frame) session
+    // Retention: a session in the data dir whose newest file is older than this is erased (service/erasure.hpp),
+    // checked at start and every hour. 0: scans are kept until deleted.
+    int retain_days = 0;   // days
+    int queue_frames = 8;  // frames; bounded per-session queue of a recording (every_frame) session
     std::filesystem::path data_dir = "facescan-data";  // finished sessions go to data_dir/SESSION/
     wire::DomainConfig domain{0, "lan"};
     std::string server_id;  // in every reply, status and announcement; default "<hostname>-<pid>"; [A-Za-z0-9._-]
