@@ -10,6 +10,7 @@
 #include <string>
 
 #include "recon/camera.hpp"
+#include "recon/sensor.hpp"
 #include "recon/status.hpp"
 
 namespace facescan::capture {
@@ -23,6 +24,14 @@ struct SourceInfo {
     bool is_recording = false;  // a file or generator: can be read as fast as the consumer takes it
     int expected_frames = 0;    // 0 when unknown or live
     std::string description;    // e.g. "synthetic:leeperrysmith", "oni:/data/scan.oni"
+    // The camera, as far as the source can tell (a device's name and range, a recording's metadata); the agent's
+    // --sensor and --depth-range replace it. A source that cannot tell leaves a Kinect v1 and sensor_known false.
+    recon::SensorModel sensor;
+    bool sensor_known = false;
+    // The colour camera's own size and intrinsics (width 0: the depth camera's) and the depth-to-colour
+    // extrinsics, for colour that is not registered to depth.
+    recon::Intrinsics colour_intrinsics{0, 0, 0.0f, 0.0f, 0.0f, 0.0f};
+    recon::Pose T_colour_depth = recon::Pose::Identity();
 };
 
 struct CapturedFrame {
