@@ -173,6 +173,7 @@ Status Session::start(const wire::CameraInfoData& camera, const wire::ReplicaDat
     recon_ = std::move(engine.recon);
     pipeline_ = std::move(engine.pipeline);
     advice_ = engine.advice;
+    recon_params_ = recon_->params();
     stats_.camera_known = true;
     stats_.every_frame = camera.every_frame;
     stats_.source = camera.source;

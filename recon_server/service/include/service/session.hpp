@@ -302,7 +302,8 @@ class Session {
     // Worker-only state (no lock).
     std::unique_ptr<FrameLoad> load_;  // made with the worker (it needs the source's rate)
     std::unique_ptr<recon::FacePipeline> pipeline_;
-    recon::AdviceParams advice_;  // set with the engine, read by the worker only
+    recon::AdviceParams advice_;       // set with the engine, read by the worker only
+    recon::ReconParams recon_params_;  // the session's, adapted to its camera (under mutex_, set with camera_)
     wire::FrameDecoder decoder_;
     recon::RgbdFrame frame_;
     recon::ScanStep step_;  // the frame worker's last frame (head, result, advice); reused
