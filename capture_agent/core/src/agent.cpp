@@ -138,7 +138,11 @@ Status Agent::saveUnconfirmed(const std::vector<wire::EncodedFrame>& kept,
     const std::filesystem::path parent =
         options_.save_dir.empty() ? defaultSaveDir() : std::filesystem::path(options_.save_dir);
     ASSIGN_OR_RETURN(const std::filesystem::path dir, createFreshDir(parent, session_id_));
-    ASSIGN_OR_RETURN(TumRecorder recorder, TumRecorder::create(dir, source_->info(), options_.jpeg_quality));
+    // The camera as the stream described it (--sensor and --depth-range included), so a replay describes it too.
+    SourceInfo info = source_->info();
+    ASSIGN_OR_RETURN(info.sensor, options_.resolveSensor(info));
+    info.sensor_known = info.sensor_known || !options_.sensor.empty() || options_.depth_min_m > 0;
+    ASSIGN_OR_RETURN(TumRecorder recorder, TumRecorder::create(dir, info, options_.jpeg_quality));
     for (const wire::EncodedFrame& f : kept) RETURN_IF_ERROR(recorder.add(f));
     for (const CapturedFrame* f : queued) RETURN_IF_ERROR(recorder.add(*f));
     const uint32_t first = kept.empty() ? queued.front()->index : kept.front().seq;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <opencv2/core.hpp>
@@ -60,13 +61,16 @@ struct SourceOptions {
 // Opens a source from its command-line spec:
 //   openni2[:URI]   the first OpenNI2 device, or the one with this URI
 //   oni:FILE        an OpenNI2 recording, every frame in order
-//   tum:DIR         a TUM RGB-D folder (rgb.txt, depth.txt, optional intrinsics.txt)
+//   tum:DIR         a TUM RGB-D folder (rgb.txt, depth.txt, optional intrinsics.txt and sensor.txt)
 //   synthetic[:k=v,...]  the virtual Kinect (keys: frames, distance, yaw, pitch, seed, noise,
 //   subject=builtin|scan|PATH)
 StatusOr<std::unique_ptr<FrameSource>> openSource(const std::string& spec, const SourceOptions& options);
 
 // Per-kind openers (used by openSource; exposed for tests).
 StatusOr<std::unique_ptr<FrameSource>> openTumSource(const std::string& dir, const SourceOptions& options);
+// A TUM folder's camera, from its optional sensor.txt: "NAME [MIN_M MAX_M]", NAME a preset (recon::sensorPresets,
+// the range overriding its own) or any name with its range. DataLoss, saying the format, for anything else.
+StatusOr<recon::SensorModel> readSensorFile(const std::filesystem::path& file);
 StatusOr<std::unique_ptr<FrameSource>> openSyntheticSource(const std::string& options_text,
                                                            const SourceOptions& options);
 // uri empty = first device. Live camera: depth 640x480@30 in mm, registration and sync on where supported.
