@@ -290,8 +290,10 @@ Status FrameDecoder::decode(const facescan_wire_RgbdFrame& msg, const CameraInfo
     const bool has_colour = msg.colour_codec == facescan_wire_COLOUR_JPEG && msg.colour._length > 0;
     if (colour == ColourDecode::kNone || !has_colour) return Status::ok();
     if (msg.colour._buffer == nullptr) return dataLoss("colour payload has no bytes");
-    // Colour that is not registered to depth cannot be used per depth pixel, and CameraInfo carries no
-    // extrinsics to register it (recon::ColourCamera could); it is dropped and the depth-only paths take over.
+    // Colour that is not registered to depth cannot be used per depth pixel. CameraInfo carries the colour
+    // camera and its extrinsics (colour_intrinsics, T_colour_depth), but the stages that read colour (detection,
+    // integration) take it per depth pixel and nothing registers it yet: it is dropped and the depth-only paths
+    // take over.
     if (!camera.colour_registered) return Status::ok();
     if (colour == ColourDecode::kEager) {
         return on_demand_.decoder().decode(msg.colour._buffer, msg.colour._length, w, h, out.colour_bgr);
