@@ -52,6 +52,11 @@ options:
                                                  yaw, pitch (deg), period (frames), seed, noise (0/1),
                                                  subject (auto|builtin|scan|PATH); all keys: an unknown
                                                  key's error lists them
+  --sensor NAME         the camera, when the source cannot tell (recordings) or tells wrong: its working range,
+                        kind and depth noise, from which every stage takes its limits; one of kinect-v1, xtion,
+                        astra, realsense-d415, azure-kinect, truedepth (default: what the device reports; a
+                        source that cannot tell: kinect-v1)
+  --depth-range MIN:MAX the camera's working range in metres, over the sensor's (e.g. 0.2:0.5)
   --session ID          session id (default: a fresh unique id, printed at start)
   --frames N            stop after N frames (default: all)
   --rate real|max|HZ    real: the source's own rate (default); max: as fast as the server takes them, with no
@@ -127,6 +132,20 @@ int main(int argc, char** argv) {
         const std::string text = v;
         if (arg == "--source") {
             options.source = text;
+        } else if (arg == "--sensor") {
+            if (const auto preset = recon::findSensorPreset(text); !preset.isOk())
+                return usageError(preset.status().message());
+            options.sensor = text;
+        } else if (arg == "--depth-range") {
+            char* end = nullptr;
+            const float lo = std::strtof(text.c_str(), &end);
+            const float hi = end && *end == ':' ? std::strtof(end + 1, &end) : 0.0f;
+            if (!end || *end != '\0' || !(lo > 0 && hi > lo && hi <= 20)) {
+                return usageError(
+                    "--depth-range takes MIN:MAX in metres with 0 < MIN < MAX <= 20, e.g. 0.2:0.5; got '" + text + "'");
+            }
+            options.depth_min_m = lo;
+            options.depth_max_m = hi;
         } else if (arg == "--session") {
             options.session_id = text;
         } else if (arg == "--frames") {
@@ -196,6 +215,11 @@ int main(int argc, char** argv) {
     std::printf("facescan-agent: source %s, %dx%d, %.1f Hz%s%s\n", info.description.c_str(), info.intrinsics.width_px,
                 info.intrinsics.height_px, info.rate_hz, info.has_colour ? ", colour" : ", depth only",
                 info.expected_frames > 0 ? (", " + std::to_string(info.expected_frames) + " frames").c_str() : "");
+    if (auto sensor = options.resolveSensor(info); sensor.isOk()) {
+        std::printf("facescan-agent: camera %s (%s), %.2f-%.2f m%s\n", sensor->name.c_str(),
+                    recon::sensorFamilyName(sensor->family), sensor->min_depth_m, sensor->max_depth_m,
+                    options.sensor.empty() && !info.sensor_known ? " (the source cannot tell: --sensor NAME)" : "");
+    }
     std::fflush(stdout);
 
     uint64_t last_digest = 0;

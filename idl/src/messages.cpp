@@ -1,6 +1,8 @@
 #include "wire/messages.hpp"
 
 #include <cmath>
+#include <cstdio>
+#include <vector>
 
 namespace facescan::wire {
 
@@ -20,6 +22,64 @@ Status CameraInfoData::validate() const {
                                std::to_string(depth_units_m));
     }
     if (!(rate_hz > 0 && rate_hz <= 1000)) return invalidArgument("frame rate must be in (0, 1000] Hz");
+    if (const Status s = sensor.validate(); !s.isOk())
+        return invalidArgument("camera '" + sensor.name + "': " + s.message());
+    const recon::Intrinsics& c = colourIntrinsics();
+    if (c.width_px < 16 || c.height_px < 16 || c.width_px > kMaxDepthWidthPx || c.height_px > kMaxDepthHeightPx) {
+        return outOfRange("colour camera size " + std::to_string(c.width_px) + "x" + std::to_string(c.height_px) +
+                          " outside 16..4096");
+    }
+    if (!(c.fx_px > 1 && c.fy_px > 1 && std::isfinite(c.fx_px) && std::isfinite(c.fy_px) && std::isfinite(c.cx_px) &&
+          std::isfinite(c.cy_px))) {
+        return invalidArgument("colour camera intrinsics are not usable (focal lengths must be finite and > 1 px)");
+    }
+    if (colour_registered && (c.width_px != k.width_px || c.height_px != k.height_px)) {
+        return invalidArgument("colour is said to be registered to depth, but its size " + std::to_string(c.width_px) +
+                               "x" + std::to_string(c.height_px) + " is not the depth's " + std::to_string(k.width_px) +
+                               "x" + std::to_string(k.height_px) +
+                               ": register it, or describe the colour camera and its extrinsics");
+    }
+    const Eigen::Matrix3f R = T_colour_depth.linear();
+    if (!T_colour_depth.matrix().allFinite() || !(R * R.transpose()).isApprox(Eigen::Matrix3f::Identity(), 1e-3f) ||
+        R.determinant() < 0.0f || T_colour_depth.translation().norm() > 1.0f) {
+        return invalidArgument("depth-to-colour extrinsics are not a rotation and a translation under 1 m");
+    }
+    return Status::ok();
+}
+
+Status CameraInfoData::checkDepthUnits(const cv::Mat& depth_raw) const {
+    if (depth_raw.empty() || depth_raw.type() != CV_16UC1) return Status::ok();
+    // A histogram of the raw values: the median without sorting a frame.
+    std::vector<uint32_t> histogram(65536, 0);
+    uint64_t valid = 0;
+    for (int v = 0; v < depth_raw.rows; v += 2) {
+        const uint16_t* row = depth_raw.ptr<uint16_t>(v);
+        for (int u = 0; u < depth_raw.cols; u += 2) {
+            if (row[u] == 0) continue;
+            ++histogram[row[u]];
+            ++valid;
+        }
+    }
+    if (valid == 0) return Status::ok();
+    uint64_t seen = 0;
+    int median_raw = 0;
+    for (; median_raw < 65536; ++median_raw) {
+        seen += histogram[static_cast<size_t>(median_raw)];
+        if (2 * seen >= valid) break;
+    }
+    const float median_m = static_cast<float>(median_raw) * depth_units_m;
+    // A scene is never tenths of the sensor's near limit away, nor ten times its far limit.
+    if (median_m < 0.1f * sensor.min_depth_m || median_m > 10.0f * sensor.max_depth_m) {
+        char text[320];
+        std::snprintf(text, sizeof(text),
+                      "depth units look wrong: the frame's median depth is %.4g m (raw %d x %g m), but '%s' "
+                      "measures %.2f-%.2f m; give the depth units of the source (e.g. --tum-depth-scale 1000 for "
+                      "millimetres) or the right --sensor",
+                      static_cast<double>(median_m), median_raw, static_cast<double>(depth_units_m),
+                      sensor.name.c_str(), static_cast<double>(sensor.min_depth_m),
+                      static_cast<double>(sensor.max_depth_m));
+        return invalidArgument(text);
+    }
     return Status::ok();
 }
 
@@ -105,6 +165,23 @@ facescan_wire_CameraInfo toMessage(const CameraInfoData& info) {
     msg.expected_frames = info.expected_frames;
     msg.source = stringView(info.source);
     msg.agent_host = stringView(info.agent_host);
+    msg.min_depth_m = info.sensor.min_depth_m;
+    msg.max_depth_m = info.sensor.max_depth_m;
+    msg.sensor_family = static_cast<facescan_wire_SensorFamily>(info.sensor.family);
+    msg.sensor_name = stringView(info.sensor.name);
+    msg.noise_c0_m = info.sensor.noise.c0_m;
+    msg.noise_c1 = info.sensor.noise.c1;
+    msg.noise_c2_per_m = info.sensor.noise.c2_per_m;
+    msg.colour_width = static_cast<uint32_t>(info.colour_intrinsics.width_px);
+    msg.colour_height = static_cast<uint32_t>(info.colour_intrinsics.height_px);
+    msg.colour_fx = info.colour_intrinsics.fx_px;
+    msg.colour_fy = info.colour_intrinsics.fy_px;
+    msg.colour_cx = info.colour_intrinsics.cx_px;
+    msg.colour_cy = info.colour_intrinsics.cy_px;
+    for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) msg.R_colour_depth[3 * r + c] = info.T_colour_depth.linear()(r, c);
+        msg.t_colour_depth_m[r] = info.T_colour_depth.translation()(r);
+    }
     return msg;
 }
 
@@ -128,6 +205,43 @@ StatusOr<CameraInfoData> fromMessage(const facescan_wire_CameraInfo& msg) {
     info.expected_frames = msg.expected_frames;
     info.source = fromDds(msg.source);
     info.agent_host = fromDds(msg.agent_host);
+    if (msg.min_depth_m == 0.0f && msg.max_depth_m == 0.0f) {
+        // An agent from before the camera travelled with the stream: it only ever drove a Kinect v1.
+        info.sensor = recon::SensorModel::kinectV1();
+    } else {
+        info.sensor.min_depth_m = msg.min_depth_m;
+        info.sensor.max_depth_m = msg.max_depth_m;
+        info.sensor.family = msg.sensor_family >= facescan_wire_SENSOR_UNKNOWN &&
+                                     msg.sensor_family <= facescan_wire_SENSOR_TIME_OF_FLIGHT
+                                 ? static_cast<recon::SensorFamily>(msg.sensor_family)
+                                 : recon::SensorFamily::kUnknown;
+        info.sensor.name = fromDds(msg.sensor_name);
+        if (info.sensor.name.empty()) info.sensor.name = "custom";
+        info.sensor.noise = {msg.noise_c0_m, msg.noise_c1, msg.noise_c2_per_m};
+    }
+    // Width 0 (an older agent's, or registered colour): the colour camera is the depth camera's.
+    if (msg.colour_width != 0 || msg.colour_height != 0) {
+        if (msg.colour_width > static_cast<uint32_t>(kMaxDepthWidthPx) ||
+            msg.colour_height > static_cast<uint32_t>(kMaxDepthHeightPx)) {
+            return outOfRange("CameraInfo colour size " + std::to_string(msg.colour_width) + "x" +
+                              std::to_string(msg.colour_height) + " exceeds 4096x4096");
+        }
+        info.colour_intrinsics.width_px = static_cast<int>(msg.colour_width);
+        info.colour_intrinsics.height_px = static_cast<int>(msg.colour_height);
+        info.colour_intrinsics.fx_px = msg.colour_fx;
+        info.colour_intrinsics.fy_px = msg.colour_fy;
+        info.colour_intrinsics.cx_px = msg.colour_cx;
+        info.colour_intrinsics.cy_px = msg.colour_cy;
+        bool rotation_zero = true;
+        for (const float v : msg.R_colour_depth) rotation_zero = rotation_zero && v == 0.0f;
+        info.T_colour_depth = recon::Pose::Identity();
+        if (!rotation_zero) {
+            for (int r = 0; r < 3; ++r) {
+                for (int c = 0; c < 3; ++c) info.T_colour_depth.matrix()(r, c) = msg.R_colour_depth[3 * r + c];
+            }
+        }
+        for (int r = 0; r < 3; ++r) info.T_colour_depth.matrix()(r, 3) = msg.t_colour_depth_m[r];
+    }
     RETURN_IF_ERROR(info.validate());
     return info;
 }
@@ -176,8 +290,10 @@ Status FrameDecoder::decode(const facescan_wire_RgbdFrame& msg, const CameraInfo
     const bool has_colour = msg.colour_codec == facescan_wire_COLOUR_JPEG && msg.colour._length > 0;
     if (colour == ColourDecode::kNone || !has_colour) return Status::ok();
     if (msg.colour._buffer == nullptr) return dataLoss("colour payload has no bytes");
-    // Colour that is not registered to depth cannot be used per depth pixel, and CameraInfo carries no
-    // extrinsics to register it (recon::ColourCamera could); it is dropped and the depth-only paths take over.
+    // Colour that is not registered to depth cannot be used per depth pixel. CameraInfo carries the colour
+    // camera and its extrinsics (colour_intrinsics, T_colour_depth), but the stages that read colour (detection,
+    // integration) take it per depth pixel and nothing registers it yet: it is dropped and the depth-only paths
+    // take over.
     if (!camera.colour_registered) return Status::ok();
     if (colour == ColourDecode::kEager) {
         return on_demand_.decoder().decode(msg.colour._buffer, msg.colour._length, w, h, out.colour_bgr);

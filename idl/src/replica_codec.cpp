@@ -92,9 +92,22 @@ void putCamera(ByteWriter& w, const CameraInfoData& c) {
     w.put<uint32_t>(c.expected_frames);
     w.str(c.source);
     w.str(c.agent_host);
+    // Version 3: the camera.
+    w.str(c.sensor.name);
+    w.put<uint8_t>(static_cast<uint8_t>(c.sensor.family));
+    for (const float f : {c.sensor.min_depth_m, c.sensor.max_depth_m, c.sensor.noise.c0_m, c.sensor.noise.c1,
+                          c.sensor.noise.c2_per_m}) {
+        w.put<float>(f);
+    }
+    const recon::Intrinsics& k = c.colour_intrinsics;
+    w.put<uint32_t>(static_cast<uint32_t>(k.width_px));
+    w.put<uint32_t>(static_cast<uint32_t>(k.height_px));
+    for (const float f : {k.fx_px, k.fy_px, k.cx_px, k.cy_px}) w.put<float>(f);
+    w.pose(c.T_colour_depth);
 }
 
-bool getCamera(ByteReader& r, CameraInfoData& c) {
+// format_version 2 has no camera description: its sessions were all Kinect v1 with registered colour.
+bool getCamera(ByteReader& r, CameraInfoData& c, uint16_t format_version) {
     uint32_t w = 0, h = 0;
     uint8_t reg = 0, every = 0;
     if (!r.get(w) || !r.get(h) || w > 4096 || h > 4096) return false;
@@ -107,7 +120,28 @@ bool getCamera(ByteReader& r, CameraInfoData& c) {
     if (!r.get(reg) || !r.get(every) || !r.get(c.expected_frames)) return false;
     c.colour_registered = reg != 0;
     c.every_frame = every != 0;
-    return r.str(c.source) && r.str(c.agent_host);
+    if (!r.str(c.source) || !r.str(c.agent_host)) return false;
+    if (format_version < 3) {
+        c.sensor = recon::SensorModel::kinectV1();
+        return true;
+    }
+    uint8_t family = 0;
+    uint32_t cw = 0, ch = 0;
+    if (!r.str(c.sensor.name) || !r.get(family) || family > static_cast<uint8_t>(recon::SensorFamily::kTimeOfFlight))
+        return false;
+    c.sensor.family = static_cast<recon::SensorFamily>(family);
+    for (float* f : {&c.sensor.min_depth_m, &c.sensor.max_depth_m, &c.sensor.noise.c0_m, &c.sensor.noise.c1,
+                     &c.sensor.noise.c2_per_m}) {
+        if (!r.get(*f)) return false;
+    }
+    if (!r.get(cw) || !r.get(ch) || cw > 4096 || ch > 4096) return false;
+    recon::Intrinsics& k = c.colour_intrinsics;
+    k.width_px = static_cast<int>(cw);
+    k.height_px = static_cast<int>(ch);
+    for (float* f : {&k.fx_px, &k.fy_px, &k.cx_px, &k.cy_px}) {
+        if (!r.get(*f)) return false;
+    }
+    return r.pose(c.T_colour_depth);
 }
 
 void putCounters(ByteWriter& w, const SessionCounters& c) {
@@ -332,9 +366,10 @@ Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out) {
     std::memcpy(&body_size, data + 8, 4);
     std::memcpy(&packed_size, data + 12, 4);
     if (magic != kMagic) return dataLoss("not a facescan replica (bad magic)");
-    if (version != kReplicaFormatVersion) {
+    if (version != kReplicaFormatVersion && version != kOldestReplicaFormatVersion) {
         return {StatusCode::kUnimplemented, "replica format version " + std::to_string(version) +
-                                                " is not compatible with this server (it reads " + "version " +
+                                                " is not compatible with this server (it reads " + "versions " +
+                                                std::to_string(kOldestReplicaFormatVersion) + "-" +
                                                 std::to_string(kReplicaFormatVersion) +
                                                 "): run the same facescan version on every server of the domain"};
     }
@@ -388,7 +423,7 @@ Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out) {
     ByteReader r(body.data(), body.size());
     ReplicaData d;
     if (!r.str(d.session_id) || !r.str(d.owner_id) || !r.get(d.epoch) || !r.get(d.round) || !r.get(d.base_round) ||
-        !r.get(d.next_seq) || !getCamera(r, d.camera) || !getCounters(r, d.counters)) {
+        !r.get(d.next_seq) || !getCamera(r, d.camera, version) || !getCounters(r, d.counters)) {
         return dataLoss("replica body truncated in its header fields");
     }
     RETURN_IF_ERROR(getState(r, d.state));

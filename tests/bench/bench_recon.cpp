@@ -36,6 +36,7 @@
 #include "recon/parallel.hpp"
 #include "recon/reconstructor.hpp"
 #include "recon/scan_step.hpp"
+#include "recon/sensor_adapt.hpp"
 #include "recon_input.hpp"
 #include "synth/kinect_simulator.hpp"
 #include "synth/sequence_options.hpp"
@@ -194,7 +195,8 @@ struct LoopResult {
 
 // Every frame through the reconstructor, timed: with the server's FacePipeline (recon/scan_step.hpp, as the
 // session worker runs it) when `pipeline` is given, else with the input's own masks.
-LoopResult runLoop(const Sequence& seq, recon::Reconstructor& rec, recon::FacePipeline* pipeline, bool verbose) {
+LoopResult runLoop(const Sequence& seq, recon::Reconstructor& rec, recon::FacePipeline* pipeline, bool verbose,
+                   const recon::AdviceParams& advice_params = {}) {
     const int n = static_cast<int>(seq.frames.size());
     LoopResult out;
     out.estimate.resize(static_cast<size_t>(n));
@@ -211,7 +213,7 @@ LoopResult runLoop(const Sequence& seq, recon::Reconstructor& rec, recon::FacePi
         recon::FrameResult r;
         const char* advice = "";
         if (pipeline) {
-            recon::scanFrame(*pipeline, rec, seq.frames[i], step);
+            recon::scanFrame(*pipeline, rec, seq.frames[i], step, advice_params);
             sum.detect += step.head.detect_ms;
             sum.segment += step.head.segment_ms;
             r = step.frame;
@@ -268,8 +270,12 @@ StatusOr<double> twinMean(const Options& o, const recon::ReconParams& params, co
     RETURN_IF_ERROR(rec.initStatus());
     std::optional<recon::FacePipeline> pipeline;
     if (o.pipeline_mask) {
+        recon::ReconParams unused = params;  // params are the main sequence's, already adapted to the camera
+        recon::FacePipelineParams face_params;
+        recon::AdviceParams advice;
+        recon::adaptToSensor(seq.sensor, seq.k, unused, face_params, advice);
         ASSIGN_OR_RETURN(recon::FacePipeline created,
-                         recon::FacePipeline::create({}, seq.k, recon::ColourCamera::registeredTo(seq.k)));
+                         recon::FacePipeline::create(face_params, seq.k, recon::ColourCamera::registeredTo(seq.k)));
         pipeline.emplace(std::move(created));
     }
     dropMasksIfAsked(o, seq);
@@ -392,6 +398,10 @@ int runRecon(const std::vector<std::string>& args) {
     }
     dropMasksIfAsked(o, seq);
     recon::ReconParams params = o.preset == "fast" ? recon::ReconParams::fast() : recon::ReconParams::faceDefaults();
+    // The camera's own limits, as the server sets them from its CameraInfo (a Kinect v1 keeps the defaults).
+    recon::FacePipelineParams face_params;
+    recon::AdviceParams advice;
+    recon::adaptToSensor(seq.sensor, seq.k, params, face_params, advice);
     if (o.volume_m > 0) params.tsdf.volume_size_m = o.volume_m;
     if (o.trunc_m > 0) params.tsdf.trunc_dist_m = o.trunc_m;
     if (o.model_level >= 0) params.model_level = o.model_level;
@@ -427,7 +437,7 @@ int runRecon(const std::vector<std::string>& args) {
 
     std::optional<recon::FacePipeline> pipeline;
     if (o.pipeline_mask) {
-        auto created = recon::FacePipeline::create({}, seq.k, recon::ColourCamera::registeredTo(seq.k));
+        auto created = recon::FacePipeline::create(face_params, seq.k, recon::ColourCamera::registeredTo(seq.k));
         if (!created.isOk()) {
             std::fprintf(stderr, "recon: %s\n", created.status().toString().c_str());
             return 1;
@@ -438,7 +448,7 @@ int runRecon(const std::vector<std::string>& args) {
 
     const int n = static_cast<int>(seq.frames.size());
     recon::setParallelSerial(o.serial);
-    const LoopResult loop = runLoop(seq, rec, pipeline ? &*pipeline : nullptr, o.verbose);
+    const LoopResult loop = runLoop(seq, rec, pipeline ? &*pipeline : nullptr, o.verbose, advice);
     recon::setParallelSerial(false);
     const std::vector<std::optional<Pose>>& estimate = loop.estimate;
     const recon::StageTimesMs& sum = loop.sum;
@@ -454,6 +464,7 @@ int runRecon(const std::vector<std::string>& args) {
 
     std::printf("facescan-bench recon: %s, %d frames, preset %s, mask: %s%s\n", o.input.c_str(), n, o.preset.c_str(),
                 seq.mask_source.c_str(), o.serial ? "; serial (the core's loops on one thread)" : "");
+    std::printf("camera %s\n", recon::describeSensor(seq.sensor, advice, params.tsdf).c_str());
     std::printf("volume %d^3 voxels of %.2f mm, %d blocks allocated (%.1f MB of voxels)\n", params.tsdf.resolution_vox,
                 1000.0 * params.tsdf.voxelSizeM(), rec.volume().grid().allocated_blocks,
                 rec.volume().grid().allocated_blocks * recon::kBlockVoxels * sizeof(recon::Voxel) / 1048576.0);

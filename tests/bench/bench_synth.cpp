@@ -93,7 +93,7 @@ int runSynth(const std::vector<std::string>& args) {
     }
     HeadModel head = std::move(loaded).value();
     const std::string head_name = head.name;
-    const facescan::synth::KinectSimulator sim(std::move(head), params);
+    const facescan::synth::KinectSimulator sim(std::move(head), params, spec->intrinsics);
     if (!tum_dir.empty()) {
         if (const auto st = facescan::synth::writeTumSequence(sim, tum_dir); !st.isOk()) {
             std::fprintf(stderr, "synth: %s\n", st.toString().c_str());

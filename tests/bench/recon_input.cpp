@@ -23,8 +23,9 @@ Status loadSynthetic(const std::string& opts, int frames, Sequence& seq) {
     if (frames > 0) sp.frames = frames;
     RETURN_IF_ERROR(sp.validate());
     ASSIGN_OR_RETURN(synth::HeadModel head, synth::loadSubject(spec.subject));
-    seq.sim.emplace(std::move(head), sp);
+    seq.sim.emplace(std::move(head), sp, spec.intrinsics);
     seq.k = seq.sim->intrinsics();
+    seq.sensor = spec.sensor_model;
     seq.frames.resize(static_cast<size_t>(sp.frames));
     seq.masks.resize(seq.frames.size());
     seq.T_ref_camera.resize(seq.frames.size());

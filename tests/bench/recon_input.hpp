@@ -9,6 +9,7 @@
 
 #include "recon/camera.hpp"
 #include "recon/frame.hpp"
+#include "recon/sensor.hpp"
 #include "recon/status.hpp"
 #include "synth/kinect_simulator.hpp"
 #include "synth/sequence_options.hpp"
@@ -24,6 +25,7 @@ struct Sequence {
     std::optional<synth::KinectSimulator> sim;  // synthetic input only
     synth::SyntheticSpec spec;                  // synthetic input only: what was rendered
     std::vector<int> head_pixels;               // synthetic input only: head-labelled pixels per frame (truth)
+    recon::SensorModel sensor;                  // the camera (synthetic: its sensor=; otherwise a Kinect v1)
 };
 
 // SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR; frames > 0 limits (synthetic: sets) the frame count.

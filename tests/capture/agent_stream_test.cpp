@@ -59,7 +59,8 @@ std::vector<cv::Mat> expectedDepth(const std::string& spec) {
 // Streams `spec` through the agent and checks every received depth frame against `expected`. With hold_file, the
 // agent runs with --hold-until: it must announce nothing for a second, until the file is created.
 void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expected, uint32_t salt,
-                      const std::vector<std::string>& extra_args = {}, const fs::path& hold_file = {}) {
+                      const std::vector<std::string>& extra_args = {}, const fs::path& hold_file = {},
+                      std::optional<wire::CameraInfoData>* received = nullptr) {
     ASSERT_FALSE(expected.empty());
     const uint32_t domain = privateDomain(salt);
     const std::string session = "agent-test-" + std::to_string(salt);
@@ -158,6 +159,7 @@ void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expec
     ASSERT_TRUE(camera.has_value());
     EXPECT_EQ(camera->session_id, session);
     EXPECT_TRUE(camera->every_frame);
+    if (received) *received = camera;
 }
 
 TEST(AgentStream, SyntheticSourceArrivesBitExactAndInOrder) {
@@ -189,6 +191,25 @@ TEST(AgentStream, TumFolderArrivesBitExactAndInOrder) {
     streamAndCompare(spec, expected, 3, {"--preload"}, go);
     EXPECT_TRUE(fs::exists(go));
     fs::remove_all(dir);
+}
+
+// The camera travels with the stream: the synthetic near-range sensor's description (its range, family and noise)
+// arrives in CameraInfo, with --depth-range over it; the frames are its own 320x240 ones.
+TEST(AgentStream, TheCameraArrivesInCameraInfoWithTheAgentsOverrides) {
+    const std::string spec = "synthetic:frames=8,seed=3,subject=builtin,sensor=truedepth";
+    const auto expected = expectedDepth(spec);
+    ASSERT_EQ(expected.size(), 8u);
+    EXPECT_EQ(expected.front().cols, 320);
+    std::optional<wire::CameraInfoData> camera;
+    streamAndCompare(spec, expected, 4, {"--depth-range", "0.2:0.6"}, {}, &camera);
+    ASSERT_TRUE(camera.has_value());
+    EXPECT_EQ(camera->sensor.name, "truedepth");
+    EXPECT_EQ(camera->sensor.family, recon::SensorFamily::kStructuredLight);
+    EXPECT_FLOAT_EQ(camera->sensor.min_depth_m, 0.2f);
+    EXPECT_FLOAT_EQ(camera->sensor.max_depth_m, 0.6f);
+    EXPECT_TRUE(camera->sensor.noise.known());
+    EXPECT_EQ(camera->intrinsics.width_px, 320);
+    EXPECT_EQ(camera->colourIntrinsics(), camera->intrinsics) << "registered colour";
 }
 
 // A live camera: nothing to read ahead.

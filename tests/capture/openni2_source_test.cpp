@@ -104,6 +104,9 @@ TEST(OpenNi2Source, LiveSyntheticDeviceDeliversKinectFrames) {
     EXPECT_EQ(info.rate_hz, 30.0f);
     EXPECT_NE(info.description.find("Synthetic Kinect"), std::string::npos) << info.description;
     EXPECT_NE(info.description.find("synced"), std::string::npos) << info.description;
+    // The device names its camera: a Kinect, so the Kinect v1's range and noise (its stream reports no minimum).
+    EXPECT_TRUE(info.sensor_known);
+    EXPECT_EQ(info.sensor, recon::SensorModel::kinectV1());
 
     constexpr int kFrames = 30;
     CapturedFrame frame;

@@ -80,7 +80,37 @@ Status AgentOptions::validate() const {
     if (!(finish_timeout_s > 0)) return invalidArgument("--finish-timeout must be > 0 seconds");
     if (wait_for_server_s < 0) return invalidArgument("--wait-for-server must be >= 0 seconds");
     if (!(stalled_after_s > 0)) return invalidArgument("--stalled-after must be > 0 seconds");
+    if (!sensor.empty()) RETURN_IF_ERROR(recon::findSensorPreset(sensor).status());
+    if ((depth_min_m != 0 || depth_max_m != 0) && !(depth_min_m > 0 && depth_max_m > depth_min_m)) {
+        return invalidArgument("--depth-range " + std::to_string(depth_min_m) + ":" + std::to_string(depth_max_m) +
+                               " cannot be right: give MIN:MAX in metres with 0 < MIN < MAX, e.g. 0.2:0.5");
+    }
     return depth.validate();
+}
+
+Status checkFrameFitsCamera(const wire::CameraInfoData& camera, const CapturedFrame& frame) {
+    RETURN_IF_ERROR(camera.checkDepthUnits(frame.depth_raw));
+    if (frame.colour_bgr.empty()) return Status::ok();
+    const recon::Intrinsics& c = camera.colourIntrinsics();
+    if (frame.colour_bgr.cols != c.width_px || frame.colour_bgr.rows != c.height_px) {
+        return invalidArgument("the source's colour frames are " + std::to_string(frame.colour_bgr.cols) + "x" +
+                               std::to_string(frame.colour_bgr.rows) + " but its camera description says " +
+                               std::to_string(c.width_px) + "x" + std::to_string(c.height_px) +
+                               ": send depth only (--no-colour) or fix the recording's colour intrinsics");
+    }
+    return Status::ok();
+}
+
+StatusOr<recon::SensorModel> AgentOptions::resolveSensor(const SourceInfo& source) const {
+    recon::SensorModel s = source.sensor;
+    if (!sensor.empty()) {
+        ASSIGN_OR_RETURN(const recon::SensorPreset preset, recon::findSensorPreset(sensor));
+        s = preset.sensor;
+    }
+    if (depth_min_m > 0) s.min_depth_m = depth_min_m;
+    if (depth_max_m > 0) s.max_depth_m = depth_max_m;
+    RETURN_IF_ERROR(s.validate());
+    return s;
 }
 
 std::string newSessionId() {
@@ -108,7 +138,11 @@ Status Agent::saveUnconfirmed(const std::vector<wire::EncodedFrame>& kept,
     const std::filesystem::path parent =
         options_.save_dir.empty() ? defaultSaveDir() : std::filesystem::path(options_.save_dir);
     ASSIGN_OR_RETURN(const std::filesystem::path dir, createFreshDir(parent, session_id_));
-    ASSIGN_OR_RETURN(TumRecorder recorder, TumRecorder::create(dir, source_->info(), options_.jpeg_quality));
+    // The camera as the stream described it (--sensor and --depth-range included), so a replay describes it too.
+    SourceInfo info = source_->info();
+    ASSIGN_OR_RETURN(info.sensor, options_.resolveSensor(info));
+    info.sensor_known = info.sensor_known || !options_.sensor.empty() || options_.depth_min_m > 0;
+    ASSIGN_OR_RETURN(TumRecorder recorder, TumRecorder::create(dir, info, options_.jpeg_quality));
     for (const wire::EncodedFrame& f : kept) RETURN_IF_ERROR(recorder.add(f));
     for (const CapturedFrame* f : queued) RETURN_IF_ERROR(recorder.add(*f));
     const uint32_t first = kept.empty() ? queued.front()->index : kept.front().seq;
@@ -192,6 +226,10 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
     camera.expected_frames = static_cast<uint32_t>(std::max(0, info.expected_frames));
     camera.source = info.description;
     camera.agent_host = hostName();
+    ASSIGN_OR_RETURN(camera.sensor, options_.resolveSensor(info));
+    camera.colour_intrinsics =
+        info.colour_registered ? recon::Intrinsics{0, 0, 0.0f, 0.0f, 0.0f, 0.0f} : info.colour_intrinsics;
+    camera.T_colour_depth = info.colour_registered ? recon::Pose::Identity() : info.T_colour_depth;
     RETURN_IF_ERROR(camera.validate());
     RETURN_IF_ERROR(s.info_writer.write(wire::toMessage(camera)));
 
@@ -243,6 +281,12 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
             }
             if (paced) std::this_thread::sleep_until(start + std::chrono::duration<double>(n / rate_hz));
             auto got = source_->next(s.slots[static_cast<size_t>(slot)]);
+            if (n == 0 && got.isOk() && *got) {
+                // The first frame against the camera's description: wrong units or a colour camera of another
+                // size are stopped here, with one line, before the server scans anything from them.
+                if (Status fits = checkFrameFitsCamera(camera, s.slots[static_cast<size_t>(slot)]); !fits.isOk())
+                    got = std::move(fits);
+            }
             std::lock_guard lock(s.mutex);
             if (!got.isOk() || !*got) {
                 if (!got.isOk()) s.capture_status = got.status();

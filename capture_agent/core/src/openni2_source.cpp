@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -162,6 +163,7 @@ class OpenNi2Source final : public FrameSource {
  private:
     Status openDepth();
     void openColour();
+    void describeSensor();
     void computeIntrinsics(const openni::VideoMode& mode);
     Status waitDepth(openni::VideoFrameRef& frame);
     void pairColour(const openni::VideoFrameRef& depth);
@@ -265,6 +267,7 @@ Status OpenNi2Source::openDepth() {
     info_.has_colour = false;
     info_.colour_registered = false;
     computeIntrinsics(mode);
+    describeSensor();
     if (is_file_) {
         const int frames = playback_->getNumberOfFrames(depth_);
         if (frames <= 0) return dataLoss("oni: '" + name_ + "' holds no depth frames");
@@ -304,6 +307,40 @@ void OpenNi2Source::openColour() {
     }
     has_colour_stream_ = true;
     info_.has_colour = true;
+}
+
+// The camera from its name (a known family's preset) and the range its depth stream reports. A recording does not
+// store the device's name, so an .oni file keeps the Kinect v1 unless --sensor says otherwise.
+void OpenNi2Source::describeSensor() {
+    if (is_file_) return;
+    const openni::DeviceInfo& dev = device_.getDeviceInfo();
+    std::string name = std::string(dev.getVendor()) + " " + dev.getName();
+    std::string lower = name;
+    for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    const char* preset = nullptr;
+    if (lower.find("kinect") != std::string::npos) {
+        preset = "kinect-v1";
+    } else if (lower.find("xtion") != std::string::npos || lower.find("ps1080") != std::string::npos ||
+               lower.find("carmine") != std::string::npos || lower.find("primesense") != std::string::npos) {
+        preset = "xtion";
+    } else if (lower.find("astra") != std::string::npos || lower.find("orbbec") != std::string::npos) {
+        preset = "astra";
+    }
+    if (preset != nullptr) {
+        if (auto found = recon::findSensorPreset(preset); found.isOk()) info_.sensor = found->sensor;
+    } else {
+        info_.sensor.family = recon::SensorFamily::kUnknown;
+        info_.sensor.noise = {};
+    }
+    info_.sensor.name = preset != nullptr ? preset : name;
+    // The stream's own range, when it gives one that can be right (many drivers report 0 as their minimum).
+    const float min_m = static_cast<float>(depth_.getMinPixelValue()) * info_.depth_units_m;
+    const float max_m = static_cast<float>(depth_.getMaxPixelValue()) * info_.depth_units_m;
+    if (min_m > 0.05f && max_m > min_m && max_m <= 20.0f) {
+        info_.sensor.min_depth_m = min_m;
+        info_.sensor.max_depth_m = max_m;
+    }
+    info_.sensor_known = preset != nullptr || min_m > 0.05f;
 }
 
 // fx = width / (2 tan(hfov / 2)) from the stream's field of view; the principal point at the image centre

@@ -51,7 +51,9 @@ StatusOr<std::unique_ptr<FrameSource>> openSyntheticSource(const std::string& op
     ASSIGN_OR_RETURN(synth::HeadModel head, synth::loadSubject(spec.subject));
 
     SourceInfo info;
-    info.intrinsics = recon::Intrinsics::kinectV1();
+    info.intrinsics = spec.intrinsics;
+    info.sensor = spec.sensor_model;
+    info.sensor_known = true;
     info.depth_units_m = kSyntheticDepthUnitsM;
     info.colour_registered = true;
     info.has_colour = options.colour;

@@ -37,6 +37,13 @@ StatusOr<TumRecorder> TumRecorder::create(const fs::path& dir, const SourceInfo&
     std::ofstream intrinsics(dir / "intrinsics.txt");
     const recon::Intrinsics& k = source.intrinsics;
     intrinsics << std::setprecision(9) << k.fx_px << ' ' << k.fy_px << ' ' << k.cx_px << ' ' << k.cy_px << '\n';
+    if (source.sensor_known) {
+        // The camera travels with the recording: the tum: source reads it back (readSensorFile).
+        std::ofstream sensor(dir / "sensor.txt");
+        sensor << source.sensor.name << ' ' << std::setprecision(9) << source.sensor.min_depth_m << ' '
+               << source.sensor.max_depth_m << '\n';
+        if (!sensor.flush()) return unavailable("cannot write in " + dir.string());
+    }
     r.depth_list_.open(dir / "depth.txt");
     r.depth_list_ << "# depth images, 16-bit PNG, 5000 units per metre (from " << source.description << ")\n"
                   << "# timestamp filename\n";

@@ -98,6 +98,37 @@ class TumSource final : public FrameSource {
 
 }  // namespace
 
+StatusOr<recon::SensorModel> readSensorFile(const fs::path& file) {
+    std::ifstream in(file);
+    std::string line;
+    while (std::getline(in, line) && (line.empty() || line[0] == '#')) {
+    }
+    std::istringstream fields(line);
+    std::string name;
+    float min_m = 0, max_m = 0;
+    fields >> name;
+    const bool has_range = static_cast<bool>(fields >> min_m >> max_m);
+    const std::string what = file.string() + " must hold 'NAME [MIN_M MAX_M]' (NAME one of " +
+                             recon::sensorPresetNames() + ", or any name with its range in metres)";
+    if (name.empty()) return dataLoss(what);
+    recon::SensorModel sensor;
+    if (const auto preset = recon::findSensorPreset(name); preset.isOk()) {
+        sensor = preset->sensor;
+    } else if (!has_range) {
+        return dataLoss(what + "; '" + name + "' is no preset, so give its range");
+    } else {
+        sensor.name = name;
+        sensor.family = recon::SensorFamily::kUnknown;
+        sensor.noise = {};
+    }
+    if (has_range) {
+        sensor.min_depth_m = min_m;
+        sensor.max_depth_m = max_m;
+    }
+    if (const Status valid = sensor.validate(); !valid.isOk()) return dataLoss(file.string() + ": " + valid.message());
+    return sensor;
+}
+
 StatusOr<std::unique_ptr<FrameSource>> openTumSource(const std::string& dir_text, const SourceOptions& options) {
     const fs::path dir(dir_text);
     if (!fs::is_directory(dir)) return notFound("TUM folder '" + dir_text + "' does not exist");
@@ -133,6 +164,10 @@ StatusOr<std::unique_ptr<FrameSource>> openTumSource(const std::string& dir_text
         if (span_s > 0) info.rate_hz = static_cast<float>((depth.size() - 1) / span_s);
     }
     info.description = "tum:" + dir_text;
+    if (fs::exists(dir / "sensor.txt")) {
+        ASSIGN_OR_RETURN(info.sensor, readSensorFile(dir / "sensor.txt"));
+        info.sensor_known = true;
+    }
     return std::unique_ptr<FrameSource>(
         std::make_unique<TumSource>(dir, std::move(info), std::move(depth), std::move(rgb), options));
 }

@@ -32,6 +32,20 @@ Vec3 toVec(const OpenMesh::Vec3f& v) { return {v[0], v[1], v[2]}; }
 
 }  // namespace
 
+NoiseParams NoiseParams::nearRangeStructuredLight() {
+    NoiseParams p;
+    p.axial_a_m = 0.0004f;
+    p.axial_b_per_m = 0.01f;
+    p.axial_z0_m = 0.2f;
+    p.angle_coeff_m = 0.0001f / 3.0f;
+    p.lateral_sigma_px = 0.5f;
+    p.disparity_step_px = 1.0f / 64.0f;
+    p.baseline_m = 0.025f;
+    p.min_range_m = 0.2f;
+    p.max_range_m = 0.5f;
+    return p;
+}
+
 Status NoiseParams::validate() const {
     if (!(axial_a_m >= 0 && axial_b_per_m >= 0 && angle_coeff_m >= 0 && lateral_sigma_px >= 0)) {
         return invalidArgument("noise: sigmas must be >= 0");

@@ -59,6 +59,30 @@ Status applyScenario(const std::string& name, SequenceParams& p) {
     return invalidArgument("unknown synthetic scenario '" + name + "' (known: gentle, wide, chin, gap, occluder)");
 }
 
+Status applySyntheticSensor(const std::string& name, SyntheticSpec& spec) {
+    SequenceParams& p = spec.sequence;
+    if (name == "kinect-v1") {
+        p.noise_model = NoiseParams{};
+        spec.intrinsics = recon::Intrinsics::kinectV1();
+        spec.sensor_model = recon::SensorModel::kinectV1();
+    } else if (name == "truedepth") {
+        ASSIGN_OR_RETURN(const recon::SensorPreset preset, recon::findSensorPreset("truedepth"));
+        p.noise_model = NoiseParams::nearRangeStructuredLight();
+        spec.intrinsics = preset.nominal_depth;
+        spec.sensor_model = preset.sensor;
+        // The model's sigma(z), as the camera description carries it: a + b (z - z0)^2 expanded.
+        const NoiseParams& n = p.noise_model;
+        spec.sensor_model.noise = {n.axial_a_m + n.axial_b_per_m * n.axial_z0_m * n.axial_z0_m,
+                                   -2.0f * n.axial_b_per_m * n.axial_z0_m, n.axial_b_per_m};
+        p.distance_m = 0.4f;  // the nose tip (0.1 m in front of the head frame's origin) at 0.3 m
+        p.wall_distance_m = 1.0f;
+    } else {
+        return invalidArgument("unknown synthetic sensor '" + name + "' (known: kinect-v1, truedepth)");
+    }
+    spec.sensor = name;
+    return Status::ok();
+}
+
 StatusOr<SyntheticSpec> parseSyntheticOptions(const std::string& text) {
     std::vector<std::pair<std::string, std::string>> items;
     RETURN_IF_ERROR(splitItems(text, items));
@@ -67,9 +91,13 @@ StatusOr<SyntheticSpec> parseSyntheticOptions(const std::string& text) {
         if (key == "scenario") spec.scenario = value;
     }
     RETURN_IF_ERROR(applyScenario(spec.scenario, spec.sequence));
+    // The sensor after the scenario (which resets the sequence) and before the keys that override it.
+    for (const auto& [key, value] : items) {
+        if (key == "sensor") RETURN_IF_ERROR(applySyntheticSensor(value, spec));
+    }
     SequenceParams& p = spec.sequence;
     for (const auto& [key, value] : items) {
-        if (key == "scenario") continue;
+        if (key == "scenario" || key == "sensor") continue;
         if (key == "subject" || key == "head") {
             spec.subject = value;
             continue;
@@ -148,7 +176,8 @@ const char* syntheticOptionsHelp() {
            "  (pitch 0 -> amplitude -> 0), seed=N, noise=0|1, torso=0|1, wall=0|1, subject=auto|builtin|scan|FILE\n"
            "  (head= is an alias), gap_start=FRAME (-1 none), gap_frames=N, gap_walk=N, gap_turn=DEG,\n"
            "  gap_leave=0|1 (0: turn in view instead of leaving), occluder_start=FRAME (-1 none),\n"
-           "  occluder_frames=N, occluder_front=M (metres in front of the nose)";
+           "  occluder_frames=N, occluder_front=M (metres in front of the nose), sensor=kinect-v1|truedepth (the\n"
+           "  camera: its resolution, noise and range, and its distance unless distance= is given)";
 }
 
 }  // namespace facescan::synth

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "recon/frame.hpp"
+#include "recon/sensor.hpp"
 #include "wire/colour_codec.hpp"
 #include "wire/depth_codec.hpp"
 #include "wire/topics.hpp"
@@ -24,8 +25,22 @@ struct CameraInfoData {
     uint32_t expected_frames = 0;  // 0 = unknown
     std::string source;
     std::string agent_host;
+    // The camera (appended to the message): an older agent's CameraInfo has none, and reads as a Kinect v1.
+    recon::SensorModel sensor;
+    // The colour camera's own size and intrinsics (width 0: the depth camera's), and where it sits: maps
+    // depth-camera points into it. Registered colour has the depth camera's and the identity.
+    recon::Intrinsics colour_intrinsics{0, 0, 0.0f, 0.0f, 0.0f, 0.0f};
+    recon::Pose T_colour_depth = recon::Pose::Identity();
+    const recon::Intrinsics& colourIntrinsics() const {
+        return colour_intrinsics.width_px == 0 ? intrinsics : colour_intrinsics;
+    }
 
-    Status validate() const;  // sizes within the codec caps, positive focal lengths, sane units
+    // Sizes within the codec caps, positive focal lengths, sane units, a usable range and a colour camera whose
+    // size matches registered frames: each fault is one line that says what to fix.
+    Status validate() const;
+    // The first frames' depth, in the camera's units, against its working range: a median of 300 m or 0.3 mm
+    // means the units are wrong. depth_raw is CV_16UC1; ok when it holds no measurement.
+    Status checkDepthUnits(const cv::Mat& depth_raw) const;
 };
 
 // Session ids travel as DDS keys and end up in file names on the server: 1-64 of [A-Za-z0-9._-], not ".."/".".

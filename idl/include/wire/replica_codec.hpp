@@ -21,7 +21,10 @@
 
 namespace facescan::wire {
 
-inline constexpr uint16_t kReplicaFormatVersion = 2;  // 2: SessionCounters::frames_tracked_only
+// 2: SessionCounters::frames_tracked_only; 3: the camera (CameraInfoData::sensor, its colour camera and extrinsics).
+// A server reads its own version and the one before, so a rolling upgrade keeps the older servers' replicas.
+inline constexpr uint16_t kReplicaFormatVersion = 3;
+inline constexpr uint16_t kOldestReplicaFormatVersion = 2;
 inline constexpr size_t kReplicaHeaderBytes = 24;
 inline constexpr size_t kMaxReplicaBodyBytes = size_t{512} << 20;  // 512 MiB: far above a face volume
 

@@ -172,10 +172,12 @@ Status Session::start(const wire::CameraInfoData& camera, const wire::ReplicaDat
     camera_ = camera;
     recon_ = std::move(engine.recon);
     pipeline_ = std::move(engine.pipeline);
+    advice_ = engine.advice;
+    recon_params_ = recon_->params();
     stats_.camera_known = true;
     stats_.every_frame = camera.every_frame;
     stats_.source = camera.source;
-    stats_.detail = "waiting for frames";
+    stats_.detail = "waiting for frames; camera " + engine.camera_line;
     if (replica) applyReplicaLocked(*replica, takeover_from_ns);
     // A live session keeps only the newest of what arrived before its CameraInfo.
     if (!camera.every_frame) {
@@ -402,7 +404,7 @@ char Session::processFrame(PendingFrame& pending) {
     }
     // The model's prediction seeds the segmentation, detection otherwise; a frame without a head counts as
     // rejected, and the next head after a loss is verified before it is fused (recon/scan_step.hpp).
-    recon::scanFrame(*pipeline_, *recon_, frame_, step_);
+    recon::scanFrame(*pipeline_, *recon_, frame_, step_, advice_);
     const char outcome = !step_.head.found || !step_.frame.tracked ? 'R' : step_.frame.integrated ? 'F' : 'T';
     const Status colour = decoder_.colourStatus();  // damaged colour costs the frame its colour, not its depth
     decoder_.releaseColour();                       // pending's bytes are recycled after this frame

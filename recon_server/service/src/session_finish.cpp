@@ -211,17 +211,21 @@ std::string Session::frameTimingsTsv() const {
 }
 
 std::string Session::summaryJson(const SessionStats& s, const MeshResult& m, const std::string& finish_json) const {
-    const recon::ReconParams& r = params_.recon;
+    recon::ReconParams r = params_.recon;
     std::string camera = "null";
     {
         std::lock_guard lk(mutex_);
         if (camera_) {
+            r = recon_params_;  // as adapted to the camera (recon/sensor_adapt.hpp)
             const recon::Intrinsics& k = camera_->intrinsics;
             camera = "{\"width\": " + std::to_string(k.width_px) + ", \"height\": " + std::to_string(k.height_px) +
                      ", \"fx\": " + num(k.fx_px) + ", \"fy\": " + num(k.fy_px) + ", \"cx\": " + num(k.cx_px) +
                      ", \"cy\": " + num(k.cy_px) + ", \"depth_units_m\": " + num(camera_->depth_units_m) +
                      ", \"rate_hz\": " + num(camera_->rate_hz) + ", \"agent_host\": \"" +
-                     jsonEscape(camera_->agent_host) + "\"}";
+                     jsonEscape(camera_->agent_host) + "\", \"sensor\": \"" + jsonEscape(camera_->sensor.name) +
+                     "\", \"sensor_family\": \"" + recon::sensorFamilyName(camera_->sensor.family) +
+                     "\", \"min_depth_m\": " + num(camera_->sensor.min_depth_m) +
+                     ", \"max_depth_m\": " + num(camera_->sensor.max_depth_m) + "}";
         }
     }
     std::string j = "{\n";

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <future>
 
+#include "recon/sensor_adapt.hpp"
 #include "service/session.hpp"
 
 namespace facescan::service {
@@ -16,10 +17,14 @@ StatusOr<SessionEngine> SessionEngine::build(const ServerParams& params, const w
     recon_params.source_fps =
         camera.rate_hz > 0.0f && camera.rate_hz <= 1000.0f ? camera.rate_hz : 0.0f;  // limits per frame
     SessionEngine e;
+    // Depth windows, pixel thresholds and the distance advice from the camera the agent described.
+    recon::FacePipelineParams face_params = params.face;
+    recon::adaptToSensor(camera.sensor, camera.intrinsics, recon_params, face_params, e.advice);
+    e.camera_line = recon::describeSensor(camera.sensor, e.advice, recon_params.tsdf);
     e.recon = std::make_shared<recon::Reconstructor>(camera.intrinsics, recon_params);
     if (!e.recon->initStatus().isOk()) return e.recon->initStatus();
     if (replica) RETURN_IF_ERROR(e.recon->restoreState(replica->state));
-    auto pipeline = recon::FacePipeline::create(params.face, camera.intrinsics,
+    auto pipeline = recon::FacePipeline::create(face_params, camera.intrinsics,
                                                 recon::ColourCamera::registeredTo(camera.intrinsics));
     if (!pipeline.isOk()) return pipeline.status();
     e.pipeline = std::make_unique<recon::FacePipeline>(std::move(pipeline).value());

@@ -48,9 +48,21 @@ struct AgentOptions {
     // encoding, like a capture PC that does not share the server's cores. Recordings only.
     bool preload = false;
     std::function<void(int, int)> preload_progress;  // (frames read, frames expected or 0), while preloading
+    // The camera: a preset name (recon::sensorPresets()) replaces what the source reports; empty keeps it (a
+    // source that cannot tell means a Kinect v1). Then each override that is set (not 0) replaces its field.
+    std::string sensor;
+    float depth_min_m = 0;  // metres; --depth-range MIN:MAX
+    float depth_max_m = 0;  // metres
+
+    // The sensor the stream will describe: the source's, or the preset, with the overrides applied.
+    StatusOr<recon::SensorModel> resolveSensor(const SourceInfo& source) const;
 
     Status validate() const;
 };
+
+// A frame against the camera description the stream announces: depth units that put the scene at 300 m or
+// 0.3 mm, or colour of another size than the colour camera's, get one line that says what to do.
+Status checkFrameFitsCamera(const wire::CameraInfoData& camera, const CapturedFrame& frame);
 
 struct AgentStats {
     uint32_t captured = 0;   // frames read from the source

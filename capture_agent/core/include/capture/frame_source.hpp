@@ -4,12 +4,14 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <opencv2/core.hpp>
 #include <string>
 
 #include "recon/camera.hpp"
+#include "recon/sensor.hpp"
 #include "recon/status.hpp"
 
 namespace facescan::capture {
@@ -23,6 +25,14 @@ struct SourceInfo {
     bool is_recording = false;  // a file or generator: can be read as fast as the consumer takes it
     int expected_frames = 0;    // 0 when unknown or live
     std::string description;    // e.g. "synthetic:leeperrysmith", "oni:/data/scan.oni"
+    // The camera, as far as the source can tell (a device's name and range, a recording's metadata); the agent's
+    // --sensor and --depth-range replace it. A source that cannot tell leaves a Kinect v1 and sensor_known false.
+    recon::SensorModel sensor;
+    bool sensor_known = false;
+    // The colour camera's own size and intrinsics (width 0: the depth camera's) and the depth-to-colour
+    // extrinsics, for colour that is not registered to depth.
+    recon::Intrinsics colour_intrinsics{0, 0, 0.0f, 0.0f, 0.0f, 0.0f};
+    recon::Pose T_colour_depth = recon::Pose::Identity();
 };
 
 struct CapturedFrame {
@@ -51,13 +61,16 @@ struct SourceOptions {
 // Opens a source from its command-line spec:
 //   openni2[:URI]   the first OpenNI2 device, or the one with this URI
 //   oni:FILE        an OpenNI2 recording, every frame in order
-//   tum:DIR         a TUM RGB-D folder (rgb.txt, depth.txt, optional intrinsics.txt)
+//   tum:DIR         a TUM RGB-D folder (rgb.txt, depth.txt, optional intrinsics.txt and sensor.txt)
 //   synthetic[:k=v,...]  the virtual Kinect (keys: frames, distance, yaw, pitch, seed, noise,
 //   subject=builtin|scan|PATH)
 StatusOr<std::unique_ptr<FrameSource>> openSource(const std::string& spec, const SourceOptions& options);
 
 // Per-kind openers (used by openSource; exposed for tests).
 StatusOr<std::unique_ptr<FrameSource>> openTumSource(const std::string& dir, const SourceOptions& options);
+// A TUM folder's camera, from its optional sensor.txt: "NAME [MIN_M MAX_M]", NAME a preset (recon::sensorPresets,
+// the range overriding its own) or any name with its range. DataLoss, saying the format, for anything else.
+StatusOr<recon::SensorModel> readSensorFile(const std::filesystem::path& file);
 StatusOr<std::unique_ptr<FrameSource>> openSyntheticSource(const std::string& options_text,
                                                            const SourceOptions& options);
 // uri empty = first device. Live camera: depth 640x480@30 in mm, registration and sync on where supported.

@@ -6,6 +6,7 @@
 //   depth.txt rgb.txt  "timestamp path", one line per frame, written as each frame is saved: a folder cut short
 //                      (a second Ctrl-C) still replays the frames saved before
 //   intrinsics.txt     "fx fy cx cy" of the depth camera
+//   sensor.txt         "NAME MIN_M MAX_M": the camera, when the source or --sensor named it
 #pragma once
 
 #include <cstdint>

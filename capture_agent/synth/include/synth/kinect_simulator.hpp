@@ -33,6 +33,13 @@ struct NoiseParams {
     float dropout_rate = 0.005f;       // share of valid pixels randomly lost, [0, 1)
     bool shadow = true;                // invalidate pixels the projector cannot see (edge shadow band)
 
+    // A near-range structured-light camera like a phone's TrueDepth front camera (0.2-0.5 m). There is no
+    // published noise model of it that this project could check; the figures are assumed, in the same form as
+    // the Kinect's: axial sigma 0.4 mm at 0.2 m growing to 0.5 mm at 0.3 m (a + b (z - z0)^2 with a = 0.4 mm,
+    // b = 0.01 /m, z0 = 0.2 m) and 1.3 mm at 0.5 m, the Kinect's incidence term scaled by the same 1/3, half a
+    // pixel of lateral jitter, a 25 mm projector baseline and 1/64 px disparity steps (0.26 mm at 0.3 m).
+    static NoiseParams nearRangeStructuredLight();
+
     Status validate() const;
 };
 

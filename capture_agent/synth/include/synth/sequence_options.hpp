@@ -6,6 +6,8 @@
 
 #include <string>
 
+#include "recon/camera.hpp"
+#include "recon/sensor.hpp"
 #include "recon/status.hpp"
 #include "synth/head_model.hpp"
 #include "synth/kinect_simulator.hpp"
@@ -16,7 +18,19 @@ struct SyntheticSpec {
     SequenceParams sequence;
     std::string scenario = "gentle";
     std::string subject = "auto";  // auto (the scan when found, else built-in) | builtin | scan | FILE
+    // The synthetic camera (sensor=NAME): its depth stream, noise and range, and the camera description an agent
+    // sends for it.
+    std::string sensor = "kinect-v1";
+    recon::Intrinsics intrinsics = recon::Intrinsics::kinectV1();
+    recon::SensorModel sensor_model = recon::SensorModel::kinectV1();
 };
+
+// The synthetic sensors, each a noise model with its source (synth::NoiseParams), its depth stream and the
+// distance its scans are made at:
+//   kinect-v1   the Kinect v1 (Nguyen et al. 2012), 640x480, head at 0.7 m (nose at 0.6 m)
+//   truedepth   a near-range structured-light camera (TrueDepth-like), 320x240, 0.2-0.5 m, nose at 0.3 m
+// Sets spec.intrinsics, spec.sensor_model and, in spec.sequence, the noise model, distance and wall.
+Status applySyntheticSensor(const std::string& name, SyntheticSpec& spec);
 
 // The named scenarios, one per robustness case the tracker must survive:
 //   gentle    the default: yaw +-35 deg, pitch +-12 deg, 300 frames (up to 0.7 deg a frame)

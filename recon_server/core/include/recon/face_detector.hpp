@@ -29,8 +29,10 @@ struct FaceDetectorParams {
     // theta_max of eq. 3.2. A face is found against its background (a wall, a chair back: > 0.3 m behind); 0.10 m
     // keeps that edge and drops the smaller steps inside a body (arm in front of torso, chin over neck).
     float boundary_jump_m = 0.10f;  // metres
-    float min_depth_m = 0.4f;       // Kinect v1 near limit: nothing closer is measured reliably (metres)
-    float max_depth_m = 4.0f;       // farther depth is ignored (metres)
+    // The sensor's range (metres): nothing closer is measured reliably, farther depth is ignored. A Kinect v1's
+    // here; adaptToSensor (recon/sensor_adapt.hpp) sets the camera's own.
+    float min_depth_m = 0.4f;  // metres
+    float max_depth_m = 4.0f;  // metres
     // The candidate mask (eq. 3.2-3.6) is computed on every 2^level-th depth pixel: faces are >= 30 px wide at
     // 4 m, so level 1 loses nothing and quarters the cost.
     int candidate_level = 1;

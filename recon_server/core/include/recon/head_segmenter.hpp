@@ -21,7 +21,8 @@ struct HeadSegmenterParams {
     // also ends on a plane just under the chin).
     float chin_margin_m = 0.015f;       // metres
     float seed_band_m = 0.06f;          // seed pixels lie within this of the face box's median depth (metres)
-    float min_depth_m = 0.4f;           // Kinect v1 near limit; closer depth is "too close" (metres)
+    float min_depth_m = 0.4f;           // the sensor's near limit (Kinect v1's; adaptToSensor sets the camera's):
+                                        // closer depth is "too close" (metres)
     float max_depth_m = 4.0f;           // farther depth is ignored (metres)
     float search_half_width_m = 0.30f;  // ROI half-width around the seed centre (metres at the seed depth)
     float search_above_m = 0.25f;       // ROI extent above the seed centre (metres)

@@ -14,8 +14,9 @@
 namespace facescan::recon {
 
 struct AdviceParams {
+    // A Kinect v1's (it measures from 0.4 m); adaptToSensor (recon/sensor_adapt.hpp) scales them to the camera.
     float far_m = 1.0f;        // metres; a head further away is asked to come closer (noise grows with z^2)
-    float near_m = 0.5f;       // metres; nearer is asked to move back (the Kinect measures from 0.4 m)
+    float near_m = 0.5f;       // metres; nearer is asked to move back
     float turned_deg = 50.0f;  // degrees from the scan's first (frontal) view: asked to turn back
     Status validate() const;
 };

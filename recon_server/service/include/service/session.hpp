@@ -146,6 +146,8 @@ using FinishCallback = std::function<void(const Status&, const MeshResult&)>;
 struct SessionEngine {
     std::shared_ptr<recon::Reconstructor> recon;
     std::unique_ptr<recon::FacePipeline> pipeline;
+    recon::AdviceParams advice;  // the distance advice for this camera's range (recon/sensor_adapt.hpp)
+    std::string camera_line;     // the camera as the status says it: range, advised distances, noise
 
     static StatusOr<SessionEngine> build(const ServerParams& params, const wire::CameraInfoData& camera,
                                          const wire::ReplicaData* replica);
@@ -304,6 +306,8 @@ class Session {
     // Worker-only state (no lock).
     std::unique_ptr<FrameLoad> load_;  // made with the worker (it needs the source's rate)
     std::unique_ptr<recon::FacePipeline> pipeline_;
+    recon::AdviceParams advice_;       // set with the engine, read by the worker only
+    recon::ReconParams recon_params_;  // the session's, adapted to its camera (under mutex_, set with camera_)
     wire::FrameDecoder decoder_;
     recon::RgbdFrame frame_;
     recon::ScanStep step_;  // the frame worker's last frame (head, result, advice); reused
