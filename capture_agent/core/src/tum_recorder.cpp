@@ -43,6 +43,7 @@ StatusOr<TumRecorder> TumRecorder::create(const fs::path& dir, const SourceInfo&
         sensor << source.sensor.name << ' ' << std::setprecision(9) << source.sensor.min_depth_m << ' '
                << source.sensor.max_depth_m << '\n';
         if (!sensor.flush()) return unavailable("cannot write in " + dir.string());
+        RETURN_IF_ERROR(wire::makeFilePrivate(dir / "sensor.txt"));
     }
     r.depth_list_.open(dir / "depth.txt");
     r.depth_list_ << "# depth images, 16-bit PNG, 5000 units per metre (from " << source.description << ")\n"

@@ -84,9 +84,10 @@ struct AgentStats {
     uint64_t digest = 0;     // of every frame sent (wire::frameDigest): the server's summary has the same
 };
 
-// Once `stop` is set, the agent ends within this: it tells the owner the stream ended, gives it what is left of
-// the budget to finish the scan, and saves the frames it has not confirmed (a stuck server costs no more).
-inline constexpr float kStopBudgetS = 1.0f;
+// Once `stop` is set, the agent tells the owner the stream ended and gives it what is left of this budget to
+// finish the scan (a stuck server costs no more). The rest of the 2 s a stop may take goes to saving the frames
+// no server confirmed and to leaving the domain, which take most of a second on a loaded machine.
+inline constexpr float kStopBudgetS = 0.6f;
 
 // A fresh session id: host-YYYYmmdd-HHMMSS-xxxx (unique per scan, valid as a DDS key and a file name).
 std::string newSessionId();
