@@ -96,9 +96,9 @@ Status Server::start() {
     cluster.join_settle_s = params_.join_settle_s;
     cluster.domain = params_.domain;
     ASSIGN_OR_RETURN(cluster_, Cluster::create(p, cluster));
-    // A server whose view is stale replicates nothing: its sessions may be another server's by now.
+    // A server whose own sessions are held replicates nothing: they may be another server's by now.
     ASSIGN_OR_RETURN(replicator_, Replicator::create(p, params_, *cluster_, [this] {
-                         return viewFresh() ? ownedSessions() : std::vector<std::shared_ptr<OwnedSession>>{};
+                         return ownSessionsFree() ? ownedSessions() : std::vector<std::shared_ptr<OwnedSession>>{};
                      }));
 
     const dds_entity_t ws = dds_create_waitset(p.handle());
@@ -309,7 +309,7 @@ void Server::takeCommands() {
                        steadyNowNs(), wire::fromDds(msg.client_id)});
     });
     if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
-    if (!viewFresh()) {
+    if (!ownSessionsFree()) {
         // Answered once this server knows which of its sessions are still its own.
         for (Command& c : got) deferred_.push_back(std::move(c));
         return;
@@ -545,7 +545,7 @@ void Server::snapshotLoop() {
                                                 : std::chrono::duration<double>(0.5);
     auto next = std::chrono::steady_clock::now();
     while (waitForTick(next, period)) {
-        if (!viewFresh()) continue;
+        if (!ownSessionsFree()) continue;
         std::vector<std::shared_ptr<Session>> all;
         for (const auto& o : ownedSessions()) {
             if (o->session) all.push_back(o->session);
@@ -567,7 +567,7 @@ void Server::statusLoop() {
     std::map<std::string, bool> final_sent;  // finished sessions: their FINISHED status went out once
     auto next = std::chrono::steady_clock::now();
     while (waitForTick(next, period)) {
-        if (!viewFresh()) continue;
+        if (!ownSessionsFree()) continue;
         std::vector<std::shared_ptr<OwnedSession>> all = ownedSessions();
         std::map<std::string, Refused> refused;
         {

@@ -252,7 +252,7 @@ Status Server::activate(OwnedSession& o) {
         if (wake_.valid()) dds_set_guardcondition(wake_.handle(), true);
     });
     session->setOwnership(params_.server_id, o.epoch);
-    session->setWatch(watchdog_->add("the worker of session " + o.id), [this] { return !viewFresh(); });
+    session->setWatch(watchdog_->add("the worker of session " + o.id), [this] { return !ownSessionsFree(); });
     SessionEngine engine;
     if (o.engine.valid()) {
         ASSIGN_OR_RETURN(engine, o.engine.get());
@@ -462,15 +462,16 @@ bool Server::rejoining() {
 }
 
 bool Server::witnessed(const std::string& session_id, int64_t owner_gone_for_ns) const {
-    // A server cut off from the network sees every other server and every agent go at once. A takeover on that
-    // view would win when the network heals (its epoch is higher) over the owner that went on scanning, and would
-    // ask the agent for frames that it dropped once that owner had them confirmed: the scan would stall for good.
-    // So a takeover needs a witness that the owner, not this server, is the one gone: most of the servers this one
-    // knows still in view (a server cut off never has that), or else the session's agent still heard a moment
-    // after the owner's claim lapsed. The moment covers an agent's lease that lapses a little after the claim (the
-    // claim is asserted every lease/12, the agent's lease renewed by whatever it sends).
+    // A server cut off from the network sees every other server and every agent go. A takeover on that view would
+    // win when the network heals (its epoch is higher) over the owner that went on scanning, and would ask the
+    // agent for frames that it dropped once that owner had them confirmed: the scan would stall for good. So a
+    // takeover needs a witness that the owner, not this server, is the one gone: most of the servers this one knows
+    // still in view (a server cut off never has that), or else the session's agent still heard half a lease after
+    // the owner's claim lapsed. An agent's lease lapses later than a claim's (its participant goes only once
+    // Cyclone has collected it, slower on a loaded machine); the wait is what a server cut off needs to see it go,
+    // and what a cluster of two, where the survivor never has a majority, pays on every takeover.
     if (cluster_->seesMajority()) return true;
-    if (owner_gone_for_ns < lease_ns_ / 8) return false;
+    if (owner_gone_for_ns < lease_ns_ / 2) return false;
     const auto agent = candidates_.find(session_id);
     return agent != candidates_.end() && agent->second.writer_alive;
 }

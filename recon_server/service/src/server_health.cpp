@@ -19,11 +19,24 @@ constexpr int kExitStalled = 70;
 
 void Server::noticePause(int64_t gap_ns, int64_t now_ns) {
     view_stale_until_ns_ = now_ns + 2 * lease_ns_;
+    // Its claims lapse in the others' view a lease after its last assertion. Short of that (less a margin for the
+    // way there), nobody can have taken its sessions over, and holding them would only stall their scans.
+    const int64_t unasserted_ns = now_ns - last_progress_ns_.load();
+    if (unasserted_ns >= lease_ns_ - lease_ns_ / 6) {
+        hold_until_ns_ = now_ns + 2 * lease_ns_;
+        std::fprintf(stderr,
+                     "facescan-server: this server did not run for %.1f s (frozen, or the machine paused): its view "
+                     "of the cluster is stale; re-observing it for %.1f s before taking anything over, and holding "
+                     "its own sessions until it knows it still owns them\n",
+                     static_cast<double>(gap_ns) * 1e-9, 2 * static_cast<double>(lease_ns_) * 1e-9);
+        return;
+    }
     std::fprintf(stderr,
-                 "facescan-server: this server did not run for %.1f s (frozen, or the machine paused): its view of "
-                 "the cluster is stale; re-observing it for %.1f s before taking anything over, and holding its "
-                 "own sessions until it knows it still owns them\n",
-                 static_cast<double>(gap_ns) * 1e-9, 2 * static_cast<double>(lease_ns_) * 1e-9);
+                 "facescan-server: this server did not run for %.1f s (frozen, or the machine paused): its view of the "
+                 "cluster is stale; re-observing it for %.1f s before taking anything over. Its own sessions go on: "
+                 "its liveliness was asserted %.1f s ago, within the %.1f s lease, so none can have been taken over\n",
+                 static_cast<double>(gap_ns) * 1e-9, 2 * static_cast<double>(lease_ns_) * 1e-9,
+                 static_cast<double>(unasserted_ns) * 1e-9, static_cast<double>(lease_ns_) * 1e-9);
 }
 
 bool Server::viewFresh() const {
@@ -33,10 +46,15 @@ bool Server::viewFresh() const {
     return now >= view_stale_until_ns_.load() && now - watchdog_->lastCheckNs() < lease_ns_ / 2;
 }
 
+bool Server::ownSessionsFree() const {
+    const int64_t now = steadyNowNs();
+    return now >= hold_until_ns_.load() && now - watchdog_->lastCheckNs() < lease_ns_ / 2;
+}
+
 void Server::assertProgress(int64_t now_ns) {
     // A few times a lease is enough for the readers' lease, and cheap (one small message per peer). Often enough
     // that a server cut off sees the agents' leases lapse soon after its peers' claims (Server::witnessed).
-    if (now_ns - last_progress_ns_ < lease_ns_ / 12) return;
+    if (now_ns - last_progress_ns_.load() < lease_ns_ / 12) return;
     last_progress_ns_ = now_ns;
     if (const dds_return_t rc = dds_assert_liveliness(participant_->handle()); rc < 0) {
         std::fprintf(stderr, "facescan-server: %s\n", wire::ddsStatus(rc, "assert liveliness").toString().c_str());

@@ -151,7 +151,7 @@ class Server {
     void takeOverFromFirstFrame(const std::string& session_id, const OwnerView& view);
     void requestReplays();
     void releaseStale();
-    // Whether a takeover may go ahead: most servers still in view, or else the agent still heard a moment later.
+    // Whether a takeover may go ahead: most servers still in view, or else the agent still heard half a lease later.
     bool witnessed(const std::string& session_id, int64_t owner_gone_for_ns) const;
     // Whether this server is cut off, or back from it and re-observing the cluster before it takes anything over.
     bool rejoining();
@@ -174,7 +174,8 @@ class Server {
     // work and output (frames, finishes, replicas, status, snapshots, replies) until it knows whether it still owns
     // them.
     void noticePause(int64_t gap_ns, int64_t now_ns);
-    bool viewFresh() const;
+    bool viewFresh() const;        // not re-observing the cluster after a pause: it may take over and place
+    bool ownSessionsFree() const;  // its own sessions may go on (not held after a pause long enough to lose them)
     void assertProgress(int64_t now_ns);    // the announcement's and claims' liveliness (wire::withProgressLiveliness)
     void onStall(const std::string& what);  // the watchdog found a loop stuck: say so and exit non-zero
     // Fault injection for the cluster tests, as etcd's gofail or FreeBSD's fail(9): with FACESCAN_FAILPOINT=
@@ -209,7 +210,8 @@ class Server {
     std::unique_ptr<Retirer> retirer_;  // after the DDS entities: it ends readers and claims, so it goes first
     int64_t lease_ns_ = 10'000'000'000;
     std::atomic<int64_t> view_stale_until_ns_{0};  // steady clock: after a pause, the view is re-observed until then
-    int64_t last_progress_ns_ = 0;                 // intake thread: when liveliness was last asserted
+    std::atomic<int64_t> last_progress_ns_{0};     // intake thread: when liveliness was last asserted
+    std::atomic<int64_t> hold_until_ns_{0};        // steady clock: after a long pause, its own sessions wait until then
     std::filesystem::path stall_file_;             // FACESCAN_FAILPOINT; empty: none
     wire::Entity waitset_;
     wire::Entity wake_;  // guard condition: queue space freed, an engine built, or shutdown
