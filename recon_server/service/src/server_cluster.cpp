@@ -301,8 +301,7 @@ void Server::yield(const std::string& session_id, const std::string& why) {
     // that owner's result, not this one's). This server's files would be a second result for one scan: they go.
     // Without the agent, the new owner has only the replica, and these files may be the whole scan: they stay.
     const std::filesystem::path written = o->session ? o->session->filesDir() : std::filesystem::path();
-    const auto agent = candidates_.find(session_id);
-    const bool agent_lives = agent != candidates_.end() && agent->second.writer_alive;
+    const bool agent_lives = agentLives(session_id);
     if (o->session) o->session->abandon();
     retireOwned(o, /*dispose_claim=*/false);
     unlist(session_id);
@@ -472,6 +471,10 @@ bool Server::witnessed(const std::string& session_id, int64_t owner_gone_for_ns)
     // and what a cluster of two, where the survivor never has a majority, pays on every takeover.
     if (cluster_->seesMajority()) return true;
     if (owner_gone_for_ns < lease_ns_ / 2) return false;
+    return agentLives(session_id);
+}
+
+bool Server::agentLives(const std::string& session_id) const {
     const auto agent = candidates_.find(session_id);
     return agent != candidates_.end() && agent->second.writer_alive;
 }
@@ -529,8 +532,7 @@ void Server::releaseStale() {
         // writes may be held up by the old owner's reader until that one's lease lapses everywhere. Releasing it
         // would leave the scan with no owner. A new session that gets no frame is released (a flood of bogus
         // sessions must not hold places), and placed again while its agent lives.
-        const auto agent = candidates_.find(o->id);
-        const bool agent_lives = agent != candidates_.end() && agent->second.writer_alive;
+        const bool agent_lives = agentLives(o->id);
         if (o->phase == OwnedSession::Phase::kReady && steadyNowNs() - o->ready_ns > first_frame_ns && o->session &&
             o->session->stats().frames_received == 0 && o->session->nextSeq() == 0 &&
             !(o->takeover_from_ns != 0 && agent_lives)) {

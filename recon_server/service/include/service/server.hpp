@@ -153,6 +153,7 @@ class Server {
     void releaseStale();
     // Whether a takeover may go ahead: most servers still in view, or else the agent still heard half a lease later.
     bool witnessed(const std::string& session_id, int64_t owner_gone_for_ns) const;
+    bool agentLives(const std::string& session_id) const;  // its CameraInfo writer is alive in this view
     // Whether this server is cut off, or back from it and re-observing the cluster before it takes anything over.
     bool rejoining();
     // A new scan under the id of one that finished in this server's data dir: refused with a FINISHED claim (true),
