@@ -56,7 +56,8 @@ const std::vector<CommandSpec>& commandSpecs() {
          {"--json"},
          "Usage: facescan servers [--json]\n"
          "Lists the facescan servers alive on the domain: sessions owned (of their capacity), sessions they stand\n"
-         "by for, CPU load (cores), uptime and version.\n"
+         "by for, CPU load (cores), uptime and version. A server still on the network that has stopped working\n"
+         "(frozen intake, overloaded) is marked NOT RESPONDING.\n"
          "  --json          one JSON object per server instead of the table\n"},
         {Command::kWatch,
          "watch",

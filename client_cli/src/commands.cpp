@@ -123,17 +123,18 @@ int runServers(const CliOptions& options) {
     int code = kExitOk;
     auto client = connectOrFail(options, code);
     if (!client) return code;
-    auto servers = client->servers(std::chrono::milliseconds(std::min<int64_t>(1000, options.timeout.count())));
+    auto servers =
+        client->servers(std::chrono::milliseconds(std::min<int64_t>(1000, options.timeout.count())), options.timeout);
     if (!servers.isOk()) return fail(exitCodeForRequest(servers.status()), servers.status().message());
     if (options.json) {
         for (const ServerInfo& s : *servers) {
             std::printf(
                 "{\"server\":%s,\"host\":%s,\"pid\":%u,\"open_sessions\":%u,\"max_sessions\":%u,"
                 "\"standby_sessions\":%u,\"cpu_load\":%.2f,\"started_ns\":%lld,\"joining\":%s,"
-                "\"protocol\":%u,\"software\":%s}\n",
+                "\"protocol\":%u,\"software\":%s,\"responding\":%s}\n",
                 jsonString(s.server_id).c_str(), jsonString(s.host).c_str(), s.pid, s.open_sessions, s.max_sessions,
                 s.standby_sessions, s.cpu_load, static_cast<long long>(s.started_ns), s.joining ? "true" : "false",
-                s.protocol_version, jsonString(s.software).c_str());
+                s.protocol_version, jsonString(s.software).c_str(), s.responding ? "true" : "false");
         }
         return kExitOk;
     }
@@ -144,6 +145,7 @@ int runServers(const CliOptions& options) {
         std::string version = s.software;
         if (s.protocol_version != wire::kClusterProtocolVersion) version += " (other protocol: not a peer)";
         if (s.joining) version += " (joining)";
+        if (!s.responding) version += " (NOT RESPONDING: frozen or overloaded; its scans move if it stays so)";
         std::printf("%-24s %-16s %9s %8u %6.2f %8s  %s\n", s.server_id.c_str(), s.host.c_str(), sessions.c_str(),
                     s.standby_sessions, s.cpu_load, uptimeText(s.started_ns).c_str(), version.c_str());
     }

@@ -21,7 +21,7 @@ int runDelete(const CliOptions& options) {
     auto client = connectOrFail(options, code);
     if (!client) return code;
     const auto settle = std::chrono::milliseconds(std::min<int64_t>(1000, options.timeout.count()));
-    auto servers = client->servers(settle);
+    auto servers = client->servers(settle, options.timeout);
     if (!servers.isOk()) return fail(exitCodeForRequest(servers.status()), servers.status().message());
     auto sessions = client->sessions(std::chrono::milliseconds(600));
     if (!sessions.isOk()) return fail(exitCodeForRequest(sessions.status()), sessions.status().message());

@@ -30,7 +30,19 @@ milliseconds remaining(Clock::time_point deadline) {
     return std::max(milliseconds(0), std::chrono::duration_cast<milliseconds>(deadline - Clock::now()));
 }
 
+// The source time stamp DDS puts on a sample is the writer's wall clock.
+int64_t wallNowNs() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+        .count();
+}
+
 }  // namespace
+
+// Where a keyed sample came from: its writer, and when it was written (the writer's clock).
+struct SampleOrigin {
+    dds_instance_handle_t writer = 0;
+    int64_t source_ns = 0;
+};
 
 const char* scanStateName(facescan_wire_ScanState state) {
     switch (state) {
@@ -89,6 +101,7 @@ struct ScanClient::Endpoints {
     std::optional<wire::Topic<facescan_wire_SessionOwner>> owner_topic;
     std::optional<wire::Reader<facescan_wire_SessionOwner>> owner_reader;
     std::map<std::string, ServerInfo> servers;
+    std::map<std::string, SampleOrigin> server_writers;  // each server's latest announcement: writer and stamp
     std::map<std::string, OwnerInfo> owners;
     bool server_seen = false;          // a server's ScanStatus writer is matched
     bool command_server_seen = false;  // a server's command endpoints are matched
@@ -336,8 +349,12 @@ namespace {
 
 // Takes the samples of a cluster topic into `into` (by key); malformed ones are left out, not-alive notices
 // mark the entry.
+// `writers`, when given, gets the writer and time stamp of each key's latest valid sample, and `arrived` counts
+// the valid samples per key.
 template <typename Msg, typename Info>
-Status takeKeyed(wire::Reader<Msg>& reader, std::map<std::string, Info>& into, char* Msg::*key) {
+Status takeKeyed(wire::Reader<Msg>& reader, std::map<std::string, Info>& into, char* Msg::*key,
+                 std::map<std::string, SampleOrigin>* writers = nullptr,
+                 std::map<std::string, int>* arrived = nullptr) {
     auto taken = reader.take(
         [&](const Msg& m, const dds_sample_info_t& info) {
             const std::string id = wire::fromDds(m.*key);
@@ -351,6 +368,8 @@ Status takeKeyed(wire::Reader<Msg>& reader, std::map<std::string, Info>& into, c
             static_cast<decltype(*parsed)&>(v) = std::move(*parsed);
             v.alive = info.instance_state == DDS_IST_ALIVE;
             into[id] = std::move(v);
+            if (writers) (*writers)[id] = SampleOrigin{info.publication_handle, info.source_timestamp};
+            if (arrived) ++(*arrived)[id];
         },
         1024);
     return taken.isOk() ? Status::ok() : taken.status();
@@ -358,18 +377,52 @@ Status takeKeyed(wire::Reader<Msg>& reader, std::map<std::string, Info>& into, c
 
 }  // namespace
 
-StatusOr<std::vector<ServerInfo>> ScanClient::servers(milliseconds settle) {
+StatusOr<std::vector<ServerInfo>> ScanClient::servers(milliseconds settle, milliseconds max_wait) {
     RETURN_IF_ERROR(ensureClusterReaders());
     Endpoints& e = *endpoints_;
-    const auto deadline = Clock::now() + settle;
-    // Announcements are durable: they come right after discovery; then a moment for the others.
-    while (Clock::now() < deadline) {
+    const auto start = Clock::now();
+    const auto settled = start + settle;
+    const auto deadline = start + std::max(settle, max_wait);
+    // A working server writes its announcement at least once a second (cluster.cpp). A new reader gets the
+    // last one at once and counts its writer alive until a lease passes without an assertion, longer than this
+    // command lives; so whether a server still works is told by a fresh announcement instead: one stamped in the
+    // last kFresh by the server's clock, or a second one arriving while we listen. A clock that is off only costs
+    // waiting up to kListen for that second one, never a wrong verdict.
+    constexpr auto kFresh = milliseconds(2000);
+    constexpr auto kListen = milliseconds(2500);
+    std::map<std::string, int> arrived;  // announcements received during this call, by server
+    const auto fresh = [&](const std::string& id) {
+        const auto seen = e.server_writers.find(id);
+        if (seen == e.server_writers.end()) return false;
+        const int64_t age_ns = wallNowNs() - seen->second.source_ns;
+        return arrived[id] >= 2 || (age_ns >= 0 && age_ns < std::chrono::nanoseconds(kFresh).count());
+    };
+    // Announcements are durable: they come right after discovery; then a moment for the others. Each server
+    // has one announcement writer, so a matched writer not yet heard from is a server whose announcement is
+    // still on its way: on a loaded host that can take longer than the settle time, and a listing (or an erasure)
+    // that silently left a live server out would be wrong.
+    while (true) {
+        const auto now = Clock::now();
+        const bool unheard = e.announce_reader->matchedWriters() > static_cast<int>(e.servers.size());
+        bool unsure = false;
+        for (const auto& [id, s] : e.servers) unsure |= s.alive && !fresh(id);
+        if (now >= deadline || (now >= settled && !unheard && (!unsure || now >= start + kListen))) break;
         e.announce_reader->waitForData(std::min(milliseconds(100), remaining(deadline)));
-        RETURN_IF_ERROR(takeKeyed(*e.announce_reader, e.servers, &facescan_wire_ServerAnnounce::server_id));
+        RETURN_IF_ERROR(takeKeyed(*e.announce_reader, e.servers, &facescan_wire_ServerAnnounce::server_id,
+                                  &e.server_writers, &arrived));
     }
+    // A server whose writer is still matched (its process answers discovery) but which announces nothing, or
+    // whose liveliness lapsed, is there but stuck (its intake stalled, or too loaded): listed as not responding,
+    // since that is the server that needs attention. One whose writer is gone has left.
+    const std::vector<dds_instance_handle_t> matched = e.announce_reader->matchedPublications();
     std::vector<ServerInfo> out;
-    for (const auto& [id, s] : e.servers) {
-        if (s.alive) out.push_back(s);
+    for (auto [id, s] : e.servers) {
+        const auto seen = e.server_writers.find(id);
+        const bool present = seen != e.server_writers.end() &&
+                             std::find(matched.begin(), matched.end(), seen->second.writer) != matched.end();
+        if (!s.alive && !present) continue;
+        s.responding = s.alive && fresh(id);
+        out.push_back(std::move(s));
     }
     if (out.empty()) return deadlineExceeded(noServerMessage(config_.domain));
     return out;

@@ -12,6 +12,7 @@
 #include <memory>
 #include <optional>
 #include <regex>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -133,17 +134,17 @@ class ClusterRig {
         return n.empty() ? 0 : std::stoi(n);
     }
 
-    // Until `n` servers are up and past their join (facescan servers).
+    // Until `n` servers are up, past their join and responding (facescan servers).
     bool waitForServers(int n, std::chrono::milliseconds timeout) const {
         return waitUntil(
             [&] {
-                const std::string out = cli("servers --json").out;
-                int joined = 0;
-                for (size_t at = out.find("\"joining\":false"); at != std::string::npos;
-                     at = out.find("\"joining\":false", at + 1)) {
-                    ++joined;
+                std::istringstream out(cli("servers --json").out);
+                int working = 0;
+                for (std::string line; std::getline(out, line);) {
+                    working += line.find("\"joining\":false") != std::string::npos &&
+                               line.find("\"responding\":true") != std::string::npos;
                 }
-                return joined >= n;
+                return working >= n;
             },
             timeout);
     }

@@ -115,5 +115,37 @@ TEST(StuckServer, AnOwnerWhoseIntakeStallsIsEndedByItsWatchdogAndTheScanFinishes
     expectFinishedOnceWhole(rig, "rec", other);
 }
 
+// What an operator sees of a stuck server: `facescan servers` keeps listing it, as not responding, while its
+// process is there (its DDS threads still answer discovery) but its liveliness has lapsed; the healthy one is
+// listed as responding. Dropping it from the list would hide the one server that needs attention.
+TEST(StuckServer, AServerWhoseIntakeStallsIsListedAsNotResponding) {
+    ClusterRig rig("unresponsive", 63);
+    ::setenv("FACESCAN_FAILPOINT", ("intake-stall-when-file:" + (rig.dir() / "stall").string()).c_str(), 1);
+    rig.startServer("srv-stuck", {"--set", "stall_limit_s=60"});
+    ::unsetenv("FACESCAN_FAILPOINT");
+    rig.startServer("srv-fine");
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    std::ofstream(rig.dir() / "stall").put('\n');
+    std::string listed;
+    const bool shown = waitUntil(
+        [&] {
+            listed = rig.cli("servers --json").out;
+            std::istringstream lines(listed);
+            bool stuck = false, fine = false;
+            for (std::string line; std::getline(lines, line);) {
+                stuck |=
+                    jsonField(line, "server") == "srv-stuck" && line.find("\"responding\":false") != std::string::npos;
+                fine |=
+                    jsonField(line, "server") == "srv-fine" && line.find("\"responding\":true") != std::string::npos;
+            }
+            return stuck && fine;
+        },
+        20s);
+    EXPECT_TRUE(shown) << listed << readText(rig.serverLog("srv-stuck"));
+    EXPECT_TRUE(processRuns(rig.server("srv-stuck").pid()));
+    const auto table = rig.cli("servers");
+    EXPECT_NE(table.out.find("NOT RESPONDING"), std::string::npos) << table.out;
+}
+
 }  // namespace
 }  // namespace facescan::testing

@@ -50,6 +50,9 @@ struct SessionStatus : wire::ScanStatusData {
 // A server of the domain (its announcement) and whether it is alive.
 struct ServerInfo : wire::ServerAnnounceData {
     bool alive = true;
+    // false: the server is still on the domain but has not asserted its liveliness for a lease (frozen or
+    // overloaded); its sessions are taken over if it stays so.
+    bool responding = true;
 };
 
 // Who owns a session (the strongest live claim: every reader sees the same one).
@@ -106,9 +109,11 @@ class ScanClient {
     // `settle` for the durable samples. Sorted by session id.
     StatusOr<std::vector<SessionStatus>> sessions(std::chrono::milliseconds settle);
 
-    // The servers alive on the domain (their durable announcements), after up to `settle` for them to arrive.
-    // Sorted by id.
-    StatusOr<std::vector<ServerInfo>> servers(std::chrono::milliseconds settle);
+    // The servers on the domain (their durable announcements; one that is there but not responding too), after
+    // `settle` for them to arrive, and
+    // longer, up to `max_wait` in all, while a server already matched has not been heard yet. Sorted by id.
+    StatusOr<std::vector<ServerInfo>> servers(std::chrono::milliseconds settle,
+                                              std::chrono::milliseconds max_wait = std::chrono::milliseconds(0));
     // The owner of every session that has one (durable claims), after up to `settle`.
     StatusOr<std::map<std::string, OwnerInfo>> owners(std::chrono::milliseconds settle);
 

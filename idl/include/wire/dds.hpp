@@ -14,6 +14,7 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "recon/status.hpp"
 
@@ -266,6 +267,15 @@ class Reader {
         return dds_get_subscription_matched_status(entity_.handle(), &st) < 0 ? 0 : static_cast<int>(st.current_count);
     }
     bool waitForWriters(int count, std::chrono::milliseconds timeout) const;
+    // The instance handles of the writers matched now (their participants are still discovered), whatever
+    // their liveliness: a writer here whose instance reads not alive belongs to a process that is there but
+    // has stopped asserting it.
+    std::vector<dds_instance_handle_t> matchedPublications() const {
+        std::vector<dds_instance_handle_t> handles(static_cast<size_t>(std::max(matchedWriters(), 0)) + 8);
+        const dds_return_t n = dds_get_matched_publications(entity_.handle(), handles.data(), handles.size());
+        handles.resize(n < 0 ? 0 : std::min(static_cast<size_t>(n), handles.size()));
+        return handles;
+    }
     dds_entity_t handle() const { return entity_.handle(); }
 
  private:
