@@ -37,8 +37,14 @@ void Server::clusterTick() {
     const std::map<std::string, OwnerView> owners = cluster_->owners();
     settleClaims(owners);  // while the view is stale, only to give up what another server owns now
     if (!viewFresh()) return;
-    if (!rejoining()) takeOverOrphans(owners);
-    placeNewSessions(owners);
+    // A server back from a cut-off sees the agents again before the other servers' claims: every session would
+    // look unplaced, and a claim on one that another server is scanning wins on its tie-break and splits the
+    // scan (the other server gives up the frames it integrated, which the agent has already dropped). So it
+    // places nothing either until it has re-observed the cluster.
+    if (!rejoining()) {
+        takeOverOrphans(owners);
+        placeNewSessions(owners);
+    }
     requestReplays();
     releaseStale();
 }
@@ -439,8 +445,8 @@ bool Server::rejoining() {
     // A server that sees no other server and no agent any more, after it had seen other servers, is cut off from
     // the network. When it comes back, its view of the others' claims lags behind its view of the agents for a
     // moment: every owner still looks gone while the agents look alive again, and a takeover then would be a split.
-    // So it takes nothing over until it has re-observed the cluster for two leases after the cut, as a server that
-    // was frozen does. (A server whose peers died keeps seeing its agents, and takes their sessions over.)
+    // So it takes nothing over and places nothing until it has re-observed the cluster for two leases after the
+    // cut, as a server that was frozen does. (A server whose peers died keeps seeing its agents, and takes their sessions over.)
     const int64_t now = steadyNowNs();
     const int others = cluster_->othersAlive();
     bool agents = false;
@@ -452,7 +458,7 @@ bool Server::rejoining() {
     } else if (cut_off_since_ns_ != 0) {
         std::fprintf(stderr,
                      "facescan-server: this server saw no other server and no agent for %.1f s (cut off from the "
-                     "network): re-observing the cluster for %.1f s before taking anything over\n",
+                     "network): re-observing the cluster for %.1f s before taking over or placing any session\n",
                      static_cast<double>(now - cut_off_since_ns_) * 1e-9,
                      static_cast<double>(rejoin_until_ns_ - now) * 1e-9);
         cut_off_since_ns_ = 0;
