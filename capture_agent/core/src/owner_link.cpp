@@ -190,6 +190,9 @@ StatusOr<bool> SessionStream::write(const wire::EncodedFrame& frame, bool end_of
                                     Clock::time_point deadline) {
     facescan_wire_RgbdFrame msg = wire::toMessage(session_id_, frame);
     msg.end_of_stream = end_of_stream;
+    // Tells an owner that needs older frames that they are gone from here (confirmed by an earlier owner whose copy
+    // did not survive), so that it goes on from what exists instead of asking for them for ever.
+    if (every_frame_) msg.oldest_kept_seq = std::min(frame.seq, kept_.firstSeq(frame.seq));
     const auto first_try = Clock::now();
     for (;;) {
         if (stop || Clock::now() >= deadline) return false;

@@ -209,7 +209,18 @@ FrameFate Session::pushFrame(const facescan_wire_RgbdFrame& msg) {
     const bool recording = camera_ && camera_->every_frame;
     if (msg.seq < next_seq_) return recording ? FrameFate::kDuplicate : FrameFate::kIgnored;
     // A recording is integrated in order: a frame after a gap (sent while a new owner took over) waits for the
-    // agent to resend from next_seq_.
+    // agent to resend from next_seq_, unless the agent no longer holds those frames: an earlier owner confirmed
+    // them and its copy was lost with it (its standby died too). They are counted dropped and said so, and the
+    // scan goes on from the oldest frame that exists; waiting would hold the scan and its agent for ever.
+    if (recording && msg.seq > next_seq_ && msg.oldest_kept_seq > next_seq_) {
+        const uint32_t lost = msg.oldest_kept_seq - next_seq_;
+        stats_.frames_dropped += lost;
+        stats_.detail = "frames " + std::to_string(next_seq_) + "-" + std::to_string(msg.oldest_kept_seq - 1) +
+                        " lost: an earlier owner confirmed them and no copy survived it";
+        std::fprintf(stderr, "facescan-server: session %s: %s (%u frames); going on from frame %u\n", id_.c_str(),
+                     stats_.detail.c_str(), lost, msg.oldest_kept_seq);
+        next_seq_ = msg.oldest_kept_seq;
+    }
     if (recording && msg.seq > next_seq_) return FrameFate::kAhead;
     if (msg.seq > next_seq_) stats_.frames_dropped += msg.seq - next_seq_;  // live: lost on the way
     next_seq_ = msg.seq + 1;

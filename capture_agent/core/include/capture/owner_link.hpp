@@ -64,6 +64,8 @@ class ReplayBuffer {
     // Drops the frames before `seq` (the owner confirmed them).
     void dropBefore(uint32_t seq);
     bool empty() const { return frames_.empty(); }
+    // The oldest frame kept; `otherwise` when none is.
+    uint32_t firstSeq(uint32_t otherwise) const { return frames_.empty() ? otherwise : frames_.front().frame.seq; }
     // Calls fn(frame, end_of_stream) for every kept frame from `seq` on, in order; stops when fn returns false.
     template <typename Fn>
     void forEachFrom(uint32_t seq, Fn&& fn) const {
