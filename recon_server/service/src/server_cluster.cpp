@@ -446,7 +446,8 @@ bool Server::rejoining() {
     // the network. When it comes back, its view of the others' claims lags behind its view of the agents for a
     // moment: every owner still looks gone while the agents look alive again, and a takeover then would be a split.
     // So it takes nothing over and places nothing until it has re-observed the cluster for two leases after the
-    // cut, as a server that was frozen does. (A server whose peers died keeps seeing its agents, and takes their sessions over.)
+    // cut, as a server that was frozen does. (A server whose peers died keeps seeing its agents, and takes their
+    // sessions over.)
     const int64_t now = steadyNowNs();
     const int others = cluster_->othersAlive();
     bool agents = false;
