@@ -586,7 +586,10 @@ TEST(ServerSession, AJoiningSessionsBuildDoesNotHoldUpTheFramesOfARunningOne) {
         sent = seq + 1;
         std::this_thread::sleep_for(33ms);
     });
-    const auto lost = [](const StatusCopy& s) { return s.frames_skipped + s.frames_dropped; };
+    // Lost at the intake: a live reader keeps the last 8 samples, so an intake held up for longer loses frames on
+    // the way (seq gaps, frames_dropped). Frames skipped behind a busy worker are the CPU's doing, not the intake's,
+    // and grow with whatever else the machine runs.
+    const auto lost = [](const StatusCopy& s) { return s.frames_dropped; };
     auto before = rig.client->waitForStatus(
         "running", [](const StatusCopy& s) { return s.frames_integrated >= 10; }, 30s);
     ASSERT_TRUE(before) << "the running session never scanned";
@@ -609,10 +612,11 @@ TEST(ServerSession, AJoiningSessionsBuildDoesNotHoldUpTheFramesOfARunningOne) {
     ASSERT_TRUE(after) << "the running session stopped receiving frames";
     const uint32_t during = sent_until_owned - sent_at_join;
     const uint32_t lost_during = lost(*after) - lost(*before);
-    std::printf("joining took %.2f s: the running session lost %u of the %u frames sent meanwhile (and after)\n",
-                join_s, lost_during, during);
-    // The build competes for the cores (a few frames may be skipped behind a busy worker); with the intake thread
-    // stuck in it, 16 of 28 were lost here (3 with the build on its own thread).
+    std::printf(
+        "joining took %.2f s: the running session lost %u of the %u frames sent meanwhile (and after) at its "
+        "intake\n",
+        join_s, lost_during, during);
+    // With the intake thread stuck in the build, 16 of 28 were lost here.
     EXPECT_LE(lost_during, during / 3) << after->detail;
 }
 

@@ -234,8 +234,19 @@ int Cluster::othersAlive() const {
     return n;
 }
 
+namespace {
+constexpr int64_t kForgetNs = 600'000'000'000;  // a server gone this long is no longer counted
+}  // namespace
+
+int Cluster::othersKnown() const {
+    std::lock_guard lk(mutex_);
+    const int64_t now = steadyNowNs();
+    int n = 0;
+    for (const auto& [id, p] : peers_) n += id != options_.server_id && (p.alive || now - p.seen_ns < kForgetNs);
+    return n;
+}
+
 bool Cluster::seesMajority() const {
-    constexpr int64_t kForgetNs = 600'000'000'000;  // a server gone this long is no longer counted
     std::lock_guard lk(mutex_);
     const int64_t now = steadyNowNs();
     int alive = 0, known = 0;

@@ -393,6 +393,7 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         if (choice.kind == TakeoverChoice::Kind::kWait) continue;  // a server that has its replica continues it
         std::optional<wire::ReplicaData> copy = *choice.copy;
         if (disk != resumable_.end()) resumable_.erase(disk);
+        held_elsewhere_.erase(id);
         auto o = std::make_shared<OwnedSession>();
         // The takeover time runs from the old owner's last sign of life (an announcement or a replica).
         const int64_t heard =
@@ -411,13 +412,28 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         }
     }
     // 2. Replicas in the data dir of sessions with no claim left anywhere (their owner's lapsed long ago, or the
-    //    agent is gone too): resumed. Those that finished, or that another live server continues, stay on disk.
+    //    agent is gone too): resumed. Those that finished stay on disk. One that another live server continues is
+    //    kept ready as well: if that server fails too before its own copy reached a standby, this copy is the
+    //    only one left of the frames the agent has dropped (a restart of each server in turn lost them).
     for (auto it = resumable_.begin(); it != resumable_.end();) {
         const auto view = owners.find(it->first);
+        const auto elsewhere = held_elsewhere_.find(it->first);
+        if (view == owners.end() && elsewhere != held_elsewhere_.end() && !agentLives(it->first)) {
+            // Continued elsewhere and then its claim went with its agent: it ended there (finished, or its owner's
+            // files hold it). Resuming this older copy now would write a second, partial result.
+            std::fprintf(stderr, "facescan-server: session %s ended on server '%s': the replica in %s stays as it is\n",
+                         it->first.c_str(), elsewhere->second.owner_id.c_str(), params_.data_dir.c_str());
+            held_elsewhere_.erase(elsewhere);
+            it = resumable_.erase(it);
+            continue;
+        }
         if (view == owners.end()) {
             auto o = std::make_shared<OwnedSession>();
             o->takeover_from_ns = steadyNowNs();
-            const uint32_t epoch = it->second.epoch + 1;
+            // Above every epoch this session had, including those of the servers that continued it meanwhile.
+            const uint32_t epoch =
+                std::max(it->second.epoch, elsewhere != held_elsewhere_.end() ? elsewhere->second.epoch : 0u) + 1;
+            if (elsewhere != held_elsewhere_.end()) held_elsewhere_.erase(elsewhere);
             std::fprintf(stderr, "facescan-server: session %s: resuming from %s at frame %u (epoch %u)\n",
                          it->first.c_str(), params_.data_dir.c_str(), it->second.next_seq, epoch);
             o->restore_from = std::move(it->second);
@@ -434,9 +450,26 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             ++it;  // its owner is gone: the takeover above decides (it may be waiting for its view to catch up)
             continue;
         }
+        const wire::SessionOwnerData& claim = view->second.data;
+        if (view->second.alive && holding(claim.state) && claim.owner_id != params_.server_id) {
+            const bool first = elsewhere == held_elsewhere_.end();
+            HeldElsewhere& held = held_elsewhere_[it->first];
+            held.epoch = std::max(held.epoch, claim.epoch);
+            held.owner_id = claim.owner_id;
+            if (first) {
+                std::fprintf(stderr,
+                             "facescan-server: session %s is %s on server '%s': this server keeps its replica in %s "
+                             "(frame %u) in case that one fails too\n",
+                             it->first.c_str(), wire::ownerStateName(claim.state), claim.owner_id.c_str(),
+                             params_.data_dir.c_str(), it->second.next_seq);
+            }
+            ++it;
+            continue;
+        }
         std::fprintf(stderr, "facescan-server: session %s is %s on server '%s': the replica in %s stays as it is\n",
-                     it->first.c_str(), wire::ownerStateName(view->second.data.state),
-                     view->second.data.owner_id.c_str(), params_.data_dir.c_str());
+                     it->first.c_str(), wire::ownerStateName(claim.state), claim.owner_id.c_str(),
+                     params_.data_dir.c_str());
+        if (elsewhere != held_elsewhere_.end()) held_elsewhere_.erase(elsewhere);
         it = resumable_.erase(it);
     }
 }
@@ -476,8 +509,15 @@ bool Server::witnessed(const std::string& session_id, int64_t owner_gone_for_ns)
     // the owner's claim lapsed. An agent's lease lapses later than a claim's (its participant goes only once
     // Cyclone has collected it, slower on a loaded machine); the wait is what a server cut off needs to see it go,
     // and what a cluster of two, where the survivor never has a majority, pays on every takeover.
+    //
+    // Losing every one of two or more other servers at once is, seen from inside, what a cut-off looks like (two
+    // failures at the same moment are rare). The agent then goes from this server's view too, but Cyclone can
+    // take seconds longer to notice it than the claim's lapse (in a chaos run a server cut off took a
+    // session over 2.4 s after the owner's lapse, its agent still in view, and split the scan). So that case waits
+    // two leases for the agent to go; a single lost peer (a cluster of two) keeps the short wait.
     if (cluster_->seesMajority()) return true;
-    if (owner_gone_for_ns < lease_ns_ / 2) return false;
+    const bool lost_all = cluster_->othersAlive() == 0 && cluster_->othersKnown() >= 2;
+    if (owner_gone_for_ns < (lost_all ? 2 * lease_ns_ : lease_ns_ / 2)) return false;
     return agentLives(session_id);
 }
 

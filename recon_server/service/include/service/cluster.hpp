@@ -113,6 +113,7 @@ class Cluster {
     // server's view, itself included: false for a server cut off from the others.
     bool seesMajority() const;
     int othersAlive() const;  // other servers alive in this server's view
+    int othersKnown() const;  // other servers alive, or seen within the last minutes
     // Live, joined, compatible servers with their load: self included once joined. Open counts come from the
     // claims (the same on every server), capacities and standbys from the announcements.
     std::vector<ServerLoad> liveLoads() const;
