@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <regex>
+#include <thread>
 
 #include "child_process.hpp"
 #include "client/web_assets.hpp"
@@ -15,6 +16,7 @@
 #include "site_fixture.hpp"
 #include "test_domain.hpp"
 #include "wire/mesh_codec.hpp"
+#include "wire/topics.hpp"
 
 namespace {
 
@@ -146,7 +148,38 @@ TEST(SecureDelete, TheClientRoleErasesAScanAndTheViewerRoleMayNot) {
     const auto audit = ft::runCommand(std::string(FACESCAN_CLI) + " audit " + data.string() + " --session secure-gone");
     EXPECT_EQ(audit.exit_code, 0) << audit.out;
     EXPECT_TRUE(contains(audit.out, "delete")) << audit.out;
-    EXPECT_TRUE(contains(audit.out, "client client@")) << "the client's identity name leads its id: " << audit.out;
+    EXPECT_TRUE(contains(audit.out, "dds CN=client,OU=client,O=lab (client id client@"))
+        << "the subject the client authenticated with is on record: " << audit.out;
+
+    // Enrolled identity A (client-a) sends a request that claims to come from B (the client id `client` uses):
+    // the record names A, the subject A authenticated with; B only as the claim beside it.
+    ASSERT_EQ(site.add("client", "client-a").exit_code, 0);
+    fs::create_directories(data / "secure-forged");
+    std::ofstream(data / "secure-forged" / "mesh.ply") << "ply";
+    {
+        auto participant = wire::Participant::create({domain, "loopback", site.identity("client-a").string()});
+        ASSERT_TRUE(participant.isOk()) << participant.status().toString();
+        auto topic = wire::Topic<facescan_wire_EraseRequest>::create(*participant);
+        ASSERT_TRUE(topic.isOk()) << topic.status().toString();
+        auto writer = wire::Writer<facescan_wire_EraseRequest>::create(*topic);
+        ASSERT_TRUE(writer.isOk()) << writer.status().toString();
+        ASSERT_TRUE(writer->waitForReaders(1, std::chrono::seconds(20))) << ft::readText(site.root() / "server.log");
+        const std::string session = "secure-forged", request = "forged-1", claimed = "client@boss-pc:1:1";
+        facescan_wire_EraseRequest m{};
+        m.session_id = wire::stringView(session);
+        m.request_id = wire::stringView(request);
+        m.client_id = wire::stringView(claimed);
+        ASSERT_TRUE(writer->write(m).isOk());
+        for (int i = 0; i < 200 && fs::exists(data / "secure-forged"); ++i) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        }
+    }
+    EXPECT_FALSE(fs::exists(data / "secure-forged")) << ft::readText(site.root() / "server.log");
+    const auto forged =
+        ft::runCommand(std::string(FACESCAN_CLI) + " audit " + data.string() + " --session secure-forged");
+    EXPECT_EQ(forged.exit_code, 0) << forged.out;
+    EXPECT_TRUE(contains(forged.out, "dds CN=client-a,OU=client,O=lab (client id client@boss-pc:1:1)"))
+        << "the sender is the identity it authenticated with, not the one it claims: " << forged.out;
 }
 
 }  // namespace
