@@ -39,7 +39,8 @@ every frame, status and mesh is encrypted, and each role may do only its job.
                 DIR/agent, DIR/server, DIR/client, DIR/viewer. --name names the site (default: DIR's name);
                 --days is how long those four identities are valid (default $DEFAULT_DAYS).
   add           enrols one more machine or user as DIR/NAME with ROLE's permissions, signed by the site:
-                  agent    publishes camera info and frames; reads status, replies and who owns its scan
+                  agent    publishes camera info and frames; reads status, replies, who owns its scan and
+                           erasures (it drops the frames it kept for an erased scan)
                   server   reads frames and commands; publishes status, snapshots and replies, its announcement
                            and its claims on scans; talks to the other servers of the cluster (facescan/cluster/*)
                   client   reads status, snapshots, replies and the cluster's announcements and owners; sends
@@ -157,7 +158,7 @@ EOF
 # by everyone (an agent streams to its session's owner); facescan/cluster/* is between servers only.
 CLUSTER_PUBLIC="facescan/ServerAnnounce facescan/SessionOwner"
 # Erasure: a client asks (EraseRequest), servers pass the request on (so a server that was down learns it) and
-# report (EraseReport). Identities enrolled before these topics existed need their permissions made again.
+# report (EraseReport); agents read the requests to drop the frames they kept for an erased scan. Identities enrolled before these topics existed need their permissions made again.
 ERASURE="facescan/EraseRequest facescan/EraseReport"
 role_publishes() {
     case $1 in
@@ -169,7 +170,7 @@ role_publishes() {
 }
 role_subscribes() {
     case $1 in
-        agent) echo "facescan/ScanStatus facescan/ScanReply $CLUSTER_PUBLIC" ;;
+        agent) echo "facescan/ScanStatus facescan/ScanReply $CLUSTER_PUBLIC facescan/EraseRequest" ;;
         server) echo "facescan/CameraInfo facescan/RgbdFrame facescan/ScanCommand $CLUSTER_PUBLIC facescan/cluster/* facescan/EraseRequest" ;;
         client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/EraseReport" ;;
         viewer) echo "facescan/ScanStatus facescan/MeshSnapshot $CLUSTER_PUBLIC" ;;
