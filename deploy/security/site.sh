@@ -45,7 +45,8 @@ every frame, status and mesh is encrypted, and each role may do only its job.
                            and its claims on scans; talks to the other servers of the cluster (facescan/cluster/*)
                   client   reads status, snapshots, replies and the cluster's announcements and owners; sends
                            commands (reset, finish, get mesh)
-                  viewer   only reads status, snapshots and the cluster's announcements and owners
+                  viewer   only reads status, snapshots, the cluster's announcements and owners, and erasures
+                           (an erased scan leaves its pages)
                 Valid from now (or --from DATE) for --days N days (default $DEFAULT_DAYS) or until --until DATE
                 (DATE: YYYY-MM-DD or YYYY-MM-DDTHH:MM:SS, UTC).
   revoke        revokes NAME: its certificate goes on the revocation list (DIR/crl.pem, copied into every
@@ -158,7 +159,7 @@ EOF
 # by everyone (an agent streams to its session's owner); facescan/cluster/* is between servers only.
 CLUSTER_PUBLIC="facescan/ServerAnnounce facescan/SessionOwner"
 # Erasure: a client asks (EraseRequest), servers pass the request on (so a server that was down learns it) and
-# report (EraseReport); agents read the requests to drop the frames they kept for an erased scan. Identities enrolled before these topics existed need their permissions made again.
+# report (EraseReport); agents and viewers read the requests to drop what they hold of an erased scan. Identities enrolled before these topics existed need their permissions made again.
 ERASURE="facescan/EraseRequest facescan/EraseReport"
 role_publishes() {
     case $1 in
@@ -172,8 +173,8 @@ role_subscribes() {
     case $1 in
         agent) echo "facescan/ScanStatus facescan/ScanReply $CLUSTER_PUBLIC facescan/EraseRequest" ;;
         server) echo "facescan/CameraInfo facescan/RgbdFrame facescan/ScanCommand $CLUSTER_PUBLIC facescan/cluster/* facescan/EraseRequest" ;;
-        client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/EraseReport" ;;
-        viewer) echo "facescan/ScanStatus facescan/MeshSnapshot $CLUSTER_PUBLIC" ;;
+        client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/EraseReport facescan/EraseRequest" ;;
+        viewer) echo "facescan/ScanStatus facescan/MeshSnapshot $CLUSTER_PUBLIC facescan/EraseRequest" ;;
     esac
 }
 

@@ -114,6 +114,25 @@ TEST(SecureView, TheViewerIdentityWatchesAScanAndDownloadsItsFinalSnapshot) {
     // Without an identity, the same viewer on the same domain sees nothing of the secured scan.
     EXPECT_FALSE(contains(ft::httpRequest(outsider_port, "/api/sessions").body, session));
     EXPECT_EQ(ft::httpRequest(outsider_port, "/api/sessions/" + session).status, 404);
+
+    // facescan delete (the client role): the viewer drops the scan from its memory and its pages.
+    const auto erased = ft::runCommand(std::string(FACESCAN_CLI) + " delete " + session +
+                                       " --profile loopback --domain " + std::to_string(domain) +
+                                       " --timeout 20 --security " + site.identity("client").string() + " 2>&1");
+    EXPECT_EQ(erased.exit_code, 0) << erased.out << logs();
+    EXPECT_TRUE(ft::pollUntilTrue([&] { return ft::httpRequest(port, "/api/sessions/" + session).status == 404; }, 20s))
+        << logs();
+    EXPECT_EQ(ft::httpRequest(port, "/api/sessions/" + session + "/mesh.drc").status, 404);
+    EXPECT_EQ(ft::httpRequest(port, "/api/sessions/" + session + "/snapshot.drc").status, 404);
+    EXPECT_FALSE(contains(ft::httpRequest(port, "/api/sessions").body, session));
+    EXPECT_TRUE(contains(ft::readText(dir / "view.log"), "scan " + session + " was erased on the domain")) << logs();
+    EXPECT_TRUE(ws.waitFor(
+        [&](const auto& m) {
+            return !m.empty() && !m.back().binary && contains(m.back().data, "\"type\":\"sessions\"") &&
+                   !contains(m.back().data, session);
+        },
+        20s))
+        << "the page is told at once";
 }
 
 // facescan delete on a secured site: the client role may erase a scan (and the server's audit trail names the
