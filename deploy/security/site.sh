@@ -49,8 +49,10 @@ every frame, status and mesh is encrypted, and each role may do only its job.
                            (an erased scan leaves its pages)
                 Valid from now (or --from DATE) for --days N days (default $DEFAULT_DAYS) or until --until DATE
                 (DATE: YYYY-MM-DD or YYYY-MM-DDTHH:MM:SS, UTC).
-  revoke        revokes NAME: its certificate goes on the revocation list (DIR/crl.pem, copied into every
-                identity folder of DIR) and its permissions are re-issued to allow nothing. Copy the new
+  revoke        revokes NAME: its certificate (and a viewer's web certificate) goes on the revocation list
+                (DIR/crl.pem, copied into every identity folder of DIR) and its permissions are re-issued to allow
+                nothing. A running web viewer with NAME's folder refuses every connection (and so every login)
+                as soon as its crl.pem lists its web certificate, and will not start again with it. Copy the new
                 crl.pem to every machine's identity folder; each peer rejects NAME from its next start.
   list          the identities of DIR: role, validity, revoked or not.
   web           a TLS certificate for the web viewer that runs with identity DIR/NAME (normally a viewer), signed
@@ -351,6 +353,12 @@ cmd_revoke() {
     [ -f "$id/identity.pem" ] || die "no identity '$name' in $dir"
     [ ! -f "$id/REVOKED" ] || die "$name is already revoked ($(cat "$id/REVOKED"))"
     site_ca "$dir" -revoke "../$name/identity.pem"
+    # A viewer's web certificate goes too: its TLS front stops serving once it reads the new list.
+    local web=""
+    if [ -f "$id/web.crt" ]; then
+        site_ca "$dir" -revoke "../$name/web.crt"
+        web=" and its web certificate"
+    fi
     site_ca "$dir" -gencrl -out ../crl.pem
     chmod 644 "$dir/crl.pem"
     local now role subject
@@ -367,7 +375,7 @@ cmd_revoke() {
         refresh_identity "$dir" "$other"
         count=$((count + 1))
     done
-    echo "$PROG: revoked $name ($role); the new revocation list is $dir/crl.pem (copied into the $count identity folders here)."
+    echo "$PROG: revoked $name ($role)$web; the new revocation list is $dir/crl.pem (copied into the $count identity folders here)."
     echo "$PROG: copy it to every machine's identity folder (DIR/NAME/crl.pem); each peer rejects $name from its next start."
 }
 
