@@ -171,34 +171,54 @@ TEST(SecureDelete, TheClientRoleErasesAScanAndTheViewerRoleMayNot) {
         << "the subject the client authenticated with is on record: " << audit.out;
 
     // Enrolled identity A (client-a) sends a request that claims to come from B (the client id `client` uses):
-    // the record names A, the subject A authenticated with; B only as the claim beside it.
+    // the record names A, the subject A authenticated with; B only as the claim beside it. `user_data`, when
+    // given, replaces what A's participant announces (B's certificate: a forgery the GUID binding catches).
     ASSERT_EQ(site.add("client", "client-a").exit_code, 0);
-    fs::create_directories(data / "secure-forged");
-    std::ofstream(data / "secure-forged" / "mesh.ply") << "ply";
-    {
+    const auto forge = [&](const std::string& session, const std::string* user_data) {
+        fs::create_directories(data / session);
+        std::ofstream(data / session / "mesh.ply") << "ply";
         auto participant = wire::Participant::create({domain, "loopback", site.identity("client-a").string()});
-        ASSERT_TRUE(participant.isOk()) << participant.status().toString();
+        EXPECT_TRUE(participant.isOk()) << participant.status().toString();
+        if (!participant.isOk()) return std::string();
+        if (user_data) {
+            wire::Qos qos;
+            dds_qset_userdata(qos.get(), user_data->data(), user_data->size());
+            EXPECT_EQ(dds_set_qos(participant->handle(), qos.get()), DDS_RETCODE_OK);
+        }
         auto topic = wire::Topic<facescan_wire_EraseRequest>::create(*participant);
-        ASSERT_TRUE(topic.isOk()) << topic.status().toString();
+        EXPECT_TRUE(topic.isOk()) << topic.status().toString();
+        if (!topic.isOk()) return std::string();
         auto writer = wire::Writer<facescan_wire_EraseRequest>::create(*topic);
-        ASSERT_TRUE(writer.isOk()) << writer.status().toString();
-        ASSERT_TRUE(writer->waitForReaders(1, std::chrono::seconds(20))) << ft::readText(site.root() / "server.log");
-        const std::string session = "secure-forged", request = "forged-1", claimed = "client@boss-pc:1:1";
+        EXPECT_TRUE(writer.isOk() && writer->waitForReaders(1, std::chrono::seconds(20)))
+            << ft::readText(site.root() / "server.log");
+        const std::string request = session + "-request", claimed = "client@boss-pc:1:1";
         facescan_wire_EraseRequest m{};
         m.session_id = wire::stringView(session);
         m.request_id = wire::stringView(request);
         m.client_id = wire::stringView(claimed);
-        ASSERT_TRUE(writer->write(m).isOk());
-        for (int i = 0; i < 200 && fs::exists(data / "secure-forged"); ++i) {
+        EXPECT_TRUE(writer->write(m).isOk());
+        for (int i = 0; i < 200 && fs::exists(data / session); ++i) {
             std::this_thread::sleep_for(std::chrono::milliseconds(100));
         }
-    }
-    EXPECT_FALSE(fs::exists(data / "secure-forged")) << ft::readText(site.root() / "server.log");
-    const auto forged =
-        ft::runCommand(std::string(FACESCAN_CLI) + " audit " + data.string() + " --session secure-forged");
-    EXPECT_EQ(forged.exit_code, 0) << forged.out;
-    EXPECT_TRUE(contains(forged.out, "dds CN=client-a,OU=client,O=lab (client id client@boss-pc:1:1)"))
-        << "the sender is the identity it authenticated with, not the one it claims: " << forged.out;
+        EXPECT_FALSE(fs::exists(data / session)) << ft::readText(site.root() / "server.log");
+        const auto record =
+            ft::runCommand(std::string(FACESCAN_CLI) + " audit " + data.string() + " --session " + session);
+        EXPECT_EQ(record.exit_code, 0) << record.out;
+        return record.out;
+    };
+    const std::string forged = forge("secure-forged", nullptr);
+    EXPECT_TRUE(contains(forged, "dds CN=client-a,OU=client,O=lab (client id client@boss-pc:1:1)"))
+        << "the sender is the identity it authenticated with, not the one it claims: " << forged;
+    // B's certificate in A's USER_DATA: never recorded as B (A's own, if the server read it before the change).
+    const std::string b_certificate = ft::readText(site.identity("client") / "identity.pem");
+    ASSERT_FALSE(b_certificate.empty());
+    const std::string b_user_data = "facescan-identity-certificate\n" + b_certificate;
+    const std::string stolen = forge("secure-stolen", &b_user_data);
+    std::printf("an announced certificate that is not the sender's own:\n%s", stolen.c_str());
+    EXPECT_FALSE(contains(stolen, "dds CN=client,")) << stolen;
+    EXPECT_TRUE(contains(stolen, "which is not the identity it authenticated with") ||
+                contains(stolen, "dds CN=client-a,OU=client,O=lab"))
+        << stolen;
 }
 
 }  // namespace
