@@ -20,6 +20,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr const char* kUserDataTag = "facescan-identity-certificate\n";
+constexpr size_t kMaxKnown = 4096;  // participants whose subject is cached
 
 template <auto Free>
 struct OpenSslFree {
@@ -140,6 +141,8 @@ StatusOr<std::string> PeerIdentities::subjectOf(dds_entity_t reader, dds_instanc
     if (!found) return notFound("its participant is no longer discovered");
     ASSIGN_OR_RETURN(std::string subject, verifiedSubject(participant, user_data));
     std::lock_guard lock(mutex_);
+    // Every client run is a new participant: the cache is bounded, a forgotten one is verified again.
+    if (known_.size() >= kMaxKnown) known_.clear();
     known_[key] = subject;
     return subject;
 }
