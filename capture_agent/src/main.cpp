@@ -41,6 +41,8 @@ constexpr const char* kUsage = R"(usage: facescan-agent [options]
 Reads RGB-D frames from a camera or a recording, compresses depth losslessly and colour as JPEG, and streams
 them to facescan-server over DDS. Prints a status line every second; Ctrl-C or SIGTERM ends the stream within
 2 s, whatever the server does (a second Ctrl-C at once), and saves a recording's unconfirmed frames (--save-dir).
+When the scan is erased on the domain (facescan delete), the agent stops the same way but drops the frames it
+kept for it, saves none (and deletes a save under way), and says so.
 
 options:
   --source SRC          where frames come from (default: openni2)

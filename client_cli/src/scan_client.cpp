@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <random>
+#include <set>
 #include <thread>
 
 #include "wire/dds_options.hpp"
@@ -100,6 +101,9 @@ struct ScanClient::Endpoints {
     std::optional<wire::Reader<facescan_wire_ServerAnnounce>> announce_reader;
     std::optional<wire::Topic<facescan_wire_SessionOwner>> owner_topic;
     std::optional<wire::Reader<facescan_wire_SessionOwner>> owner_reader;
+    std::optional<wire::Topic<facescan_wire_EraseRequest>> erase_topic;
+    std::optional<wire::Reader<facescan_wire_EraseRequest>> erase_reader;
+    std::set<std::string> erased;  // sessions takeErased() has reported
     std::map<std::string, ServerInfo> servers;
     std::map<std::string, SampleOrigin> server_writers;  // each server's latest announcement: writer and stamp
     std::map<std::string, OwnerInfo> owners;
@@ -329,6 +333,24 @@ Status ScanClient::poll(milliseconds wait, std::map<std::string, SessionStatus>&
         },
         64);
     return taken.isOk() ? Status::ok() : taken.status();
+}
+
+StatusOr<std::vector<std::string>> ScanClient::takeErased() {
+    Endpoints& e = *endpoints_;
+    if (!e.erase_reader) {
+        ASSIGN_OR_RETURN(auto topic, wire::Topic<facescan_wire_EraseRequest>::create(e.participant));
+        e.erase_topic.emplace(std::move(topic));
+        ASSIGN_OR_RETURN(auto reader, wire::Reader<facescan_wire_EraseRequest>::create(*e.erase_topic));
+        e.erase_reader.emplace(std::move(reader));
+    }
+    std::vector<std::string> out;
+    auto taken = e.erase_reader->take([&](const facescan_wire_EraseRequest& m, const dds_sample_info_t& info) {
+        if (!info.valid_data) return;
+        std::string id = wire::fromDds(m.session_id);
+        if (wire::validateSessionId(id).isOk() && e.erased.insert(id).second) out.push_back(std::move(id));
+    });
+    if (!taken.isOk()) return taken.status();
+    return out;
 }
 
 Status ScanClient::ensureClusterReaders() {

@@ -5,7 +5,9 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <openssl/err.h>
+#include <openssl/pem.h>
 #include <openssl/ssl.h>
+#include <openssl/x509.h>
 #include <poll.h>
 #include <signal.h>
 #include <sys/socket.h>
@@ -14,7 +16,10 @@
 #include <atomic>
 #include <cerrno>
 #include <condition_variable>
+#include <cstdio>
 #include <cstring>
+#include <ctime>
+#include <filesystem>
 #include <map>
 #include <mutex>
 #include <set>
@@ -61,6 +66,34 @@ bool sendAll(int fd, const char* p, size_t n) {
     return true;
 }
 
+// PermissionDenied when `certificate` is on the revocation list in `crl_path` (saying since when); NotFound when
+// the list cannot be read. The list is the site's, signed by the CA that issued the web certificate: a list that
+// is not (another site's) is an error too, so a swapped file cannot hide a revocation.
+Status checkRevocation(X509* certificate, const std::filesystem::path& crl_path) {
+    FILE* file = std::fopen(crl_path.c_str(), "r");
+    if (!file) return notFound("cannot read the revocation list " + crl_path.string() + ": " + std::strerror(errno));
+    X509_CRL* crl = PEM_read_X509_CRL(file, nullptr, nullptr, nullptr);
+    std::fclose(file);
+    if (!crl) return invalidArgument(crl_path.string() + " is not a PEM revocation list (" + opensslError() + ")");
+    Status status = Status::ok();
+    if (X509_NAME_cmp(X509_CRL_get_issuer(crl), X509_get_issuer_name(certificate)) != 0) {
+        status = invalidArgument(crl_path.string() +
+                                 " is not the revocation list of the CA that issued the web certificate (another "
+                                 "site's?): copy the site's crl.pem");
+    } else if (X509_REVOKED* revoked = nullptr; X509_CRL_get0_by_cert(crl, &revoked, certificate) == 1) {
+        char when[64] = "an unknown date";
+        if (const ASN1_TIME* t = revoked ? X509_REVOKED_get0_revocationDate(revoked) : nullptr) {
+            std::tm tm{};
+            if (ASN1_TIME_to_tm(t, &tm) == 1) std::strftime(when, sizeof when, "%Y-%m-%d %H:%M UTC", &tm);
+        }
+        status = permissionDenied(std::string("the viewer's web certificate was revoked on ") + when + " (it is on " +
+                                  crl_path.string() +
+                                  "): this viewer may not serve; enrol a new viewer (site.sh add, web, login)");
+    }
+    X509_CRL_free(crl);
+    return status;
+}
+
 }  // namespace
 
 struct TlsFront::Impl {
@@ -76,6 +109,29 @@ struct TlsFront::Impl {
     std::map<uint16_t, std::string> relays;  // the relay's local port on 127.0.0.1 -> the browser's address
     std::set<int> sockets;                   // every open socket of a relay, shut down by stop()
     int active = 0;
+    // Revocation (Options::crl): the list's last change seen, and whether it lists the web certificate.
+    std::filesystem::file_time_type crl_seen{};
+    bool revoked = false;
+
+    // Looks at the revocation list again when it changed; true when the certificate is revoked (said once).
+    bool isRevoked() {
+        if (options.crl.empty()) return false;
+        std::error_code ec;
+        const auto changed_at = std::filesystem::last_write_time(options.crl, ec);
+        std::lock_guard lock(mutex);
+        if (revoked || ec || changed_at == crl_seen) return revoked;
+        crl_seen = changed_at;
+        const Status s = checkRevocation(SSL_CTX_get0_certificate(ctx), options.crl);
+        if (s.code() == StatusCode::kPermissionDenied) {
+            revoked = true;
+            std::fprintf(stderr, "facescan view: %s; refusing every connection from now on\n", s.message().c_str());
+            // The open connections end too: a revoked viewer shows nothing more.
+            for (const int fd : sockets) ::shutdown(fd, SHUT_RDWR);
+        } else if (!s.isOk()) {
+            std::fprintf(stderr, "facescan view: WARNING: %s\n", s.message().c_str());
+        }
+        return revoked;
+    }
 
     ~Impl() {
         if (listen_fd >= 0) ::close(listen_fd);
@@ -95,6 +151,10 @@ struct TlsFront::Impl {
             socklen_t len = sizeof from;
             const int fd = ::accept4(listen_fd, reinterpret_cast<sockaddr*>(&from), &len, SOCK_CLOEXEC);
             if (fd < 0) continue;
+            if (isRevoked()) {
+                ::close(fd);  // no handshake: a revoked certificate is never shown again
+                continue;
+            }
             std::unique_lock lock(mutex);
             changed.wait(lock, [&] { return stopping || active < options.max_connections; });
             if (stopping) {
@@ -154,7 +214,7 @@ struct TlsFront::Impl {
 
     void pump(SSL* ssl, int client, int backend) {
         char buf[16384];
-        while (!stopping) {
+        while (!stopping && !isRevoked()) {
             pollfd fds[2] = {{client, POLLIN, 0}, {backend, POLLIN, 0}};
             // Bytes OpenSSL already decrypted are not on the socket any more: take them without waiting.
             if (SSL_pending(ssl) > 0) {
@@ -200,6 +260,11 @@ StatusOr<std::unique_ptr<TlsFront>> TlsFront::start(const Options& options) {
         SSL_CTX_check_private_key(impl.ctx) != 1) {
         return invalidArgument(pem + ": the private key is missing or not the certificate's (" + opensslError() +
                                "): make the file again with facescan-site web");
+    }
+    if (!options.crl.empty()) {
+        RETURN_IF_ERROR(checkRevocation(SSL_CTX_get0_certificate(impl.ctx), options.crl));
+        std::error_code ec;
+        impl.crl_seen = std::filesystem::last_write_time(options.crl, ec);
     }
 
     const bool v6 = options.bind.find(':') != std::string::npos;

@@ -113,7 +113,29 @@ int runView(const CliOptions& options) {
 
     std::map<std::string, SessionStatus> statuses;
     std::vector<MeshSnapshotData> snapshots;
+    bool erasures_heard = true;
     while (!g_interrupted) {
+        // Erasures first: a scan deleted on the domain leaves this viewer's memory and every page.
+        if (erasures_heard) {
+            auto erased = live->takeErased();
+            if (!erased.isOk()) {
+                erasures_heard = false;
+                std::fprintf(stderr,
+                             "facescan view: WARNING: cannot hear facescan delete (%s): an erased scan stays on these "
+                             "pages until the viewer restarts; with DDS Security, enrol its identity again "
+                             "(site.sh add)\n",
+                             erased.status().message().c_str());
+            } else {
+                for (const std::string& id : *erased) {
+                    statuses.erase(id);
+                    if (hub.erase(id)) {
+                        std::printf("facescan view: scan %s was erased on the domain: dropped from this viewer\n",
+                                    id.c_str());
+                        std::fflush(stdout);
+                    }
+                }
+            }
+        }
         snapshots.clear();
         if (Status s = live->poll(std::chrono::milliseconds(200), statuses, kAllSessions, &snapshots); !s.isOk()) {
             (*server)->stop();

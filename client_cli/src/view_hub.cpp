@@ -54,12 +54,17 @@ std::string sessionsMessage(const std::map<std::string, SessionStatus>& statuses
 
 ViewHub::ViewHub() : sessions_json_(std::make_shared<const std::string>(sessionsMessage({}))) {}
 
-void ViewHub::updateStatuses(const std::map<std::string, SessionStatus>& statuses) {
+void ViewHub::updateStatuses(const std::map<std::string, SessionStatus>& all) {
+    std::map<std::string, SessionStatus> statuses = all;
+    {
+        std::lock_guard lock(mutex_);
+        for (const std::string& id : erased_) statuses.erase(id);
+    }
     auto json = std::make_shared<const std::string>(sessionsMessage(statuses));
     {
         std::lock_guard lock(mutex_);
         if (*json == *sessions_json_) return;
-        statuses_ = statuses;
+        statuses_ = std::move(statuses);
         sessions_json_ = std::move(json);
         ++sessions_version_;
     }
@@ -70,6 +75,7 @@ void ViewHub::putSnapshot(std::shared_ptr<const FramedSnapshot> snapshot) {
     if (!snapshot) return;
     {
         std::lock_guard lock(mutex_);
+        if (erased_.count(snapshot->session_id)) return;  // a late sample of an erased scan
         Held& held = snapshots_[snapshot->session_id];
         // A reset session starts again at seq 0 with a newer creation time: newer means either.
         if (held.snapshot && snapshot->seq <= held.snapshot->seq && snapshot->created_ns <= held.snapshot->created_ns) {
@@ -79,6 +85,21 @@ void ViewHub::putSnapshot(std::shared_ptr<const FramedSnapshot> snapshot) {
         held.version = next_snapshot_version_++;
     }
     changed_.notify_all();
+}
+
+bool ViewHub::erase(const std::string& session_id) {
+    bool held = false;
+    {
+        std::lock_guard lock(mutex_);
+        erased_.insert(session_id);
+        held = statuses_.erase(session_id) + snapshots_.erase(session_id) > 0;
+        if (held) {
+            sessions_json_ = std::make_shared<const std::string>(sessionsMessage(statuses_));
+            ++sessions_version_;
+        }
+    }
+    if (held) changed_.notify_all();
+    return held;
 }
 
 std::vector<SessionStatus> ViewHub::sessions() const {

@@ -429,6 +429,10 @@ StatusOr<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& 
         front.bind = config.bind;
         front.port = config.port;
         front.pem = certificate;
+        // site.sh revoke rewrites the identity folder's revocation list (and puts the web certificate on it).
+        if (std::error_code ec; std::filesystem::exists(config.tls_dir / "crl.pem", ec)) {
+            front.crl = config.tls_dir / "crl.pem";
+        }
         front.backend_port = server->port_;
         front.max_connections = config.threads;
         auto started = TlsFront::start(front);

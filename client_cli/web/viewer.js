@@ -100,9 +100,10 @@ draco.preload();
 let decoding = false;
 let pending = null;  // a snapshot that arrived while another was decoding
 let framedSession = null;
+const erasedSessions = new Set();  // deleted while this page was open: never drawn again
 
 function onSnapshot(header, bytes) {
-  if (header.session !== stats.followed) return;
+  if (header.session !== stats.followed || erasedSessions.has(header.session)) return;
   const received = nowMs();
   // The size is kept now: decoding hands the buffer to the decoder's worker.
   const snap = { header, bytes, size: bytes.byteLength, received };
@@ -114,6 +115,7 @@ function decode(snap) {
   const t0 = performance.now();
   draco.parse(snap.bytes, (geometry) => {
     const decodeMs = performance.now() - t0;
+    if (erasedSessions.has(snap.header.session)) { geometry.dispose(); finishDecode(); return; }
     if (!geometry.attributes.normal) geometry.computeVertexNormals();  // snapshots may come without normals
     const old = face.geometry;
     face.geometry = geometry;
@@ -204,6 +206,18 @@ function showSessions() {
 }
 
 function onSessions(list) {
+  // A session leaves the list only when it was erased (facescan delete): its mesh goes from the page too.
+  if (stats.followed && sessions.some((s) => s.session === stats.followed) &&
+      !list.some((s) => s.session === stats.followed)) {
+    erasedSessions.add(stats.followed);
+    pending = null;
+    face.geometry.dispose();
+    face.geometry = new THREE.BufferGeometry();
+    requestRender();
+    $('overlay').hidden = false;
+    $('overlay').textContent = `Scan ${stats.followed} was deleted: nothing of it is shown any more.`;
+    $('snapshot').textContent = 'deleted';
+  }
   sessions = list;
   if (!stats.followed) {
     if (wanted && list.some((s) => s.session === wanted)) {

@@ -39,16 +39,20 @@ every frame, status and mesh is encrypted, and each role may do only its job.
                 DIR/agent, DIR/server, DIR/client, DIR/viewer. --name names the site (default: DIR's name);
                 --days is how long those four identities are valid (default $DEFAULT_DAYS).
   add           enrols one more machine or user as DIR/NAME with ROLE's permissions, signed by the site:
-                  agent    publishes camera info and frames; reads status, replies and who owns its scan
+                  agent    publishes camera info and frames; reads status, replies, who owns its scan and
+                           erasures (it drops the frames it kept for an erased scan)
                   server   reads frames and commands; publishes status, snapshots and replies, its announcement
                            and its claims on scans; talks to the other servers of the cluster (facescan/cluster/*)
                   client   reads status, snapshots, replies and the cluster's announcements and owners; sends
                            commands (reset, finish, get mesh)
-                  viewer   only reads status, snapshots and the cluster's announcements and owners
+                  viewer   only reads status, snapshots, the cluster's announcements and owners, and erasures
+                           (an erased scan leaves its pages)
                 Valid from now (or --from DATE) for --days N days (default $DEFAULT_DAYS) or until --until DATE
                 (DATE: YYYY-MM-DD or YYYY-MM-DDTHH:MM:SS, UTC).
-  revoke        revokes NAME: its certificate goes on the revocation list (DIR/crl.pem, copied into every
-                identity folder of DIR) and its permissions are re-issued to allow nothing. Copy the new
+  revoke        revokes NAME: its certificate (and a viewer's web certificate) goes on the revocation list
+                (DIR/crl.pem, copied into every identity folder of DIR) and its permissions are re-issued to allow
+                nothing. A running web viewer with NAME's folder refuses every connection (and so every login)
+                as soon as its crl.pem lists its web certificate, and will not start again with it. Copy the new
                 crl.pem to every machine's identity folder; each peer rejects NAME from its next start.
   list          the identities of DIR: role, validity, revoked or not.
   web           a TLS certificate for the web viewer that runs with identity DIR/NAME (normally a viewer), signed
@@ -157,7 +161,7 @@ EOF
 # by everyone (an agent streams to its session's owner); facescan/cluster/* is between servers only.
 CLUSTER_PUBLIC="facescan/ServerAnnounce facescan/SessionOwner"
 # Erasure: a client asks (EraseRequest), servers pass the request on (so a server that was down learns it) and
-# report (EraseReport). Identities enrolled before these topics existed need their permissions made again.
+# report (EraseReport); agents and viewers read the requests to drop what they hold of an erased scan. Identities enrolled before these topics existed need their permissions made again.
 ERASURE="facescan/EraseRequest facescan/EraseReport"
 role_publishes() {
     case $1 in
@@ -169,10 +173,10 @@ role_publishes() {
 }
 role_subscribes() {
     case $1 in
-        agent) echo "facescan/ScanStatus facescan/ScanReply $CLUSTER_PUBLIC" ;;
+        agent) echo "facescan/ScanStatus facescan/ScanReply $CLUSTER_PUBLIC facescan/EraseRequest" ;;
         server) echo "facescan/CameraInfo facescan/RgbdFrame facescan/ScanCommand $CLUSTER_PUBLIC facescan/cluster/* facescan/EraseRequest" ;;
-        client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/EraseReport" ;;
-        viewer) echo "facescan/ScanStatus facescan/MeshSnapshot $CLUSTER_PUBLIC" ;;
+        client) echo "facescan/ScanStatus facescan/MeshSnapshot facescan/ScanReply $CLUSTER_PUBLIC facescan/EraseReport facescan/EraseRequest" ;;
+        viewer) echo "facescan/ScanStatus facescan/MeshSnapshot $CLUSTER_PUBLIC facescan/EraseRequest" ;;
     esac
 }
 
@@ -349,6 +353,12 @@ cmd_revoke() {
     [ -f "$id/identity.pem" ] || die "no identity '$name' in $dir"
     [ ! -f "$id/REVOKED" ] || die "$name is already revoked ($(cat "$id/REVOKED"))"
     site_ca "$dir" -revoke "../$name/identity.pem"
+    # A viewer's web certificate goes too: its TLS front stops serving once it reads the new list.
+    local web=""
+    if [ -f "$id/web.crt" ]; then
+        site_ca "$dir" -revoke "../$name/web.crt"
+        web=" and its web certificate"
+    fi
     site_ca "$dir" -gencrl -out ../crl.pem
     chmod 644 "$dir/crl.pem"
     local now role subject
@@ -365,7 +375,7 @@ cmd_revoke() {
         refresh_identity "$dir" "$other"
         count=$((count + 1))
     done
-    echo "$PROG: revoked $name ($role); the new revocation list is $dir/crl.pem (copied into the $count identity folders here)."
+    echo "$PROG: revoked $name ($role)$web; the new revocation list is $dir/crl.pem (copied into the $count identity folders here)."
     echo "$PROG: copy it to every machine's identity folder (DIR/NAME/crl.pem); each peer rejects $name from its next start."
 }
 

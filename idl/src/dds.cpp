@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "wire/data_files.hpp"
+#include "wire/peer_identity.hpp"
 #include "wire/security.hpp"
 
 namespace facescan::wire {
@@ -167,7 +168,14 @@ StatusOr<Participant> Participant::create(const DomainConfig& config) {
             entry = {participant.domain_, config.profile, config.security};
         }
     }
-    const dds_entity_t h = dds_create_participant(config.domain_id, nullptr, nullptr);
+    // With an identity, the participant announces its certificate in USER_DATA: peers bind it to the GUID that
+    // authentication fixed, to know who sent a command (wire/peer_identity.hpp).
+    Qos qos;
+    if (!config.security.empty()) {
+        ASSIGN_OR_RETURN(const std::string user_data, identityUserData(config.security));
+        dds_qset_userdata(qos.get(), user_data.data(), user_data.size());
+    }
+    const dds_entity_t h = dds_create_participant(config.domain_id, qos.get(), nullptr);
     if (h < 0) {
         // The identity's files were checked before; what is left is the plugins' own refusal (in Cyclone's log).
         if (!config.security.empty()) {

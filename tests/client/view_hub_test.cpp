@@ -116,5 +116,41 @@ TEST(ViewHub, SessionsJsonChangesOnlyWithThePictureAndStaysValid) {
     EXPECT_EQ(*hub.snapshotMesh("a"), (std::vector<uint8_t>{5, 6, 7}));
 }
 
+// facescan delete: an erased scan leaves the hub's memory and every page (a sessions message without it), and
+// what still arrives of it (a late snapshot, a status from the map the DDS side keeps) is dropped.
+TEST(ViewHub, AnErasedScanLeavesMemoryAndThePagesAndStaysGone) {
+    ViewHub hub;
+    SessionStatus a, b;
+    a.session_id = "a";
+    b.session_id = "b";
+    hub.updateStatuses({{"a", a}, {"b", b}});
+    hub.putSnapshot(frameSnapshot(snap("a", 1, 10, {5, 6})));
+    hub.putSnapshot(frameSnapshot(snap("b", 1, 10)));
+    ViewHub::Cursor cursor;
+    hub.follow(cursor, "a");
+    const auto before = hub.next(cursor, 0ms);
+    ASSERT_TRUE(before.sessions_json && before.snapshot);
+    ASSERT_NE(before.sessions_json->find("\"session\":\"a\""), std::string::npos);
+
+    EXPECT_TRUE(hub.erase("a"));
+    const auto after = hub.next(cursor, 0ms);
+    ASSERT_TRUE(after.sessions_json) << "the pages are told at once";
+    EXPECT_EQ(after.sessions_json->find("\"session\":\"a\""), std::string::npos) << *after.sessions_json;
+    EXPECT_NE(after.sessions_json->find("\"session\":\"b\""), std::string::npos) << *after.sessions_json;
+    EXPECT_FALSE(after.snapshot);
+    EXPECT_FALSE(hub.session("a"));
+    EXPECT_FALSE(hub.snapshot("a"));
+    EXPECT_EQ(hub.snapshotMesh("a").status().code(), StatusCode::kNotFound);
+    EXPECT_TRUE(hub.snapshot("b")) << "other scans stay";
+
+    // Late arrivals of the erased scan are dropped; erasing again holds nothing.
+    hub.putSnapshot(frameSnapshot(snap("a", 2, 20)));
+    hub.updateStatuses({{"a", a}, {"b", b}});
+    EXPECT_FALSE(hub.snapshot("a"));
+    EXPECT_FALSE(hub.session("a"));
+    EXPECT_EQ(hub.sessionsJson()->find("\"session\":\"a\""), std::string::npos);
+    EXPECT_FALSE(hub.erase("a"));
+}
+
 }  // namespace
 }  // namespace facescan::client

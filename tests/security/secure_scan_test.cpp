@@ -10,6 +10,7 @@
 #include <chrono>
 #include <filesystem>
 #include <regex>
+#include <sstream>
 #include <thread>
 
 #include "child_process.hpp"
@@ -189,6 +190,14 @@ TEST(SecureScan, IsPrivateEachRoleDoesOnlyItsJobAndTheAccuracyIsThatOfAnUnsecure
     // The client (commands allowed) fetches the final mesh: every frame integrated, as without security (the
     // eavesdropper's reset never arrived), with the same accuracy.
     const ScanResult secure = fetchAndMeasure(session, as_client, dir / "secure.ply");
+    // The server's audit trail names the fetch's sender by the subject it authenticated with.
+    bool fetch_on_record = false;
+    std::istringstream audit(readText(dir / "data" / "audit.log"));
+    for (std::string line; std::getline(audit, line);) {
+        fetch_on_record = fetch_on_record || (contains(line, "\tget_mesh\t" + session + "\t") &&
+                                              contains(line, "\tdds CN=client,OU=client,O=lab (client id client@"));
+    }
+    EXPECT_TRUE(fetch_on_record) << readText(dir / "data" / "audit.log");
     std::printf(
         "secured scan (%d frames): mean %.3f mm, completeness %.3f, %d integrated; unsecured: mean %.3f mm, "
         "completeness %.3f, %d integrated\n",

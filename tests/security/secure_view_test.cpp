@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <regex>
+#include <thread>
 
 #include "child_process.hpp"
 #include "client/web_assets.hpp"
@@ -15,6 +16,7 @@
 #include "site_fixture.hpp"
 #include "test_domain.hpp"
 #include "wire/mesh_codec.hpp"
+#include "wire/topics.hpp"
 
 namespace {
 
@@ -112,6 +114,25 @@ TEST(SecureView, TheViewerIdentityWatchesAScanAndDownloadsItsFinalSnapshot) {
     // Without an identity, the same viewer on the same domain sees nothing of the secured scan.
     EXPECT_FALSE(contains(ft::httpRequest(outsider_port, "/api/sessions").body, session));
     EXPECT_EQ(ft::httpRequest(outsider_port, "/api/sessions/" + session).status, 404);
+
+    // facescan delete (the client role): the viewer drops the scan from its memory and its pages.
+    const auto erased = ft::runCommand(std::string(FACESCAN_CLI) + " delete " + session +
+                                       " --profile loopback --domain " + std::to_string(domain) +
+                                       " --timeout 20 --security " + site.identity("client").string() + " 2>&1");
+    EXPECT_EQ(erased.exit_code, 0) << erased.out << logs();
+    EXPECT_TRUE(ft::pollUntilTrue([&] { return ft::httpRequest(port, "/api/sessions/" + session).status == 404; }, 20s))
+        << logs();
+    EXPECT_EQ(ft::httpRequest(port, "/api/sessions/" + session + "/mesh.drc").status, 404);
+    EXPECT_EQ(ft::httpRequest(port, "/api/sessions/" + session + "/snapshot.drc").status, 404);
+    EXPECT_FALSE(contains(ft::httpRequest(port, "/api/sessions").body, session));
+    EXPECT_TRUE(contains(ft::readText(dir / "view.log"), "scan " + session + " was erased on the domain")) << logs();
+    EXPECT_TRUE(ws.waitFor(
+        [&](const auto& m) {
+            return !m.empty() && !m.back().binary && contains(m.back().data, "\"type\":\"sessions\"") &&
+                   !contains(m.back().data, session);
+        },
+        20s))
+        << "the page is told at once";
 }
 
 // facescan delete on a secured site: the client role may erase a scan (and the server's audit trail names the
@@ -146,7 +167,58 @@ TEST(SecureDelete, TheClientRoleErasesAScanAndTheViewerRoleMayNot) {
     const auto audit = ft::runCommand(std::string(FACESCAN_CLI) + " audit " + data.string() + " --session secure-gone");
     EXPECT_EQ(audit.exit_code, 0) << audit.out;
     EXPECT_TRUE(contains(audit.out, "delete")) << audit.out;
-    EXPECT_TRUE(contains(audit.out, "client client@")) << "the client's identity name leads its id: " << audit.out;
+    EXPECT_TRUE(contains(audit.out, "dds CN=client,OU=client,O=lab (client id client@"))
+        << "the subject the client authenticated with is on record: " << audit.out;
+
+    // Enrolled identity A (client-a) sends a request that claims to come from B (the client id `client` uses):
+    // the record names A, the subject A authenticated with; B only as the claim beside it. `user_data`, when
+    // given, replaces what A's participant announces (B's certificate: a forgery the GUID binding catches).
+    ASSERT_EQ(site.add("client", "client-a").exit_code, 0);
+    const auto forge = [&](const std::string& session, const std::string* user_data) {
+        fs::create_directories(data / session);
+        std::ofstream(data / session / "mesh.ply") << "ply";
+        auto participant = wire::Participant::create({domain, "loopback", site.identity("client-a").string()});
+        EXPECT_TRUE(participant.isOk()) << participant.status().toString();
+        if (!participant.isOk()) return std::string();
+        if (user_data) {
+            wire::Qos qos;
+            dds_qset_userdata(qos.get(), user_data->data(), user_data->size());
+            EXPECT_EQ(dds_set_qos(participant->handle(), qos.get()), DDS_RETCODE_OK);
+        }
+        auto topic = wire::Topic<facescan_wire_EraseRequest>::create(*participant);
+        EXPECT_TRUE(topic.isOk()) << topic.status().toString();
+        if (!topic.isOk()) return std::string();
+        auto writer = wire::Writer<facescan_wire_EraseRequest>::create(*topic);
+        EXPECT_TRUE(writer.isOk() && writer->waitForReaders(1, std::chrono::seconds(20)))
+            << ft::readText(site.root() / "server.log");
+        const std::string request = session + "-request", claimed = "client@boss-pc:1:1";
+        facescan_wire_EraseRequest m{};
+        m.session_id = wire::stringView(session);
+        m.request_id = wire::stringView(request);
+        m.client_id = wire::stringView(claimed);
+        EXPECT_TRUE(writer->write(m).isOk());
+        for (int i = 0; i < 200 && fs::exists(data / session); ++i) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        }
+        EXPECT_FALSE(fs::exists(data / session)) << ft::readText(site.root() / "server.log");
+        const auto record =
+            ft::runCommand(std::string(FACESCAN_CLI) + " audit " + data.string() + " --session " + session);
+        EXPECT_EQ(record.exit_code, 0) << record.out;
+        return record.out;
+    };
+    const std::string forged = forge("secure-forged", nullptr);
+    EXPECT_TRUE(contains(forged, "dds CN=client-a,OU=client,O=lab (client id client@boss-pc:1:1)"))
+        << "the sender is the identity it authenticated with, not the one it claims: " << forged;
+    // B's certificate in A's USER_DATA: never recorded as B (A's own, if the server read it before the change).
+    const std::string b_certificate = ft::readText(site.identity("client") / "identity.pem");
+    ASSERT_FALSE(b_certificate.empty());
+    const std::string b_user_data = "facescan-identity-certificate\n" + b_certificate;
+    const std::string stolen = forge("secure-stolen", &b_user_data);
+    std::printf("an announced certificate that is not the sender's own:\n%s", stolen.c_str());
+    EXPECT_FALSE(contains(stolen, "dds CN=client,")) << stolen;
+    EXPECT_TRUE(contains(stolen, "which is not the identity it authenticated with") ||
+                contains(stolen, "dds CN=client-a,OU=client,O=lab"))
+        << stolen;
 }
 
 }  // namespace

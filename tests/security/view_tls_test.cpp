@@ -283,6 +283,38 @@ TEST_F(TlsView, ACertificateOfAnotherSiteExpiredOrForAnotherHostIsRejectedByACli
     }
 }
 
+// site.sh revoke of a viewer: its web certificate goes on the site's revocation list with its identity, and the
+// running viewer (whose folder site.sh refreshed) refuses every new connection, so no login works either; it
+// will not start again with that certificate. Before the revocation the same requests are served.
+TEST_F(TlsView, ARevokedViewerRefusesEveryConnectionAndWillNotStartAgain) {
+    auto viewer = startViewer(site_->identity("viewer"));
+    ASSERT_TRUE(viewer->server) << viewer->status.toString();
+    const uint16_t port = viewer->server->port();
+    const auto login = [&] {
+        return curl(ca(), "127.0.0.1", port, "/login",
+                    "--data-urlencode 'user=alice' --data-urlencode 'password=" + std::string(kPassword) + "'");
+    };
+    EXPECT_EQ(httpCode(curl(ca(), "127.0.0.1", port, "/login")), 200);
+    const auto before = login();
+    EXPECT_EQ(httpCode(before), 303) << "the login works before the revocation\n" << before.out;
+
+    const auto revoked = site_->revoke("viewer");
+    ASSERT_EQ(revoked.exit_code, 0) << revoked.out;
+    EXPECT_TRUE(contains(revoked.out, "and its web certificate")) << revoked.out;
+    const auto page = curl(ca(), "127.0.0.1", port, "/login");
+    EXPECT_NE(page.exit_code, 0) << page.out;
+    EXPECT_NE(httpCode(page), 200) << page.out;
+    const auto after = login();
+    EXPECT_NE(httpCode(after), 303) << after.out;
+    EXPECT_FALSE(contains(after.out, "Set-Cookie")) << after.out;
+
+    viewer.reset();
+    auto again = startViewer(site_->identity("viewer"));
+    EXPECT_FALSE(again->server);
+    EXPECT_EQ(again->status.code(), StatusCode::kPermissionDenied) << again->status.toString();
+    EXPECT_TRUE(contains(again->status.message(), "web certificate was revoked on")) << again->status.toString();
+}
+
 TEST_F(TlsView, WithoutItsCertificateOrLoginsTheViewerSaysWhatToRunAndSiteShChecksItsInput) {
     ASSERT_EQ(site_->add("viewer", "bare").exit_code, 0);
     auto no_cert = startViewer(site_->identity("bare"));

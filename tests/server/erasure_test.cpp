@@ -12,6 +12,7 @@
 #include <fstream>
 #include <thread>
 
+#include "child_process.hpp"
 #include "run_command.hpp"
 #include "service/server.hpp"
 #include "test_agent.hpp"
@@ -156,6 +157,47 @@ TEST(Erasure, ARunningScanIsRefusedUnlessForceWhichFinishesAndErasesIt) {
     agent->reset();
     server->reset();
     fs::remove_all(a.data_dir);
+}
+
+// The real facescan-agent streaming a recording (--rate max: it keeps the frames the owner has not confirmed)
+// hears `facescan delete --force` of its session (finished, then erased): it stops at once instead of streaming
+// its thousands of frames on, drops what it kept, saves nothing, and says so.
+TEST(Erasure, ARecordingAgentDropsTheFramesItKeptForAnErasedScan) {
+    const uint32_t domain = testing::privateDomain(44);
+    const ServerParams a = params(domain, "srv-agent");
+    fs::remove_all(a.data_dir);
+    const fs::path save_dir = a.data_dir.string() + "-agent-saves";
+    fs::remove_all(save_dir);
+    auto server = Server::create(a);
+    ASSERT_TRUE(server.isOk()) << server.status().toString();
+    const std::string session = "agent-erased-" + std::to_string(getpid());
+    const fs::path log = a.data_dir.string() + "-agent.log";
+    // Far more frames than the test waits for: without the erasure the agent would stream for minutes.
+    testing::ChildProcess agent(
+        {FACESCAN_AGENT_BIN, "--session", session, "--source", "synthetic:frames=20000,subject=builtin,seed=1",
+         "--rate", "max", "--save-dir", save_dir.string(), "--wait-for-server", "20", "--profile", "loopback",
+         "--domain", std::to_string(domain)},
+        log);
+    for (int i = 0; i < 200 && !contains(testing::readText(log), "streaming session"); ++i)
+        std::this_thread::sleep_for(100ms);
+    ASSERT_TRUE(contains(testing::readText(log), "streaming session")) << testing::readText(log);
+    std::this_thread::sleep_for(1s);  // frames on their way, some kept unconfirmed
+
+    const auto asked = cli(domain, "delete --force " + session);
+    EXPECT_EQ(asked.exit_code, 0) << asked.out;
+    EXPECT_TRUE(contains(asked.out, "srv-agent: removed")) << asked.out;
+    const int exit_code = agent.wait(20s);
+    const std::string out = testing::readText(log);
+    EXPECT_EQ(exit_code, 0) << out;
+    EXPECT_TRUE(contains(out, "session " + session + " was erased on the domain (facescan delete, asked by ")) << out;
+    EXPECT_TRUE(contains(out, "frame(s) this agent kept for it and saved none")) << out;
+    EXPECT_FALSE(contains(out, "saved the")) << out;
+    std::error_code ec;
+    EXPECT_TRUE(!fs::exists(save_dir, ec) || fs::is_empty(save_dir, ec)) << "the agent saved frames of an erased scan";
+    server->reset();
+    fs::remove_all(a.data_dir);
+    fs::remove_all(save_dir);
+    fs::remove(log);
 }
 
 // During a cluster run: an owner, a standby holding the scan's replica in memory and on disk. After the delete

@@ -16,6 +16,7 @@
 #include "capture/tum_recorder.hpp"
 #include "wire/dds_options.hpp"
 #include "wire/messages.hpp"
+#include "wire/topics.hpp"
 
 namespace facescan::capture {
 namespace {
@@ -131,10 +132,10 @@ std::string newSessionId() {
     return host + "-" + stamp + "-" + suffix;
 }
 
-Status Agent::saveUnconfirmed(const std::vector<wire::EncodedFrame>& kept,
-                              const std::vector<const CapturedFrame*>& queued,
-                              const std::function<void(const std::string&)>& on_event) {
-    if (kept.empty() && queued.empty()) return Status::ok();
+StatusOr<std::filesystem::path> Agent::saveUnconfirmed(const std::vector<wire::EncodedFrame>& kept,
+                                                       const std::vector<const CapturedFrame*>& queued,
+                                                       const std::function<void(const std::string&)>& on_event) {
+    if (kept.empty() && queued.empty()) return std::filesystem::path();
     const std::filesystem::path parent =
         options_.save_dir.empty() ? defaultSaveDir() : std::filesystem::path(options_.save_dir);
     ASSIGN_OR_RETURN(const std::filesystem::path dir, createFreshDir(parent, session_id_));
@@ -150,7 +151,7 @@ Status Agent::saveUnconfirmed(const std::vector<wire::EncodedFrame>& kept,
     on_event("saved the " + std::to_string(recorder.frames()) + " frames no server confirmed (frames " +
              std::to_string(first) + "-" + std::to_string(last) + " of session " + session_id_ + ") to " +
              dir.string() + ": replay them with --source tum:" + dir.string() + " --rate max");
-    return Status::ok();
+    return dir;
 }
 
 struct Agent::Impl {
@@ -161,6 +162,10 @@ struct Agent::Impl {
     wire::Topic<facescan_wire_RgbdFrame> frame_topic;
     wire::Writer<facescan_wire_RgbdFrame> frame_writer;  // in the session's partition: only its owner reads it
     std::optional<OwnerLink> link;
+    // `facescan delete` on the domain: requests to erase a session (read for this agent's session only).
+    std::optional<wire::Topic<facescan_wire_EraseRequest>> erase_topic;
+    std::optional<wire::Reader<facescan_wire_EraseRequest>> erase_reader;
+    std::string erase_unavailable;  // why this agent cannot hear erasures (said once at the start)
 
     // Camera thread -> publisher hand-over.
     std::mutex mutex;
@@ -201,6 +206,17 @@ StatusOr<std::unique_ptr<Agent>> Agent::create(AgentOptions options) {
                      wire::Writer<facescan_wire_RgbdFrame>::create(impl->frame_topic, &frame_qos,
                                                                    wire::sessionPartition(agent->session_id_)));
     ASSIGN_OR_RETURN(impl->link, OwnerLink::create(impl->participant, agent->session_id_));
+    // An identity enrolled before agents read erasures may not: the agent still scans, and says what it misses.
+    if (auto topic = wire::Topic<facescan_wire_EraseRequest>::create(impl->participant); topic.isOk()) {
+        impl->erase_topic.emplace(std::move(*topic));
+        if (auto reader = wire::Reader<facescan_wire_EraseRequest>::create(*impl->erase_topic); reader.isOk()) {
+            impl->erase_reader.emplace(std::move(*reader));
+        } else {
+            impl->erase_unavailable = reader.status().message();
+        }
+    } else {
+        impl->erase_unavailable = topic.status().message();
+    }
     const int queue = agent->options_.queue_frames;
     impl->slots.resize(static_cast<size_t>(queue));
     impl->free_slots.emplace(queue);
@@ -210,9 +226,51 @@ StatusOr<std::unique_ptr<Agent>> Agent::create(AgentOptions options) {
     return agent;
 }
 
-Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const std::string&)>& on_event,
+std::string Agent::erasureRequested() {
+    if (!impl_->erase_reader) return {};
+    std::string by;
+    auto n = impl_->erase_reader->take([&](const facescan_wire_EraseRequest& m, const dds_sample_info_t& info) {
+        if (info.valid_data && wire::fromDds(m.session_id) == session_id_) by = wire::fromDds(m.client_id);
+    });
+    if (!n.isOk()) return {};
+    return by;
+}
+
+Status Agent::run(const std::atomic<bool>& external_stop, const std::function<void(const std::string&)>& on_event,
                   const std::function<void(const AgentStats&)>& on_stats) {
     Impl& s = *impl_;
+    if (!s.erase_unavailable.empty()) {
+        on_event("WARNING: this agent cannot hear facescan delete (" + s.erase_unavailable +
+                 "): with DDS Security, enrol its identity again (site.sh add) so that it may read erasures");
+    }
+    // `stop` is Ctrl-C (the caller's flag) or an erasure of this session on the domain, watched here.
+    std::atomic<bool> stop{false}, erased{false}, watching{true};
+    std::string erased_by;  // written before `erased` is set
+    std::thread watcher([&] {
+        while (watching) {
+            if (external_stop) stop = true;
+            if (!erased) {
+                if (std::string by = erasureRequested(); !by.empty()) {
+                    erased_by = std::move(by);
+                    erased = true;
+                    stop = true;
+                }
+            }
+            std::this_thread::sleep_for(50ms);
+        }
+    });
+    struct JoinWatcher {
+        std::atomic<bool>& watching;
+        std::thread& thread;
+        ~JoinWatcher() {
+            watching = false;
+            thread.join();
+        }
+    } join_watcher{watching, watcher};
+    auto say_erased = [&](size_t dropped) {
+        on_event("session " + session_id_ + " was erased on the domain (facescan delete, asked by " + erased_by +
+                 "): dropped the " + std::to_string(dropped) + " frame(s) this agent kept for it and saved none");
+    };
     const SourceInfo& info = source_->info();
     const bool every_frame = everyFrame();
 
@@ -247,6 +305,10 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
                                 " s to take session " + session_id_ +
                                 ": start one with the same --profile, --domain and --security; " +
                                 wire::noPeerHint(options_.dds, s.participant.otherParticipants()));
+    }
+    if (erased) {
+        say_erased(0);
+        return Status::ok();
     }
     if (stop) return Status::ok();
     // Discovery time from joining the domain (with DDS Security: authentication handshakes and key exchange too).
@@ -418,21 +480,43 @@ Status Agent::run(const std::atomic<bool>& stop, const std::function<void(const 
         on_event("the server was not told that the stream ended: " + end_status.message());
         end_status = Status::ok();
     }
-    if (told_end && !stream.waitFinished(stop, options_.finish_timeout_s, budget_left_s())) {
+    // An erased scan is not waited for: nothing of it is kept for a new owner.
+    if (told_end && !erased && !stream.waitFinished(stop, options_.finish_timeout_s, budget_left_s())) {
         if (!stop) {
             end_status = deadlineExceeded("the server did not finish session " + session_id_ + " within " +
                                           std::to_string(static_cast<int>(options_.finish_timeout_s)) + " s");
         }
     }
     report(true);
-    if (every_frame && !stream.finished()) {
+    if (erased) {
+        // Nothing of an erased scan stays with the agent: the kept and queued frames go with it, unsaved.
+        std::vector<wire::EncodedFrame> kept = every_frame ? stream.unconfirmed() : std::vector<wire::EncodedFrame>{};
+        size_t queued = 0;
+        while (!s.ready->empty()) {
+            s.ready->pop();
+            ++queued;
+        }
+        say_erased(kept.size() + queued);
+    } else if (every_frame && !stream.finished()) {
         // The frames kept for the owner, then the captured ones still queued for the publisher.
         std::vector<wire::EncodedFrame> kept = stream.unconfirmed();
         std::vector<const CapturedFrame*> queued;
         while (!s.ready->empty()) queued.push_back(&s.slots[static_cast<size_t>(s.ready->pop())]);
-        if (const Status saved = saveUnconfirmed(kept, queued, on_event); !saved.isOk()) {
-            on_event("could not save the frames no server confirmed: " + saved.toString());
-            if (end_status.isOk()) end_status = saved;
+        auto saved = saveUnconfirmed(kept, queued, on_event);
+        if (!saved.isOk()) {
+            on_event("could not save the frames no server confirmed: " + saved.status().toString());
+            if (end_status.isOk()) end_status = saved.status();
+        } else if (!saved->empty()) {
+            // An erasure that came while saving: what was just written goes too.
+            if (!erased) std::this_thread::sleep_for(100ms);  // the watcher's next look at the domain
+            if (erased) {
+                std::error_code ec;
+                const auto removed = std::filesystem::remove_all(*saved, ec);
+                on_event("session " + session_id_ + " was erased on the domain while its frames were saved (asked by " +
+                         erased_by + "): " +
+                         (ec ? "could NOT delete " + saved->string() + ": " + ec.message() + " (delete it by hand)"
+                             : "deleted " + saved->string() + " (" + std::to_string(removed) + " file(s))"));
+            }
         }
     }
 

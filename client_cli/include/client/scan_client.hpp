@@ -123,6 +123,11 @@ class ScanClient {
     Status poll(std::chrono::milliseconds wait, std::map<std::string, SessionStatus>& statuses,
                 const std::string& snapshot_session, std::vector<MeshSnapshotData>* snapshots);
 
+    // The sessions erased on the domain (`facescan delete`: EraseRequest) since the last call, each once; the
+    // first call starts reading them (durable: erasures from before it joined come too). PermissionDenied for an
+    // identity enrolled before its role read erasures.
+    StatusOr<std::vector<std::string>> takeErased();
+
     // This client's id as its commands carry it (its DDS Security identity's name first, when it has one).
     const std::string& clientId() const { return client_id_; }
 

@@ -22,14 +22,18 @@ namespace facescan::client {
 class TlsFront {
  public:
     struct Options {
-        std::string bind = "127.0.0.1";   // the address browsers connect to
-        uint16_t port = 0;                // 0: any free port (port() says which)
-        std::filesystem::path pem;        // the key and the certificate (facescan-site web: DIR/NAME/web.pem)
+        std::string bind = "127.0.0.1";  // the address browsers connect to
+        uint16_t port = 0;               // 0: any free port (port() says which)
+        std::filesystem::path pem;       // the key and the certificate (facescan-site web: DIR/NAME/web.pem)
+        // The site's revocation list (DIR/NAME/crl.pem, which site.sh revoke rewrites; empty: none). A web
+        // certificate on it is not served: start() refuses, and a running front refuses every new connection and
+        // ends the open ones from the moment the file lists it (it is looked at again when it changes).
+        std::filesystem::path crl;
         uint16_t backend_port = 0;        // CivetWeb's plain port on 127.0.0.1
         int max_connections = 64;         // relayed at once; more wait in the listen queue
         double handshake_timeout_s = 10;  // a client that does not finish its TLS handshake is dropped
     };
-    // Loads the key and certificate (the reason when they are bad or do not match) and listens.
+    // Loads the key and certificate (the reason when they are bad, do not match or are revoked) and listens.
     static StatusOr<std::unique_ptr<TlsFront>> start(const Options& options);
     ~TlsFront();  // stop()
     TlsFront(const TlsFront&) = delete;

@@ -12,6 +12,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -58,6 +59,9 @@ class ViewHub {
     // when the picture does. A snapshot older than the one held (a late sample) is ignored.
     void updateStatuses(const std::map<std::string, SessionStatus>& statuses);
     void putSnapshot(std::shared_ptr<const FramedSnapshot> snapshot);
+    // The scan was erased on the domain (`facescan delete`): its status and meshes leave memory and every page
+    // (the sessions message goes out without it), and what still arrives of it is dropped. True when it was held.
+    bool erase(const std::string& session_id);
 
     // The web side.
     std::vector<SessionStatus> sessions() const;
@@ -92,6 +96,7 @@ class ViewHub {
     std::map<std::string, Held> snapshots_;
     uint64_t next_snapshot_version_ = 1;
     bool all_closed_ = false;
+    std::set<std::string> erased_;  // never shown again
 };
 
 }  // namespace facescan::client

@@ -5,9 +5,12 @@
 //
 // One record per line, tab-separated, a tab, newline or backslash inside a field written as \t, \n, \\:
 //   TIME (UTC, 2026-11-26T07:03:00.123Z)  ACTION  SESSION  IDENTITY  OUTCOME ("ok" or "error: ...")  RECORDER
-// IDENTITY says what kind it is: "client NAME@HOST:PID:N" (the client id a DDS client sends; NAME is its DDS
-// Security identity when it has one), "login USER" (a viewer login over TLS), "http ADDRESS" (a viewer without
-// a login). RECORDER is the program that wrote the record ("server ID", "viewer HOST").
+// IDENTITY says what kind it is: "dds SUBJECT (client id ID)" (with DDS Security: the certificate subject the
+// sender's participant authenticated with, wire/peer_identity.hpp, and beside it the client id it claims),
+// "client NAME@HOST:PID:N" (without DDS Security: only the client id the client sends, which nothing checks;
+// "(identity not verified: WHY)" follows it when a secured server could not establish the sender),
+// "login USER" (a viewer login over TLS), "http ADDRESS" (a viewer without a login). RECORDER is the program
+// that wrote the record ("server ID", "viewer HOST").
 #pragma once
 
 #include <cstdint>

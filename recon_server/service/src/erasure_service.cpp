@@ -52,18 +52,24 @@ ErasureService::~ErasureService() {
 
 void ErasureService::takeRequests() {
     struct Request {
-        std::string session, request_id, client_id;
+        std::string session, request_id, client_id, identity;
     };
     std::vector<Request> got;
     auto n = requests_->take([&](const facescan_wire_EraseRequest& m, const dds_sample_info_t& info) {
         if (!info.valid_data) return;
-        got.push_back({wire::fromDds(m.session_id), wire::fromDds(m.request_id), wire::fromDds(m.client_id)});
+        std::string client = wire::fromDds(m.client_id);
+        // Identified now, while its writer is matched.
+        std::string identity =
+            hooks_.identify ? hooks_.identify(requests_->handle(), info.publication_handle, client) : client;
+        got.push_back(
+            {wire::fromDds(m.session_id), wire::fromDds(m.request_id), std::move(client), std::move(identity)});
     });
     if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
-    for (const Request& r : got) handle(r.session, r.request_id, r.client_id);
+    for (const Request& r : got) handle(r.session, r.request_id, r.client_id, r.identity);
 }
 
-void ErasureService::handle(const std::string& session, const std::string& request_id, const std::string& client_id) {
+void ErasureService::handle(const std::string& session, const std::string& request_id, const std::string& client_id,
+                            const std::string& identity) {
     if (Status s = wire::validateSessionId(session); !s.isOk()) return report(session, request_id, s, {});
     // Each request once: the copies other servers pass on carry the same request id.
     if (!handled_.insert(session + "\n" + request_id).second) return;
@@ -75,14 +81,14 @@ void ErasureService::handle(const std::string& session, const std::string& reque
         const Status refused =
             Status(StatusCode::kUnavailable, "session " + session + " is still being scanned on server " + server_id_ +
                                                  ": finish it first (facescan finish " + session + "), then delete it");
-        if (hooks_.erased) hooks_.erased(client_id, refused, ErasureReport{session, {}, false});
+        if (hooks_.erased) hooks_.erased(identity, refused, ErasureReport{session, {}, false});
         report(session, request_id, refused, {});
         return;
     }
-    auto erased = eraseSession(data_dir_, session, "asked by " + client_id + " (request " + request_id + ")");
+    auto erased = eraseSession(data_dir_, session, "asked by " + identity + " (request " + request_id + ")");
     const Status status = erased.status();
     const ErasureReport result = erased.isOk() ? *erased : ErasureReport{session, {}, false};
-    if (hooks_.erased) hooks_.erased(client_id, status, result);  // on record before the client hears of it
+    if (hooks_.erased) hooks_.erased(identity, status, result);  // on record before the client hears of it
     report(session, request_id, status, result.removed);
     if (status.isOk() && !known) republish(session, request_id, client_id);
 }

@@ -53,6 +53,9 @@ Status Server::start() {
     using wire::boxed;
     ASSIGN_OR_RETURN(participant_, boxed(wire::Participant::create(params_.domain)));
     const wire::Participant& p = *participant_;
+    if (!params_.domain.security.empty()) {
+        ASSIGN_OR_RETURN(peers_, wire::PeerIdentities::create(p, params_.domain.security));
+    }
     ASSIGN_OR_RETURN(camera_topic_, boxed(wire::Topic<facescan_wire_CameraInfo>::create(p)));
     ASSIGN_OR_RETURN(frame_topic_, boxed(wire::Topic<facescan_wire_RgbdFrame>::create(p)));
     ASSIGN_OR_RETURN(status_topic_, boxed(wire::Topic<facescan_wire_ScanStatus>::create(p)));
@@ -305,8 +308,13 @@ void Server::takeCommands() {
     std::vector<Command> got;
     auto n = command_reader_->take([&](const facescan_wire_ScanCommand& msg, const dds_sample_info_t& info) {
         if (!info.valid_data) return;
+        const std::string client = wire::fromDds(msg.client_id);
+        // Identified now, while its writer is matched (the client may be gone when a deferred command runs).
+        std::string identity = static_cast<facescan_wire_CommandKind>(msg.kind) == facescan_wire_CMD_GET_STATUS
+                                   ? std::string()
+                                   : identify(command_reader_->handle(), info.publication_handle, client);
         got.push_back({wire::fromDds(msg.session_id), wire::fromDds(msg.request_id), static_cast<uint32_t>(msg.kind),
-                       steadyNowNs(), wire::fromDds(msg.client_id)});
+                       steadyNowNs(), client, std::move(identity)});
     });
     if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
     if (!ownSessionsFree()) {

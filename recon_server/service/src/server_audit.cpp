@@ -29,12 +29,21 @@ void Server::audit(const Command& c, const Status& status) {
     wire::AuditRecord r;
     r.action = actionName(c.kind);
     r.session = c.session_id;
-    r.identity = "client " + (c.client_id.empty() ? std::string("(no client id)") : c.client_id);
+    r.identity = c.identity;
     r.outcome = status.isOk() ? "ok" : "error: " + status.message();
     r.recorder = "server " + params_.server_id;
     if (const Status s = audit_->append(std::move(r)); !s.isOk()) {
         std::fprintf(stderr, "facescan-server: %s\n", s.message().c_str());
     }
+}
+
+std::string Server::identify(dds_entity_t reader, dds_instance_handle_t writer, const std::string& claimed_client) {
+    const std::string claimed = claimed_client.empty() ? std::string("(no client id)") : claimed_client;
+    // Without DDS Security nobody is authenticated: the client id is all there is, and anyone may send any.
+    if (!peers_) return "client " + claimed;
+    auto subject = peers_->subjectOf(reader, writer);
+    if (!subject.isOk()) return "client " + claimed + " (identity not verified: " + subject.status().message() + ")";
+    return "dds " + *subject + " (client id " + claimed + ")";
 }
 
 void Server::startRetention() {
@@ -75,6 +84,11 @@ Status Server::startErasure() {
         const auto it = owned_.find(session);
         return it != owned_.end() && it->second->session && it->second->session->open();
     };
+    hooks.identify = [this](dds_entity_t reader, dds_instance_handle_t writer, const std::string& client) {
+        // A tombstone a server passes on names that server, not a client.
+        if (!peers_ && client.starts_with("server ")) return client;
+        return identify(reader, writer, client);
+    };
     hooks.erased = [this](const std::string& client, const Status& status, const ErasureReport& report) {
         // Its record in memory goes too: unlisted at once, its last status and snapshot out of the writers.
         if (status.isOk()) {
@@ -102,7 +116,7 @@ Status Server::startErasure() {
         wire::AuditRecord r;
         r.action = "delete";
         r.session = report.session_id;
-        r.identity = client.starts_with("server ") ? client : "client " + client;
+        r.identity = client;
         r.outcome = status.isOk() ? "ok: removed " + std::to_string(report.removed.size()) + " file(s)"
                                   : "error: " + status.message();
         r.recorder = "server " + params_.server_id;

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <atomic>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <string>
@@ -104,6 +105,9 @@ class Agent {
     // Publishes until the source ends, `stop` becomes true (Ctrl-C) or the source fails; in every case the
     // server is told the stream ended. `on_event` gets a one-line message for notable events (waiting for a
     // server, server found or lost, where unconfirmed frames were saved) and `on_stats` about once a second.
+    // When the domain erases the session (`facescan delete`: an EraseRequest for it), the agent stops as on
+    // Ctrl-C, drops the frames it kept for the owner, saves none (and deletes what a save had written) and
+    // says so.
     Status run(const std::atomic<bool>& stop, const std::function<void(const std::string&)>& on_event,
                const std::function<void(const AgentStats&)>& on_stats);
 
@@ -111,9 +115,12 @@ class Agent {
     struct Impl;
     explicit Agent(AgentOptions options);
     // Saves `kept` (sent, not confirmed) and `queued` (captured, not sent) as a TUM folder under the save dir,
-    // and says where.
-    Status saveUnconfirmed(const std::vector<wire::EncodedFrame>& kept, const std::vector<const CapturedFrame*>& queued,
-                           const std::function<void(const std::string&)>& on_event);
+    // and says where; the folder (empty when there was nothing to save).
+    StatusOr<std::filesystem::path> saveUnconfirmed(const std::vector<wire::EncodedFrame>& kept,
+                                                    const std::vector<const CapturedFrame*>& queued,
+                                                    const std::function<void(const std::string&)>& on_event);
+    // Who asked to erase this session, when an EraseRequest for it is on the domain (empty: none yet).
+    std::string erasureRequested();
 
     AgentOptions options_;
     std::string session_id_;

@@ -22,8 +22,12 @@ class ErasureService {
  public:
     struct Hooks {
         std::function<bool(const std::string& session)> scanning_here;  // an open session this server owns
-        // After each request handled: the client that asked, the outcome and the report (log, audit trail).
-        std::function<void(const std::string& client, const Status&, const ErasureReport&)> erased;
+        // Who sent a request, for the record: the request's reader, its writer (publication handle) and the
+        // client id the request claims. Unset: the claimed client id.
+        std::function<std::string(dds_entity_t reader, dds_instance_handle_t writer, const std::string& client)>
+            identify;
+        // After each request handled: who asked (identify), the outcome and the report (log, audit trail).
+        std::function<void(const std::string& identity, const Status&, const ErasureReport&)> erased;
     };
     // Creates the endpoints, takes the requests already on the domain for `settle_s` (0: only what has arrived;
     // more when the server has replicas to resume), then keeps taking them on a thread of its own.
@@ -37,7 +41,8 @@ class ErasureService {
  private:
     ErasureService() = default;
     void takeRequests();
-    void handle(const std::string& session, const std::string& request_id, const std::string& client_id);
+    void handle(const std::string& session, const std::string& request_id, const std::string& client_id,
+                const std::string& identity);
     void report(const std::string& session, const std::string& request_id, const Status& status,
                 const std::vector<std::string>& removed);
     void republish(const std::string& session, const std::string& request_id, const std::string& client_id);

@@ -40,6 +40,7 @@
 #include "service/session.hpp"
 #include "service/watchdog.hpp"
 #include "wire/audit_log.hpp"
+#include "wire/peer_identity.hpp"
 #include "wire/topics.hpp"
 
 namespace facescan::service {
@@ -99,6 +100,7 @@ class Server {
         uint32_t kind = 0;
         int64_t received_ns = 0;
         std::string client_id;  // as the client sent it (its DDS Security identity's name first, when it has one)
+        std::string identity;   // who sent it, for the audit trail (identify())
     };
     struct Candidate {  // a CameraInfo of a session nobody owns yet
         wire::CameraInfoData camera;
@@ -126,6 +128,9 @@ class Server {
     void runCommand(const Command& c);
     // Appends the answered command to the audit trail (server_audit.cpp); a status query is not recorded.
     void audit(const Command& c, const Status& status);
+    // The audit trail's IDENTITY of a sample's sender (server_audit.cpp): with DDS Security the subject its
+    // participant authenticated with (wire/peer_identity.hpp), the client id it claims only beside it.
+    std::string identify(dds_entity_t reader, dds_instance_handle_t writer, const std::string& claimed_client);
     void reply(const Command& c, const Status& status, const MeshResult* mesh = nullptr,
                const std::vector<uint8_t>* payload = nullptr);
     void publishStatus(const SessionStats& s);
@@ -193,6 +198,7 @@ class Server {
     std::unique_ptr<RetentionSweeper> retention_;  // --retain-days (server_audit.cpp starts it); stops before audit_
     void startRetention();
     std::unique_ptr<wire::Participant> participant_;
+    std::unique_ptr<wire::PeerIdentities> peers_;  // with DDS Security: who authenticated as the sender of a command
     std::unique_ptr<Cluster> cluster_;
     std::unique_ptr<Replicator> replicator_;
     std::unique_ptr<wire::Topic<facescan_wire_CameraInfo>> camera_topic_;
