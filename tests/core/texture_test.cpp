@@ -1,11 +1,21 @@
-// The texture atlas (recon/texture_atlas.hpp) on a sphere whose colour is known everywhere: views are ray-cast
-// analytically (not with the code under test), so the atlas can be compared with the truth at any surface point.
+// The texture atlas (recon/texture_atlas.hpp) and its files (recon/mesh_writer.hpp) on a sphere whose colour is known
+// everywhere: views are ray-cast analytically (not with the code under test), so the atlas can be compared with the
+// truth at any surface point.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <map>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 
+#include "recon/mesh_writer.hpp"
 #include "recon/texture_atlas.hpp"
 
 namespace facescan::recon {
@@ -264,6 +274,78 @@ TEST(TextureBake, BadInputGetsAClearMessage) {
     TextureParams bad;
     bad.weight_power = 0;
     EXPECT_FALSE(bakeTexture(mesh, {view(0, 0)}, bad, out).isOk());
+}
+
+}  // namespace
+}  // namespace facescan::recon
+
+namespace facescan::recon {
+namespace {
+
+TEST(TextureFiles, ObjMtlPngAndPlyCarryTheTexture) {
+    const IndexedMesh mesh = sphere(16, 32);
+    TexturedMesh t;
+    ASSERT_TRUE(bakeTexture(mesh, {view(0, 0), view(40, 0)}, TextureParams{}, t).isOk());
+
+    auto obj = texturedObjFiles(t, "model");
+    ASSERT_TRUE(obj.isOk()) << obj.status().toString();
+    EXPECT_NE(obj->obj.find("mtllib model.mtl\nusemtl facescan\n"), std::string::npos);
+    EXPECT_NE(obj->mtl.find("map_Kd model.png"), std::string::npos);
+    size_t vt = 0, faces = 0;
+    std::istringstream lines(obj->obj);
+    for (std::string line; std::getline(lines, line);) {
+        if (line.rfind("vt ", 0) == 0) {
+            float u = -1, v = -1;
+            ASSERT_EQ(std::sscanf(line.c_str(), "vt %f %f", &u, &v), 2);
+            // v up: the first uv's v is 1 - its glTF v.
+            if (vt == 0) {
+                EXPECT_NEAR(v, 1.0f - t.uv[0].y(), 1e-5f);
+            }
+            ++vt;
+        }
+        if (line.rfind("f ", 0) == 0) {
+            unsigned a[3][3];
+            ASSERT_EQ(std::sscanf(line.c_str(), "f %u/%u/%u %u/%u/%u %u/%u/%u", &a[0][0], &a[0][1], &a[0][2], &a[1][0],
+                                  &a[1][1], &a[1][2], &a[2][0], &a[2][1], &a[2][2]),
+                      9)
+                << line;
+            ++faces;
+        }
+    }
+    EXPECT_EQ(vt, t.mesh.vertexCount());
+    EXPECT_EQ(faces, t.mesh.triangleCount());
+    const std::vector<uint8_t> png(obj->png.begin(), obj->png.end());
+    const cv::Mat decoded = cv::imdecode(png, cv::IMREAD_COLOR);
+    ASSERT_EQ(decoded.size(), t.atlas_bgr.size());
+    EXPECT_EQ(cv::norm(decoded, t.atlas_bgr, cv::NORM_INF), 0.0);  // PNG is lossless
+    EXPECT_FALSE(texturedObjFiles(t, "a/b").isOk());
+
+    auto ply = texturedPlyBytes(t, "model.png");
+    ASSERT_TRUE(ply.isOk()) << ply.status().toString();
+    EXPECT_NE(ply->find("comment TextureFile model.png\n"), std::string::npos);
+    const std::filesystem::path path =
+        std::filesystem::temp_directory_path() / ("facescan_texture_test_" + std::to_string(::getpid()) + ".ply");
+    {
+        std::ofstream f(path, std::ios::binary);
+        f << *ply;
+    }
+    OpenMesh::TriMesh_ArrayKernelT<> back;
+    back.request_vertex_texcoords2D();
+    OpenMesh::IO::Options opt = OpenMesh::IO::Options::VertexTexCoord;
+    ASSERT_TRUE(OpenMesh::IO::read_mesh(back, path.string(), opt));
+    std::filesystem::remove(path);
+    ASSERT_TRUE(opt.vertex_has_texcoord());
+    ASSERT_EQ(back.n_vertices(), t.mesh.vertexCount());
+    for (const auto vh : back.vertices()) {
+        const auto uv = back.texcoord2D(vh);
+        const Eigen::Vector2f& want = t.uv[static_cast<size_t>(vh.idx())];
+        ASSERT_NEAR(uv[0], want.x(), 1e-6f);
+        ASSERT_NEAR(uv[1], 1.0f - want.y(), 1e-6f);
+    }
+
+    TexturedMesh untextured;
+    untextured.mesh = mesh;
+    EXPECT_FALSE(texturedPlyBytes(untextured, "x.png").isOk());
 }
 
 }  // namespace
