@@ -183,9 +183,9 @@ TEST(TextureBake, ResolvesWhatVertexColoursBlur) {
     ASSERT_TRUE(report.isOk()) << report.status().toString();
     ASSERT_TRUE(out.valid());
     std::printf("%s\n", report->summary().c_str());
-    // The colour camera's own resolution: the median view distance to the centre (0.5 m) over fx (575.8 px) is
-    // 0.87 mm per texel.
-    EXPECT_NEAR(report->texel_mm, 0.5f / 575.8f * 1000, 0.01f);
+    // From the colour camera's resolution: the median view distance to the centre (0.5 m) over fx (575.8 px) is
+    // 0.87 mm a pixel, two texels a pixel by default.
+    EXPECT_NEAR(report->texel_mm, 0.5f / 575.8f * 1000 / 2, 0.01f);
     EXPECT_EQ(report->views_used, 7);
     const Errors e = frontErrors(out);
     std::printf("front mean abs error: texture %.2f, vertex colours %.2f (of 255)\n", e.texture, e.vertex);
