@@ -354,6 +354,7 @@ void Session::workerLoop() {
             lk.unlock();
             recon_->reset();
             pipeline_->reset();
+            keyframes_.clear();  // their poses are in the old model's frame
             lk.lock();
             trajectory_.clear();
             last_pose_ = recon::Pose::Identity();
