@@ -271,6 +271,14 @@ TEST(TextureBake, BadInputGetsAClearMessage) {
     EXPECT_NE(too_large.status().message().find("exceeds"), std::string::npos) << too_large.status().message();
     EXPECT_FALSE(out.valid());
 
+    TextureParams tight;
+    tight.max_memory_bytes = size_t{1} << 20;  // the sphere's atlas needs tens of MiB to bake
+    auto no_memory = bakeTexture(mesh, {view(0, 0)}, tight, out);
+    ASSERT_FALSE(no_memory.isOk());
+    EXPECT_EQ(no_memory.status().code(), StatusCode::kResourceExhausted);
+    EXPECT_NE(no_memory.status().message().find("MiB"), std::string::npos) << no_memory.status().message();
+    EXPECT_FALSE(out.valid());
+
     TextureParams bad;
     bad.weight_power = 0;
     EXPECT_FALSE(bakeTexture(mesh, {view(0, 0)}, bad, out).isOk());

@@ -230,6 +230,16 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
         return charted.status();
     }
     TextureReport report = *charted;
+    // Every texel may be on the surface: its working state, the atlas and the masks, bounded before allocating.
+    const double atlas_texels = double(out.atlas_bgr.cols) * double(out.atlas_bgr.rows);
+    const double need = atlas_texels * double(sizeof(Texel) + sizeof(TopSamples) + sizeof(int) + 3 + 2);
+    if (need > double(params.max_memory_bytes)) {
+        const std::string size = std::to_string(out.atlas_bgr.cols) + "x" + std::to_string(out.atlas_bgr.rows);
+        out = TexturedMesh{};
+        return resourceExhausted("baking a " + size + " texture needs about " + std::to_string(int(need / (1 << 20))) +
+                                 " MiB, more than the " + std::to_string(params.max_memory_bytes >> 20) +
+                                 " MiB allowed: give a coarser texel (fewer texels per pixel) or allow more memory");
+    }
     report.views_given = static_cast<int>(views.size());
     report.views_dark = dark;
     if (dark > 0) report.notes.push_back(std::to_string(dark) + " dark colour frames left out");

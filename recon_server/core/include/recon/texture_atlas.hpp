@@ -45,7 +45,10 @@ struct TextureParams {
     // texels per colour pixel when texel_m is 0 (ratio, in (0, 4]); 2: resampling a pixel into one texel blurs it
     // (facescan-bench texture: +3.1 dB over vertex colours at 1280x720 with 2, +2.8 dB with 1)
     float texels_per_pixel = 2.0f;
-    int max_atlas_px = 8192;      // pixels; the atlas side at most (8192^2 RGB is 192 MiB, what a GPU still loads)
+    int max_atlas_px = 8192;  // pixels; the atlas side at most (8192^2 RGB is 192 MiB, what a GPU still loads)
+    // bytes the bake may hold at once (the atlas and about 130 bytes a texel of working state); above: an error
+    // that names the size, before anything is allocated
+    size_t max_memory_bytes = size_t{512} << 20;
     int padding_px = 4;           // texels each chart is grown by, and kept between charts
     float cap_cos = 0.8f;         // a triangle whose normal is within acos(cap_cos) of the head's axis is a cap
     float min_view_cos = 0.2f;    // a view at more than acos(min_view_cos) (78 deg) from the normal is not used
