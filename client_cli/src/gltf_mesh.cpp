@@ -10,6 +10,8 @@
 #include <limits>
 #include <sstream>
 
+#include "recon/mesh_writer.hpp"
+
 namespace facescan::client {
 namespace {
 
@@ -38,14 +40,17 @@ int addAccessor(tinygltf::Model& model, const void* data, size_t count, size_t b
     return static_cast<int>(model.accessors.size() - 1);
 }
 
-}  // namespace
-
-StatusOr<std::string> meshToGlb(const recon::IndexedMesh& mesh) {
+// The GLB of `mesh`; with `uv` and `png` (a textured mesh) also TEXCOORD_0 and the PNG as the material's base colour
+// texture.
+StatusOr<std::string> glb(const recon::IndexedMesh& mesh, const std::vector<Eigen::Vector2f>* uv,
+                          const std::string* png) {
     std::vector<float> positions, normals;
     std::vector<uint8_t> colours;
     // glTF viewers light with NORMAL: always send it, from the triangles when the mesh has none.
     const std::vector<Eigen::Vector3f> vertex_normals = mesh.hasNormals() ? mesh.normals : recon::vertexNormals(mesh);
-    const bool has_colours = mesh.hasColours();
+    // glTF multiplies COLOR_0 into the base colour texture: a textured GLB leaves the vertex colours out (they
+    // stay in the PLY and OBJ).
+    const bool has_colours = mesh.hasColours() && uv == nullptr;
     const bool has_normals = true;
     std::array<double, 3> lo{}, hi{};
     lo.fill(std::numeric_limits<double>::max());
@@ -99,6 +104,13 @@ StatusOr<std::string> meshToGlb(const recon::IndexedMesh& mesh) {
             addAccessor(model, colours.data(), n, 4, TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE, TINYGLTF_TYPE_VEC4, true,
                         TINYGLTF_TARGET_ARRAY_BUFFER);
     }
+    if (uv != nullptr) {  // glTF's texture coordinates are ours: (0, 0) the image's top-left corner
+        std::vector<float> coords;
+        coords.reserve(uv->size() * 2);
+        for (const Eigen::Vector2f& t : *uv) coords.insert(coords.end(), {t.x(), t.y()});
+        primitive.attributes["TEXCOORD_0"] = addAccessor(model, coords.data(), n, 8, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                                         TINYGLTF_TYPE_VEC2, false, TINYGLTF_TARGET_ARRAY_BUFFER);
+    }
     primitive.indices = addAccessor(model, indices.data(), indices.size(), 4, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
                                     TINYGLTF_TYPE_SCALAR, false, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
 
@@ -109,6 +121,35 @@ StatusOr<std::string> meshToGlb(const recon::IndexedMesh& mesh) {
     material.pbrMetallicRoughness.metallicFactor = 0.0;
     material.pbrMetallicRoughness.roughnessFactor = 0.9;
     material.doubleSided = true;
+    if (png != nullptr) {
+        // The PNG inside the binary chunk (a buffer view, 4-byte aligned like every block), one linear sampler.
+        std::vector<unsigned char>& buffer = model.buffers[0].data;
+        const size_t offset = buffer.size();
+        buffer.insert(buffer.end(), png->begin(), png->end());
+        buffer.resize((buffer.size() + 3) / 4 * 4, 0);
+        tinygltf::BufferView view;
+        view.buffer = 0;
+        view.byteOffset = offset;
+        view.byteLength = png->size();
+        model.bufferViews.push_back(view);
+        tinygltf::Image image;
+        image.name = "atlas";
+        image.mimeType = "image/png";
+        image.bufferView = static_cast<int>(model.bufferViews.size() - 1);
+        model.images.push_back(image);
+        tinygltf::Sampler sampler;
+        sampler.magFilter = TINYGLTF_TEXTURE_FILTER_LINEAR;
+        sampler.minFilter = TINYGLTF_TEXTURE_FILTER_LINEAR_MIPMAP_LINEAR;
+        sampler.wrapS = TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE;
+        sampler.wrapT = TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE;
+        model.samplers.push_back(sampler);
+        tinygltf::Texture texture;
+        texture.sampler = 0;
+        texture.source = 0;
+        model.textures.push_back(texture);
+        material.pbrMetallicRoughness.baseColorTexture.index = 0;
+        material.pbrMetallicRoughness.baseColorTexture.texCoord = 0;
+    }
     model.materials.push_back(material);
     primitive.material = 0;
 
@@ -133,6 +174,18 @@ StatusOr<std::string> meshToGlb(const recon::IndexedMesh& mesh) {
     return out.str();
 }
 
+}  // namespace
+
+StatusOr<std::string> meshToGlb(const recon::IndexedMesh& mesh) { return glb(mesh, nullptr, nullptr); }
+
 StatusOr<std::string> meshToGlb(const recon::Mesh& mesh) { return meshToGlb(recon::fromOpenMesh(mesh)); }
+
+StatusOr<std::string> meshToGlb(const recon::TexturedMesh& mesh) {
+    if (mesh.uv.size() != mesh.mesh.vertexCount() || mesh.atlas_bgr.empty()) {
+        return invalidArgument("glTF export: the mesh has no texture (texture coordinates and an atlas are needed)");
+    }
+    ASSIGN_OR_RETURN(const std::string png, recon::atlasPngBytes(mesh));
+    return glb(mesh.mesh, &mesh.uv, &png);
+}
 
 }  // namespace facescan::client

@@ -11,7 +11,10 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
+#include "client/gltf_mesh.hpp"
 #include "wire/mesh_codec.hpp"
 
 namespace facescan::client {
@@ -244,6 +247,56 @@ TEST_F(MeshFileTest, EmptyMeshIsRefused) {
         EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << name;
         EXPECT_FALSE(fs::exists(dir_ / name));
     }
+}
+
+// A textured mesh's GLB: TEXCOORD_0 as given, the atlas as a PNG in the binary chunk (decoded back equal), the
+// material's base colour texture pointing at it, and no COLOR_0 (glTF would multiply it into the texture).
+TEST(TexturedGlb, CarriesTexcoordsAndTheAtlasAsBaseColourTexture) {
+    recon::TexturedMesh t;
+    t.mesh.positions_m = {{0, 0, 0.5f}, {0.1f, 0, 0.5f}, {0.1f, 0.1f, 0.5f}, {0, 0.1f, 0.5f}};
+    t.mesh.colours_rgb = {{{10, 20, 30}}, {{10, 20, 30}}, {{10, 20, 30}}, {{10, 20, 30}}};
+    t.mesh.triangles = {{0, 2, 1}, {0, 3, 2}};
+    t.uv = {{0.1f, 0.1f}, {0.9f, 0.1f}, {0.9f, 0.9f}, {0.1f, 0.9f}};
+    t.atlas_bgr = cv::Mat(8, 8, CV_8UC3);
+    cv::randu(t.atlas_bgr, cv::Scalar::all(0), cv::Scalar::all(255));
+    auto glb = meshToGlb(t);
+    ASSERT_TRUE(glb.isOk()) << glb.status().toString();
+
+    tinygltf::Model model;
+    tinygltf::TinyGLTF reader;
+    std::string err, warn;
+    ASSERT_TRUE(reader.LoadBinaryFromMemory(&model, &err, &warn, reinterpret_cast<const unsigned char*>(glb->data()),
+                                            static_cast<unsigned>(glb->size())))
+        << err << warn;
+    const tinygltf::Primitive& prim = model.meshes.at(0).primitives.at(0);
+    EXPECT_EQ(prim.attributes.count("COLOR_0"), 0u);
+    ASSERT_EQ(prim.attributes.count("TEXCOORD_0"), 1u);
+    const tinygltf::Accessor& tc = model.accessors[prim.attributes.at("TEXCOORD_0")];
+    ASSERT_EQ(tc.count, 4u);
+    const tinygltf::BufferView& tv = model.bufferViews[tc.bufferView];
+    for (size_t i = 0; i < 4; ++i) {
+        float uv[2];
+        std::memcpy(uv, model.buffers[0].data.data() + tv.byteOffset + tc.byteOffset + i * 8, sizeof uv);
+        EXPECT_FLOAT_EQ(uv[0], t.uv[i].x());
+        EXPECT_FLOAT_EQ(uv[1], t.uv[i].y());
+    }
+    ASSERT_EQ(model.materials.size(), 1u);
+    const int texture = model.materials[0].pbrMetallicRoughness.baseColorTexture.index;
+    ASSERT_EQ(texture, 0);
+    const int source = model.textures.at(0).source;
+    const tinygltf::Image& image = model.images.at(static_cast<size_t>(source));
+    EXPECT_EQ(image.mimeType, "image/png");
+    ASSERT_GE(image.bufferView, 0);
+    const tinygltf::BufferView& iv = model.bufferViews[static_cast<size_t>(image.bufferView)];
+    const std::vector<uint8_t> png(model.buffers[0].data.begin() + static_cast<long>(iv.byteOffset),
+                                   model.buffers[0].data.begin() + static_cast<long>(iv.byteOffset + iv.byteLength));
+    const cv::Mat decoded = cv::imdecode(png, cv::IMREAD_COLOR);
+    ASSERT_EQ(decoded.size(), t.atlas_bgr.size());
+    EXPECT_EQ(cv::norm(decoded, t.atlas_bgr, cv::NORM_INF), 0.0);
+
+    recon::TexturedMesh untextured;
+    untextured.mesh = t.mesh;
+    EXPECT_FALSE(meshToGlb(untextured).isOk());
 }
 
 }  // namespace

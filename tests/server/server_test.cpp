@@ -10,11 +10,13 @@
 #include <unistd.h>
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <atomic>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
+#include <opencv2/imgcodecs.hpp>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -381,6 +383,25 @@ TEST(ServerSession, FinishDeliversTheFinishedModelWithinItsBudget) {
     std::smatch mean;
     ASSERT_TRUE(std::regex_search(summary, mean, std::regex(R"("distance_mm": \{"mean": ([0-9.e+-]+))"))) << summary;
     EXPECT_LT(std::stod(mean[1].str()), 0.5) << summary;
+
+    // The texture, baked from the colour keyframes kept during the scan: OBJ + MTL + PNG and a PLY with texture
+    // coordinates, of the same finished model; summary.json says how it was made.
+    EXPECT_NE(summary.find("\"texture\": {\"width\": "), std::string::npos) << summary;
+    std::smatch used;
+    ASSERT_TRUE(std::regex_search(summary, used, std::regex(R"("views_used": ([0-9]+))"))) << summary;
+    EXPECT_GE(std::stoi(used[1].str()), 2) << "the head turns: more than one keyframe paints it; " << summary;
+    EXPECT_NE(readFile(dir / "textured.mtl").find("map_Kd textured.png"), std::string::npos);
+    EXPECT_NE(readFile(dir / "textured.obj").find("mtllib textured.mtl"), std::string::npos);
+    const cv::Mat atlas = cv::imread((dir / "textured.png").string(), cv::IMREAD_COLOR);
+    ASSERT_FALSE(atlas.empty());
+    EXPECT_GT(cv::mean(atlas)[2], 20.0) << "a skin-coloured face is not black";
+    OpenMesh::TriMesh_ArrayKernelT<> textured;
+    textured.request_vertex_texcoords2D();
+    OpenMesh::IO::Options uv_opts = OpenMesh::IO::Options::VertexTexCoord;
+    ASSERT_TRUE(OpenMesh::IO::read_mesh(textured, (dir / "textured.ply").string(), uv_opts));
+    EXPECT_TRUE(uv_opts.vertex_has_texcoord());
+    // The finished model before Draco's grid (mesh.ply is after it, which may drop a degenerate triangle).
+    EXPECT_NEAR(double(textured.n_faces()), double(ply.n_faces()), 0.02 * double(ply.n_faces()));
 }
 
 // A server told to fuse every other tracked frame (--set fuse_every=2, what the load's last economy step does):

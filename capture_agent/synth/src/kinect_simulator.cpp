@@ -416,7 +416,7 @@ void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth
                     albedo = b0 * s.colours[tri[0]] + b1 * s.colours[tri[1]] + b2 * s.colours[tri[2]];
                 }
                 const float diffuse = std::max(0.0f, n.dot((lamp - p).normalized()));
-                const float shade = 0.35f + 0.75f * diffuse;
+                const float shade = params_.shading ? 0.35f + 0.75f * diffuse : 1.0f;
                 for (int c = 0; c < 3; ++c) crow[u][c] = cv::saturate_cast<uint8_t>(albedo[c] * shade);
             }
         }

@@ -132,6 +132,8 @@ StatusOr<SyntheticSpec> parseSyntheticOptions(const std::string& text) {
             p.noise = number != 0;
         } else if (key == "torso") {
             p.torso = number != 0;
+        } else if (key == "shading") {
+            p.shading = number != 0;
         } else if (key == "wall") {
             p.wall = number != 0;
         } else if (key == "gap_start") {
@@ -173,8 +175,9 @@ const char* syntheticOptionsHelp() {
     return "synthetic options (key=value, comma-separated): scenario=gentle|wide|chin|gap|occluder (sets the\n"
            "  motion and events; other keys override it), frames=N, distance=M (metres), yaw=DEG, pitch=DEG\n"
            "  (amplitudes), period=FRAMES (yaw; pitch gets half), yaw_period=FRAMES, pitch_period=FRAMES, nod=0|1\n"
-           "  (pitch 0 -> amplitude -> 0), seed=N, noise=0|1, torso=0|1, wall=0|1, subject=auto|builtin|scan|FILE\n"
-           "  (head= is an alias), gap_start=FRAME (-1 none), gap_frames=N, gap_walk=N, gap_turn=DEG,\n"
+           "  (pitch 0 -> amplitude -> 0), seed=N, noise=0|1, torso=0|1, shading=0|1 (0: unlit colour), wall=0|1,\n"
+           "  subject=auto|builtin|scan|FILE (head= is an alias), gap_start=FRAME (-1 none), gap_frames=N, gap_walk=N, "
+           "gap_turn=DEG,\n"
            "  gap_leave=0|1 (0: turn in view instead of leaving), occluder_start=FRAME (-1 none),\n"
            "  occluder_frames=N, occluder_front=M (metres in front of the nose), sensor=kinect-v1|truedepth (the\n"
            "  camera: its resolution, noise and range, and its distance unless distance= is given)";

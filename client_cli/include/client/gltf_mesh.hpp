@@ -8,6 +8,7 @@
 #include "recon/indexed_mesh.hpp"
 #include "recon/mesh.hpp"
 #include "recon/status.hpp"
+#include "recon/texture_atlas.hpp"
 
 namespace facescan::client {
 
@@ -17,5 +18,8 @@ namespace facescan::client {
 // InvalidArgument for a mesh without triangles or with non-finite points; Internal when TinyGLTF refuses it.
 StatusOr<std::string> meshToGlb(const recon::IndexedMesh& mesh);
 StatusOr<std::string> meshToGlb(const recon::Mesh& mesh);
+// A textured mesh (recon/texture_atlas.hpp): TEXCOORD_0 and the atlas as PNG, in the binary chunk, as the material's
+// baseColorTexture. glTF multiplies COLOR_0 into that texture, so the vertex colours are left out here.
+StatusOr<std::string> meshToGlb(const recon::TexturedMesh& mesh);
 
 }  // namespace facescan::client

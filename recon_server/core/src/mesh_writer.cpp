@@ -4,6 +4,7 @@
 #include <OpenMesh/Core/IO/IOManager.hh>
 #include <OpenMesh/Core/IO/exporter/BaseExporter.hh>
 #include <OpenMesh/Core/System/omstream.hh>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <unordered_set>
 
@@ -25,8 +26,10 @@ using StatusInfo = OpenMesh::Attributes::StatusInfo;
 // writers ask for them only when the options request them, and ours never do.
 class ArrayExporter final : public OpenMesh::IO::BaseExporter {
  public:
-    ArrayExporter(const IndexedMesh& mesh, const std::vector<Eigen::Vector3f>& normals)
-        : mesh_(mesh), normals_(normals) {}
+    // uv_ply: per-vertex texture coordinates with v up (OBJ's and PLY readers' convention), or null.
+    ArrayExporter(const IndexedMesh& mesh, const std::vector<Eigen::Vector3f>& normals,
+                  const std::vector<Eigen::Vector2f>* uv_ply = nullptr)
+        : mesh_(mesh), normals_(normals), uv_(uv_ply) {}
 
     Vec3f point(OpenMesh::VertexHandle vh) const override { return vec(mesh_.positions_m[at(vh)]); }
     Vec3d pointd(OpenMesh::VertexHandle vh) const override { return Vec3d(point(vh)); }
@@ -46,7 +49,11 @@ class ArrayExporter final : public OpenMesh::IO::BaseExporter {
     Vec4ui colorAi(OpenMesh::VertexHandle vh) const override { return Vec4ui(colorA(vh)); }
     Vec3f colorf(OpenMesh::VertexHandle vh) const override { return Vec3f(color(vh)) / 255.0f; }
     Vec4f colorAf(OpenMesh::VertexHandle vh) const override { return Vec4f(colorA(vh)) / 255.0f; }
-    Vec2f texcoord(OpenMesh::VertexHandle) const override { return Vec2f(0, 0); }
+    Vec2f texcoord(OpenMesh::VertexHandle vh) const override {
+        if (!uv_) return Vec2f(0, 0);
+        const Eigen::Vector2f& t = (*uv_)[at(vh)];
+        return Vec2f(t.x(), t.y());
+    }
     Vec2f texcoord(OpenMesh::HalfedgeHandle) const override { return Vec2f(0, 0); }
     StatusInfo status(OpenMesh::VertexHandle) const override { return {}; }
 
@@ -110,6 +117,7 @@ class ArrayExporter final : public OpenMesh::IO::BaseExporter {
     bool is_triangle_mesh() const override { return true; }
     bool has_vertex_normals() const override { return true; }
     bool has_vertex_colors() const override { return mesh_.hasColours(); }
+    bool has_vertex_texcoords() const override { return uv_ != nullptr; }
 
  private:
     static Vec3f vec(const Eigen::Vector3f& v) { return Vec3f(v.x(), v.y(), v.z()); }
@@ -119,14 +127,34 @@ class ArrayExporter final : public OpenMesh::IO::BaseExporter {
     }
     const IndexedMesh& mesh_;
     const std::vector<Eigen::Vector3f>& normals_;
+    const std::vector<Eigen::Vector2f>* uv_;
     mutable size_t edges_ = 0;
     OpenMesh::BaseKernel no_properties_;
 };
 
-std::string objText(const IndexedMesh& mesh, const std::vector<Eigen::Vector3f>& normals) {
+// uv (glTF's convention, v down) as OBJ and PLY readers take it: v up.
+std::vector<Eigen::Vector2f> uvUp(const std::vector<Eigen::Vector2f>& uv) {
+    std::vector<Eigen::Vector2f> out;
+    out.reserve(uv.size());
+    for (const Eigen::Vector2f& t : uv) out.emplace_back(t.x(), 1.0f - t.y());
+    return out;
+}
+
+Status checkTextured(const TexturedMesh& mesh) {
+    if (mesh.mesh.triangles.empty()) return invalidArgument("the mesh has no triangles");
+    if (mesh.uv.size() != mesh.mesh.vertexCount() || mesh.atlas_bgr.empty()) {
+        return invalidArgument("the mesh has no texture: texture coordinates and an atlas are needed");
+    }
+    return Status::ok();
+}
+
+// `uv_up`: texture coordinates to write (vt lines, faces v/vt/vn) and `mtl`: the material file to name, or null.
+std::string objText(const IndexedMesh& mesh, const std::vector<Eigen::Vector3f>& normals,
+                    const std::vector<Eigen::Vector2f>* uv_up = nullptr, const std::string& mtl = {}) {
     std::ostringstream out;
     out.precision(9);
     out << "# facescan mesh: metres, " << mesh.vertexCount() << " vertices, " << mesh.triangleCount() << " triangles\n";
+    if (uv_up) out << "mtllib " << mtl << "\nusemtl facescan\n";
     const bool colours = mesh.hasColours();
     for (size_t i = 0; i < mesh.vertexCount(); ++i) {
         const Eigen::Vector3f& p = mesh.positions_m[i];
@@ -139,16 +167,68 @@ std::string objText(const IndexedMesh& mesh, const std::vector<Eigen::Vector3f>&
         }
         out << '\n';
     }
+    if (uv_up) {
+        for (const Eigen::Vector2f& t : *uv_up) out << "vt " << t.x() << ' ' << t.y() << '\n';
+    }
     for (const Eigen::Vector3f& n : normals) out << "vn " << n.x() << ' ' << n.y() << ' ' << n.z() << '\n';
+    const char* sep = uv_up ? "/" : "//";
     for (const Triangle& t : mesh.triangles) {
         out << 'f';
-        for (const uint32_t v : t) out << ' ' << v + 1 << "//" << v + 1;  // OBJ indices start at 1
+        for (const uint32_t v : t) {  // OBJ indices start at 1; vertex, texture and normal indices coincide
+            out << ' ' << v + 1 << sep;
+            if (uv_up) out << v + 1 << '/';
+            out << v + 1;
+        }
         out << '\n';
     }
     return out.str();
 }
 
 }  // namespace
+
+StatusOr<std::string> atlasPngBytes(const TexturedMesh& mesh) {
+    RETURN_IF_ERROR(checkTextured(mesh));
+    std::vector<uint8_t> png;
+    if (!cv::imencode(".png", mesh.atlas_bgr, png)) return internalError("OpenCV could not encode the texture as PNG");
+    return std::string(png.begin(), png.end());
+}
+
+StatusOr<TexturedObjFiles> texturedObjFiles(const TexturedMesh& mesh, const std::string& stem) {
+    RETURN_IF_ERROR(checkTextured(mesh));
+    if (stem.empty() || stem.find_first_of("/\\ \n\r") != std::string::npos) {
+        return invalidArgument("the OBJ's file name stem must be a plain name without spaces or folders, got '" + stem +
+                               "'");
+    }
+    const std::vector<Eigen::Vector3f> normals = mesh.mesh.hasNormals() ? mesh.mesh.normals : vertexNormals(mesh.mesh);
+    const std::vector<Eigen::Vector2f> uv = uvUp(mesh.uv);
+    TexturedObjFiles files;
+    files.obj = objText(mesh.mesh, normals, &uv, stem + ".mtl");
+    // A matte material: the texture is the surface's colour as lit when scanned.
+    files.mtl = "# facescan texture\nnewmtl facescan\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd " + stem + ".png\n";
+    ASSIGN_OR_RETURN(files.png, atlasPngBytes(mesh));
+    return files;
+}
+
+StatusOr<std::string> texturedPlyBytes(const TexturedMesh& mesh, const std::string& texture_file) {
+    RETURN_IF_ERROR(checkTextured(mesh));
+    const std::vector<Eigen::Vector3f> normals = mesh.mesh.hasNormals() ? mesh.mesh.normals : vertexNormals(mesh.mesh);
+    const std::vector<Eigen::Vector2f> uv = uvUp(mesh.uv);
+    using OpenMesh::IO::Options;
+    Options opts(Options::Binary | Options::VertexNormal | Options::VertexTexCoord);
+    if (mesh.mesh.hasColours()) opts += Options::VertexColor;
+    ArrayExporter exporter(mesh.mesh, normals, &uv);
+    std::ostringstream out(std::ios::binary);
+    omlog().disable();
+    if (!OpenMesh::IO::IOManager().write(out, ".ply", exporter, opts, 9)) {
+        return internalError("OpenMesh could not write the textured mesh as PLY");
+    }
+    std::string bytes = std::move(out).str();
+    // The image's name in the header, after the format line (MeshLab's `comment TextureFile`).
+    const size_t format_end = bytes.find('\n', bytes.find("format "));
+    if (format_end == std::string::npos) return internalError("OpenMesh's PLY has no format line");
+    bytes.insert(format_end + 1, "comment TextureFile " + texture_file + "\n");
+    return bytes;
+}
 
 StatusOr<std::string> meshFileBytes(const IndexedMesh& mesh, MeshFileFormat format) {
     if (mesh.triangles.empty()) return invalidArgument("the mesh has no triangles");

@@ -148,6 +148,18 @@ const std::map<std::string, Setter>& setters() {
          }},
         FLOAT("finish.max_hole_m", p.finish.max_hole_m),
         FLOAT("finish.min_part_share", p.finish.min_part_share),
+        // The texture atlas (recon::TextureParams) and the colour keyframes it is baked from.
+        INT("texture.max_keyframes", p.texture_keyframes.max_keyframes),
+        {"texture.max_mib",
+         [](ServerParams& p, const std::string& key, const std::string& value) -> Status {
+             ASSIGN_OR_RETURN(const double v, parseNumber(key, value));
+             if (!(v >= 1 && v <= 1024)) return invalidArgument(key + " must be in [1, 1024] MiB, got " + value);
+             p.texture_keyframes.max_bytes = static_cast<size_t>(v * (1 << 20));
+             return Status::ok();
+         }},
+        FLOAT("texture.keyframe_deg", p.texture_keyframes.min_angle_deg),
+        INT("texture.max_atlas_px", p.texture.max_atlas_px),
+        FLOAT("texture.texels_per_pixel", p.texture.texels_per_pixel),
         // The service.
         INT("snapshot_stride_vox", p.snapshot_stride_vox),
         FLOAT("snapshot_hz", p.snapshot_hz),
@@ -229,6 +241,8 @@ Status ServerParams::validate() const {
     if (Status s = recon.validate(); !s.isOk()) return invalidArgument("recon parameters: " + s.message());
     if (Status s = face.validate(); !s.isOk()) return invalidArgument("face pipeline parameters: " + s.message());
     if (Status s = finish.validate(); !s.isOk()) return invalidArgument("finishing: " + s.message());
+    if (Status s = texture_keyframes.validate(); !s.isOk()) return s;
+    if (Status s = texture.validate(); !s.isOk()) return invalidArgument("texture: " + s.message());
     if (snapshot_stride_vox < 1 || snapshot_stride_vox > 8) return invalidArgument("snapshot_stride_vox: 1..8");
     if (!(snapshot_hz >= 0 && snapshot_hz <= 30)) return invalidArgument("--snapshot-hz must be in [0, 30]");
     if (!(snapshot_max_error_m > 0 && snapshot_max_error_m <= 0.005f)) {

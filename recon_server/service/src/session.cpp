@@ -105,6 +105,7 @@ Session::Session(std::string session_id, const ServerParams& params, std::functi
       params_(params),
       space_freed_(std::move(space_freed)),
       snapshot_mesher_(snapshotMeshParams(params)) {
+    keyframes_ = TextureKeyframes(params_.texture_keyframes);
     stats_.session_id = id_;
     stats_.detail = "waiting for CameraInfo";
     latency_ms_.reserve(kLatencyWindow);
@@ -353,6 +354,7 @@ void Session::workerLoop() {
             lk.unlock();
             recon_->reset();
             pipeline_->reset();
+            keyframes_.clear();  // their poses are in the old model's frame
             lk.lock();
             trajectory_.clear();
             last_pose_ = recon::Pose::Identity();
@@ -418,7 +420,14 @@ char Session::processFrame(PendingFrame& pending) {
     recon::scanFrame(*pipeline_, *recon_, frame_, step_, advice_);
     const char outcome = !step_.head.found || !step_.frame.tracked ? 'R' : step_.frame.integrated ? 'F' : 'T';
     const Status colour = decoder_.colourStatus();  // damaged colour costs the frame its colour, not its depth
-    decoder_.releaseColour();                       // pending's bytes are recycled after this frame
+    // The texture's keyframes: the colour payload as received, with the pose just tracked. A restarted model has a
+    // new world frame, in which the old keyframes' poses mean nothing.
+    if (step_.frame.restarted) keyframes_.clear();
+    if (step_.head.found && step_.frame.tracked && colour.isOk()) {
+        keyframes_.offer(pending.seq, static_cast<wire::ColourCodecId>(pending.colour_codec), pending.colour,
+                         recon_->lastPose());
+    }
+    decoder_.releaseColour();  // pending's bytes are recycled after this frame
     const recon::HeadObservation& head = step_.head;
     const recon::FrameResult& r = step_.frame;
     const int64_t pose_known_ns = realtimeNowNs();

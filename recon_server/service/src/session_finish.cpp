@@ -78,6 +78,8 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     Status status;
     recon::FinishReport finish_report;
     std::string finish_json = "null";
+    recon::TexturedMesh textured;
+    std::string texture_json = "null";
     if (rec) {
         recon::TsdfSnapshot grid;
         rec->copyVolume(grid);
@@ -99,6 +101,10 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
                 std::fprintf(stderr, "facescan-server: session %s: finished model: %s\n", id_.c_str(),
                              finish_report.summary().c_str());
             }
+        }
+        if (!extracted.triangles.empty()) {
+            texture_json = bakeFinishedTexture(extracted, textured);
+            nextWatchedStep();
         }
         if (!extracted.triangles.empty()) {
             const auto params = meshCodecParams(grid, wire::MeshCodecParams{}.max_position_error_m);
@@ -126,7 +132,8 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     files.mesh = &mesh;
     files.draco = result.draco.get();
     files.trajectory_tum = trajectoryTum();
-    files.summary_json = summaryJson(s, result, finish_json);
+    files.textured = &textured;
+    files.summary_json = summaryJson(s, result, finish_json, texture_json);
     files.frames_tsv = frameTimingsTsv();
     files.preview_png = &png;
     std::filesystem::path written;
@@ -210,7 +217,40 @@ std::string Session::frameTimingsTsv() const {
     return tsv;
 }
 
-std::string Session::summaryJson(const SessionStats& s, const MeshResult& m, const std::string& finish_json) const {
+std::string Session::bakeFinishedTexture(const recon::IndexedMesh& mesh, recon::TexturedMesh& out) {
+    std::optional<wire::CameraInfoData> camera;
+    {
+        std::lock_guard lk(mutex_);
+        camera = camera_;
+    }
+    std::vector<std::string> notes;
+    std::string why;
+    if (params_.texture_keyframes.max_keyframes == 0) return "null";  // texturing is off
+    if (!camera || keyframes_.count() == 0) {
+        why = keyframes_.rawSkipped() > 0 ? "the colour came uncompressed (raw), which is not kept for the texture"
+                                          : "no colour frames were received";
+    } else {
+        const std::vector<recon::TextureView> views = keyframes_.views(*camera, &notes);
+        auto baked = recon::bakeTexture(mesh, views, params_.texture, out);
+        if (baked.isOk()) {
+            baked->notes.insert(baked->notes.begin(), notes.begin(), notes.end());
+            std::fprintf(stderr, "facescan-server: session %s: %s (%zu keyframes, %zu KiB of colour kept)\n",
+                         id_.c_str(), baked->summary().c_str(), keyframes_.count(), keyframes_.bytes() >> 10);
+            keyframes_.clear();
+            return baked->json();
+        }
+        why = baked.status().message();
+    }
+    keyframes_.clear();
+    out = recon::TexturedMesh{};
+    // The model is still written, with its vertex colours.
+    std::fprintf(stderr, "facescan-server: session %s: no texture: %s; the model keeps its vertex colours\n",
+                 id_.c_str(), why.c_str());
+    return "{\"error\": \"" + jsonEscape(why) + "\"}";
+}
+
+std::string Session::summaryJson(const SessionStats& s, const MeshResult& m, const std::string& finish_json,
+                                 const std::string& texture_json) const {
     recon::ReconParams r = params_.recon;
     std::string camera = "null";
     {
@@ -255,6 +295,7 @@ std::string Session::summaryJson(const SessionStats& s, const MeshResult& m, con
     j += "  \"mesh\": {\"vertices\": " + std::to_string(m.vertex_count) +
          ", \"triangles\": " + std::to_string(m.triangle_count) + "},\n";
     j += "  \"finish\": " + finish_json + ",\n";
+    j += "  \"texture\": " + texture_json + ",\n";
     j += "  \"camera\": " + camera + ",\n";
     j += "  \"params\": {\"preset\": \"" + params_.preset +
          "\", \"tsdf\": {\"resolution_vox\": " + std::to_string(r.tsdf.resolution_vox) +

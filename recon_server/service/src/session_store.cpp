@@ -81,6 +81,14 @@ Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& f
             RETURN_IF_ERROR(writeFileAtomic(dir / "mesh.drc", files.draco->data(), files.draco->size()));
         }
     }
+    if (files.textured && files.textured->valid()) {
+        ASSIGN_OR_RETURN(const recon::TexturedObjFiles obj, recon::texturedObjFiles(*files.textured, "textured"));
+        ASSIGN_OR_RETURN(const std::string ply, recon::texturedPlyBytes(*files.textured, "textured.png"));
+        RETURN_IF_ERROR(writeFileAtomic(dir / "textured.png", obj.png));
+        RETURN_IF_ERROR(writeFileAtomic(dir / "textured.mtl", obj.mtl));
+        RETURN_IF_ERROR(writeFileAtomic(dir / "textured.obj", obj.obj));
+        RETURN_IF_ERROR(writeFileAtomic(dir / "textured.ply", ply));
+    }
     RETURN_IF_ERROR(writeFileAtomic(dir / "trajectory.txt", files.trajectory_tum));
     if (!files.frames_tsv.empty()) RETURN_IF_ERROR(writeFileAtomic(dir / "frames.tsv", files.frames_tsv));
     if (files.preview_png && !files.preview_png->empty()) {

@@ -55,9 +55,12 @@ struct SequenceParams {
     uint64_t seed = 1;                   // noise and sway phases; frame i uses a generator seeded from (seed, i)
     bool noise = true;                   // false: exact depth (no noise, quantisation, dropouts, shadows, angle loss)
     bool torso = true;                   // render a torso below the head (segmentation must remove it)
-    bool wall = true;                    // render a wall behind the subject
-    float wall_distance_m = 1.6f;        // metres, camera to wall
-    NoiseParams noise_model;             // used when noise == true
+    // false: colour is the subject's own (albedo), unlit, so that colour measured on a model compares with the
+    // subject's texture directly (the texture benchmark); true: a lamp above-left of the camera (Lambert + ambient)
+    bool shading = true;
+    bool wall = true;              // render a wall behind the subject
+    float wall_distance_m = 1.6f;  // metres, camera to wall
+    NoiseParams noise_model;       // used when noise == true
 
     // A nod instead of a symmetric pitch: pitch goes 0 -> pitch_amplitude_deg -> 0 over each pitch period (a
     // positive amplitude lowers the chin onto the chest).

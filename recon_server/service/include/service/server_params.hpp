@@ -10,6 +10,8 @@
 #include "recon/finishing.hpp"
 #include "recon/reconstructor.hpp"
 #include "recon/status.hpp"
+#include "recon/texture_atlas.hpp"
+#include "service/texture_keyframes.hpp"
 #include "wire/dds.hpp"
 
 namespace facescan::service {
@@ -19,6 +21,9 @@ struct ServerParams {
     recon::ReconParams recon = recon::ReconParams::faceDefaults();
     recon::FacePipelineParams face;  // detection and segmentation in front of the recon core
     recon::FinishParams finish;      // the final model: the head alone, holes, a triangle budget (on finish)
+    // The texture atlas baked on finish from colour keyframes kept during the scan (texture.max_keyframes 0: none).
+    KeyframeParams texture_keyframes;
+    recon::TextureParams texture;
     // Snapshots are meshed with cubes of this many voxels while scanning (2 = an eighth of the cubes); the final
     // mesh (GET_MESH, disk) is always full resolution (recon.mesh).
     int snapshot_stride_vox = 2;           // voxels

@@ -23,6 +23,7 @@
 #include "recon/scan_step.hpp"
 #include "service/frame_load.hpp"
 #include "service/server_params.hpp"
+#include "service/texture_keyframes.hpp"
 #include "service/watchdog.hpp"
 #include "wire/mesh_codec.hpp"
 #include "wire/messages.hpp"
@@ -247,7 +248,12 @@ class Session {
     void noteLoad();  // after a frame: the worker's load and recent skips into stats_
     void recordLatency(float ms);
     // finish_json: the finishing stage's report (recon::FinishReport::json()), or null.
-    std::string summaryJson(const SessionStats& s, const MeshResult& m, const std::string& finish_json) const;
+    std::string summaryJson(const SessionStats& s, const MeshResult& m, const std::string& finish_json,
+                            const std::string& texture_json = "null") const;
+    // Bakes the texture atlas of the finished mesh from the colour keyframes (on the worker, in finalize); `out`
+    // stays empty when there is none (no colour, dark colour, too large: logged, and the report says why). The
+    // texture's report as JSON for summary.json.
+    std::string bakeFinishedTexture(const recon::IndexedMesh& mesh, recon::TexturedMesh& out);
     std::string frameTimingsTsv() const;
 
     // First member, so last destroyed: a session counts as live until all of its memory is freed.
@@ -286,6 +292,7 @@ class Session {
     std::vector<float> latency_ms_;  // ring of the last kLatencyWindow
     // Worker only (finalize runs on the worker when there is one): the frames processed.
     std::vector<FrameTiming> frame_timings_;
+    TextureKeyframes keyframes_;  // the texture's colour frames, as received
     size_t latency_next_ = 0;
     std::deque<int64_t> processed_ns_;  // steady times of recently processed frames (fps)
     int64_t first_processed_ns_ = 0, last_processed_ns_ = 0;

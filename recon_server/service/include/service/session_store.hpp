@@ -13,6 +13,7 @@
 
 #include "recon/indexed_mesh.hpp"
 #include "recon/status.hpp"
+#include "recon/texture_atlas.hpp"
 
 namespace facescan::service {
 
@@ -31,7 +32,10 @@ struct SessionFiles {
     std::string trajectory_tum;                         // TUM lines
     std::string frames_tsv;                             // Session::frameTimingsTsv; not written when empty
     const std::vector<uint8_t>* preview_png = nullptr;  // not written when empty (no model)
-    std::string summary_json;                           // written last: its presence means the session is complete
+    // The textured model (recon/texture_atlas.hpp), when one was baked: textured.obj + textured.mtl + textured.png
+    // and textured.ply (u, v per vertex, naming textured.png); null or invalid: not written.
+    const recon::TexturedMesh* textured = nullptr;
+    std::string summary_json;  // written last: its presence means the session is complete
 };
 
 // Creates dir and writes the files that have content (mesh.ply and mesh.drc only for a non-empty mesh).

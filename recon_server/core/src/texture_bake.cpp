@@ -1,0 +1,432 @@
+// Baking the texture atlas (texture_atlas.hpp, steps 2-3): texels rasterised in UV space, projected into every
+// view, weighted, evened out in exposure and blended; unseen texels from the vertex colours; charts padded.
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+
+#include "recon/parallel.hpp"
+#include "recon/texture_atlas.hpp"
+
+namespace facescan::recon {
+namespace {
+
+constexpr int kTopViews = 4;  // views kept per texel: with weights raised to a power, the rest add nothing visible
+
+double msSince(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// A texel on the surface: where it is in the atlas and on the mesh.
+struct Texel {
+    int x, y;
+    Eigen::Vector3f p_m, normal;
+    Eigen::Vector3f vertex_bgr;  // the vertex colours there (the fallback), 0-255
+};
+
+// What one view makes of a texel.
+struct Sample {
+    int view = -1;
+    float weight = 0;
+    Eigen::Vector3f bgr = Eigen::Vector3f::Zero();
+};
+using TopSamples = std::array<Sample, kTopViews>;
+
+// The mesh as one view sees it: nearest depth per pixel (metres, +inf where nothing) and each pixel's distance to
+// a depth edge (pixels).
+struct ViewDepth {
+    cv::Mat z_m;        // CV_32F
+    cv::Mat edge_dist;  // CV_32F
+    float focus = 1;    // sharpness relative to the sharpest view, (0, 1]
+};
+
+// Edge functions of a triangle at a point (twice the signed areas).
+inline float edge(const Eigen::Vector2f& a, const Eigen::Vector2f& b, const Eigen::Vector2f& p) {
+    return (b.x() - a.x()) * (p.y() - a.y()) - (b.y() - a.y()) * (p.x() - a.x());
+}
+
+// Calls fn(x, y, w0, w1, w2) for each pixel centre inside the triangle (a, b, c) in pixel coordinates (the centre
+// of pixel x is x), within [0, width) x [0, height); w are barycentric weights. Both windings.
+template <class Fn>
+void rasterise(const Eigen::Vector2f& a, const Eigen::Vector2f& b, const Eigen::Vector2f& c, int width, int height,
+               Fn&& fn) {
+    const float area = edge(a, b, c);
+    if (!(std::abs(area) > 1e-12f)) return;
+    const int x0 = std::max(0, static_cast<int>(std::ceil(std::min({a.x(), b.x(), c.x()}))));
+    const int x1 = std::min(width - 1, static_cast<int>(std::floor(std::max({a.x(), b.x(), c.x()}))));
+    const int y0 = std::max(0, static_cast<int>(std::ceil(std::min({a.y(), b.y(), c.y()}))));
+    const int y1 = std::min(height - 1, static_cast<int>(std::floor(std::max({a.y(), b.y(), c.y()}))));
+    const float inv = 1.0f / area;
+    for (int y = y0; y <= y1; ++y) {
+        for (int x = x0; x <= x1; ++x) {
+            const Eigen::Vector2f p(static_cast<float>(x), static_cast<float>(y));
+            const float w0 = edge(b, c, p) * inv, w1 = edge(c, a, p) * inv, w2 = edge(a, b, p) * inv;
+            if (w0 >= -1e-5f && w1 >= -1e-5f && w2 >= -1e-5f) fn(x, y, w0, w1, w2);
+        }
+    }
+}
+
+ViewDepth viewDepth(const IndexedMesh& mesh, const TextureView& view, const TextureParams& params) {
+    const Intrinsics& k = view.colour;
+    ViewDepth d;
+    d.z_m = cv::Mat(k.height_px, k.width_px, CV_32F, cv::Scalar(std::numeric_limits<float>::infinity()));
+    std::vector<Eigen::Vector3f> p_c(mesh.vertexCount());
+    std::vector<Eigen::Vector2f> px(mesh.vertexCount());
+    for (size_t i = 0; i < mesh.vertexCount(); ++i) {
+        p_c[i] = view.T_colour_mesh * mesh.positions_m[i];
+        px[i] = p_c[i].z() > 1e-3f ? k.project(p_c[i]) : Eigen::Vector2f(-1e9f, -1e9f);
+    }
+    for (const Triangle& t : mesh.triangles) {
+        if (p_c[t[0]].z() <= 1e-3f || p_c[t[1]].z() <= 1e-3f || p_c[t[2]].z() <= 1e-3f) continue;
+        // 1/z is linear in the image: interpolated, it gives the exact depth of the triangle at each pixel.
+        const float iz0 = 1 / p_c[t[0]].z(), iz1 = 1 / p_c[t[1]].z(), iz2 = 1 / p_c[t[2]].z();
+        rasterise(px[t[0]], px[t[1]], px[t[2]], k.width_px, k.height_px,
+                  [&](int x, int y, float w0, float w1, float w2) {
+                      const float z = 1.0f / (w0 * iz0 + w1 * iz1 + w2 * iz2);
+                      float& zb = d.z_m.at<float>(y, x);
+                      if (z < zb) zb = z;
+                  });
+    }
+    // Edges: pixels with nothing, and pixels whose depth jumps against a neighbour.
+    cv::Mat not_edge(k.height_px, k.width_px, CV_8U, cv::Scalar(255));
+    for (int y = 0; y < k.height_px; ++y) {
+        const float* row = d.z_m.ptr<float>(y);
+        const float* below = d.z_m.ptr<float>(std::min(y + 1, k.height_px - 1));
+        uint8_t* out = not_edge.ptr<uint8_t>(y);
+        for (int x = 0; x < k.width_px; ++x) {
+            const float z = row[x];
+            const float right = row[std::min(x + 1, k.width_px - 1)];
+            if (!std::isfinite(z)) {
+                out[x] = 0;
+            } else if (!(std::abs(right - z) < params.depth_edge_m) ||
+                       !(std::abs(below[x] - z) < params.depth_edge_m)) {
+                out[x] = 0;
+            }
+        }
+    }
+    cv::distanceTransform(not_edge, d.edge_dist, cv::DIST_L2, 3);
+    // Sharpness: the spread of the Laplacian over the pixels the mesh covers (motion blur and defocus lower it).
+    cv::Mat grey, lap;
+    cv::cvtColor(view.colour_bgr, grey, cv::COLOR_BGR2GRAY);
+    cv::Laplacian(grey, lap, CV_32F);
+    // Relative to the image's own contrast there, so that a darker view is not taken for a blurred one.
+    cv::Scalar mean, lap_sd, grey_sd;
+    cv::meanStdDev(lap, mean, lap_sd, not_edge);
+    cv::meanStdDev(grey, mean, grey_sd, not_edge);
+    d.focus = grey_sd[0] > 1e-3 ? static_cast<float>(lap_sd[0] / grey_sd[0]) : 0.0f;
+    return d;
+}
+
+Eigen::Vector3f bilinear(const cv::Mat& img, float x, float y) {
+    const int x0 = std::clamp(static_cast<int>(std::floor(x)), 0, img.cols - 2);
+    const int y0 = std::clamp(static_cast<int>(std::floor(y)), 0, img.rows - 2);
+    const float fx = std::clamp(x - x0, 0.0f, 1.0f), fy = std::clamp(y - y0, 0.0f, 1.0f);
+    const cv::Vec3b* r0 = img.ptr<cv::Vec3b>(y0);
+    const cv::Vec3b* r1 = img.ptr<cv::Vec3b>(y0 + 1);
+    Eigen::Vector3f out;
+    for (int c = 0; c < 3; ++c) {
+        const float top = r0[x0][c] * (1 - fx) + r0[x0 + 1][c] * fx;
+        const float bottom = r1[x0][c] * (1 - fx) + r1[x0 + 1][c] * fx;
+        out[c] = top * (1 - fy) + bottom * fy;
+    }
+    return out;
+}
+
+// The blend of a texel's samples under per-view gains; false when no view saw it.
+bool blend(const TopSamples& s, const std::vector<Eigen::Vector3f>& gains, Eigen::Vector3f& out) {
+    float w = 0;
+    out.setZero();
+    for (const Sample& v : s) {
+        if (v.view < 0) break;
+        out += v.weight * gains[static_cast<size_t>(v.view)].cwiseProduct(v.bgr);
+        w += v.weight;
+    }
+    if (!(w > 0)) return false;
+    out /= w;
+    return true;
+}
+
+std::string num(double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.4g", v);
+    return buf;
+}
+
+}  // namespace
+
+std::string TextureReport::summary() const {
+    std::string s = "texture " + std::to_string(atlas_width_px) + "x" + std::to_string(atlas_height_px) + ", " +
+                    std::to_string(charts) + " charts, " + num(texel_mm) + " mm per texel, " +
+                    std::to_string(views_used) + " of " + std::to_string(views_given) + " views";
+    if (texels_surface > 0) s += ", " + num(100.0 * double(texels_unseen) / double(texels_surface)) + "% unseen";
+    for (const std::string& n : notes) s += "; " + n;
+    return s;
+}
+
+std::string TextureReport::json() const {
+    std::string j = "{\"width\": " + std::to_string(atlas_width_px) +
+                    ", \"height\": " + std::to_string(atlas_height_px) + ", \"charts\": " + std::to_string(charts) +
+                    ", \"texel_mm\": " + num(texel_mm) + ", \"texels\": " + std::to_string(texels_surface) +
+                    ", \"unseen\": " + std::to_string(texels_unseen) + ", \"views\": " + std::to_string(views_given) +
+                    ", \"views_used\": " + std::to_string(views_used) +
+                    ", \"views_dark\": " + std::to_string(views_dark) + ", \"ms\": {\"charts\": " + num(ms_charts) +
+                    ", \"visibility\": " + num(ms_visibility) + ", \"bake\": " + num(ms_bake) + "}, \"notes\": [";
+    for (size_t i = 0; i < notes.size(); ++i) {
+        std::string e;
+        for (const char c : notes[i]) {
+            if (c == '"' || c == '\\') e += '\\';
+            if (static_cast<unsigned char>(c) >= 0x20) e += c;
+        }
+        j += (i ? ", \"" : "\"") + e + "\"";
+    }
+    return j + "]}";
+}
+
+StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<TextureView>& views,
+                                    const TextureParams& params, TexturedMesh& out) {
+    out = TexturedMesh{};
+    RETURN_IF_ERROR(params.validate());
+    if (views.empty()) {
+        return invalidArgument(
+            "no colour frames to texture from (the camera sent no colour): the model keeps its "
+            "vertex colours");
+    }
+    // Bad views are refused before anything is built; dark ones are left out.
+    std::vector<int> usable;
+    int dark = 0;
+    double darkest_luma = 255;
+    for (size_t i = 0; i < views.size(); ++i) {
+        const TextureView& v = views[i];
+        if (v.colour_bgr.type() != CV_8UC3 || !v.colour.valid() || v.colour_bgr.cols != v.colour.width_px ||
+            v.colour_bgr.rows != v.colour.height_px || v.colour_bgr.cols < 2 || v.colour_bgr.rows < 2) {
+            return invalidArgument("colour view " + std::to_string(i) + ": a " + std::to_string(v.colour_bgr.cols) +
+                                   "x" + std::to_string(v.colour_bgr.rows) +
+                                   " 8-bit BGR image is needed that matches its camera's " +
+                                   std::to_string(v.colour.width_px) + "x" + std::to_string(v.colour.height_px));
+        }
+        if (!v.T_colour_mesh.matrix().allFinite()) {
+            return invalidArgument("colour view " + std::to_string(i) + ": its pose is not finite");
+        }
+        const cv::Scalar m = cv::mean(v.colour_bgr);
+        const double luma = 0.114 * m[0] + 0.587 * m[1] + 0.299 * m[2];
+        if (luma < params.min_mean_luma) {
+            ++dark;
+            darkest_luma = std::min(darkest_luma, luma);
+            continue;
+        }
+        usable.push_back(static_cast<int>(i));
+    }
+    if (usable.empty()) {
+        return invalidArgument("every colour frame is dark (mean brightness " + num(darkest_luma) + " of 255, below " +
+                               num(params.min_mean_luma) +
+                               "): the model keeps its vertex colours; light the face and scan again");
+    }
+    auto charted = textureCharts(mesh, views, params, out);
+    if (!charted.isOk()) {
+        out = TexturedMesh{};
+        return charted.status();
+    }
+    TextureReport report = *charted;
+    // Every texel may be on the surface: its working state, the atlas and the masks, bounded before allocating.
+    const double atlas_texels = double(out.atlas_bgr.cols) * double(out.atlas_bgr.rows);
+    const double need = atlas_texels * double(sizeof(Texel) + sizeof(TopSamples) + sizeof(int) + 3 + 2);
+    if (need > double(params.max_memory_bytes)) {
+        const std::string size = std::to_string(out.atlas_bgr.cols) + "x" + std::to_string(out.atlas_bgr.rows);
+        out = TexturedMesh{};
+        return resourceExhausted("baking a " + size + " texture needs about " + std::to_string(int(need / (1 << 20))) +
+                                 " MiB, more than the " + std::to_string(params.max_memory_bytes >> 20) +
+                                 " MiB allowed: give a coarser texel (fewer texels per pixel) or allow more memory");
+    }
+    report.views_given = static_cast<int>(views.size());
+    report.views_dark = dark;
+    if (dark > 0) report.notes.push_back(std::to_string(dark) + " dark colour frames left out");
+    const IndexedMesh& m = out.mesh;
+    const std::vector<Eigen::Vector3f> normals = m.hasNormals() ? m.normals : vertexNormals(m);
+    const int width = out.atlas_bgr.cols, height = out.atlas_bgr.rows;
+
+    // The texels: rasterised in UV space (texel centres), position and normal interpolated.
+    auto t0 = std::chrono::steady_clock::now();
+    cv::Mat owner(height, width, CV_32S, cv::Scalar(-1));
+    std::vector<Texel> texels;
+    for (const Triangle& t : m.triangles) {
+        const Eigen::Vector2f scale(static_cast<float>(width), static_cast<float>(height));
+        const Eigen::Vector2f half(0.5f, 0.5f);
+        const Eigen::Vector2f a = out.uv[t[0]].cwiseProduct(scale) - half, b = out.uv[t[1]].cwiseProduct(scale) - half,
+                              c = out.uv[t[2]].cwiseProduct(scale) - half;
+        rasterise(a, b, c, width, height, [&](int x, int y, float w0, float w1, float w2) {
+            int& o = owner.at<int>(y, x);
+            if (o >= 0) return;
+            o = static_cast<int>(texels.size());
+            Texel tx;
+            tx.x = x, tx.y = y;
+            tx.p_m = w0 * m.positions_m[t[0]] + w1 * m.positions_m[t[1]] + w2 * m.positions_m[t[2]];
+            tx.normal = (w0 * normals[t[0]] + w1 * normals[t[1]] + w2 * normals[t[2]]).normalized();
+            tx.vertex_bgr = Eigen::Vector3f(128, 128, 128);
+            if (m.hasColours()) {
+                tx.vertex_bgr.setZero();
+                const float w[3] = {w0, w1, w2};
+                for (int k = 0; k < 3; ++k) {
+                    const Rgb8& rgb = m.colours_rgb[t[k]];
+                    tx.vertex_bgr += w[k] * Eigen::Vector3f(rgb[2], rgb[1], rgb[0]);
+                }
+            }
+            texels.push_back(tx);
+        });
+    }
+    report.texels_surface = texels.size();
+
+    // Visibility: each usable view's z-buffer of the mesh, its edges and its sharpness.
+    std::vector<ViewDepth> depth(views.size());
+    parallelFor(0, static_cast<int>(usable.size()), [&](int lo, int hi) {
+        for (int i = lo; i < hi; ++i) depth[static_cast<size_t>(usable[i])] = viewDepth(mesh, views[usable[i]], params);
+    });
+    float sharpest = 0;
+    for (const int v : usable) sharpest = std::max(sharpest, depth[static_cast<size_t>(v)].focus);
+    for (const int v : usable) {
+        ViewDepth& d = depth[static_cast<size_t>(v)];
+        d.focus = sharpest > 0 ? std::clamp(d.focus / sharpest, 0.05f, 1.0f) : 1.0f;
+    }
+    report.ms_visibility = msSince(t0);
+
+    // Each texel's best views.
+    t0 = std::chrono::steady_clock::now();
+    std::vector<TopSamples> samples(texels.size());
+    parallelFor(0, static_cast<int>(texels.size()), [&](int lo, int hi) {
+        for (int i = lo; i < hi; ++i) {
+            const Texel& tx = texels[static_cast<size_t>(i)];
+            TopSamples& top = samples[static_cast<size_t>(i)];
+            for (const int v : usable) {
+                const TextureView& view = views[static_cast<size_t>(v)];
+                const ViewDepth& d = depth[static_cast<size_t>(v)];
+                const Eigen::Vector3f p_c = view.T_colour_mesh * tx.p_m;
+                if (p_c.z() <= 1e-3f) continue;
+                const Eigen::Vector2f px = view.colour.project(p_c);
+                int u = 0, w = 0;
+                if (!view.colour.nearestPixel(px, u, w)) continue;
+                if (p_c.z() > d.z_m.at<float>(w, u) + params.occlusion_m) continue;  // hidden from this view
+                const float cos_view = -(view.T_colour_mesh.linear() * tx.normal).dot(p_c.normalized());
+                if (cos_view < params.min_view_cos) continue;
+                const float edge_w = params.edge_band_px > 0
+                                         ? std::clamp(d.edge_dist.at<float>(w, u) / params.edge_band_px, 0.02f, 1.0f)
+                                         : 1.0f;
+                // cos^2: foreshortening; 1/z^2: pixels per area of surface; scaled so that 1 m is 1.
+                const float base = cos_view * cos_view / (p_c.z() * p_c.z()) * edge_w * d.focus;
+                const float weight = std::pow(base, params.weight_power);
+                if (!(weight > 0)) continue;
+                // Insert into the top list, kept sorted by weight.
+                int slot = kTopViews;
+                while (slot > 0 && (top[static_cast<size_t>(slot - 1)].view < 0 ||
+                                    top[static_cast<size_t>(slot - 1)].weight < weight))
+                    --slot;
+                if (slot >= kTopViews) continue;
+                for (int s = kTopViews - 1; s > slot; --s)
+                    top[static_cast<size_t>(s)] = top[static_cast<size_t>(s - 1)];
+                top[static_cast<size_t>(slot)] = Sample{v, weight, bilinear(view.colour_bgr, px.x(), px.y())};
+            }
+        }
+    });
+
+    // Exposure: per-view, per-channel gains that match each view to what the other views saw of the same texels
+    // (leave-one-out: a view that dominates its texels would otherwise match itself), a few rounds.
+    std::vector<Eigen::Vector3f> gains(views.size(), Eigen::Vector3f::Ones());
+    if (params.even_exposure && usable.size() > 1) {
+        for (int round = 0; round < 3; ++round) {
+            std::vector<Eigen::Vector3d> num_sum(views.size(), Eigen::Vector3d::Zero()),
+                den_sum(views.size(), Eigen::Vector3d::Zero());
+            for (const TopSamples& s : samples) {
+                if (s[1].view < 0) continue;  // only texels that views share
+                for (const Sample& v : s) {
+                    if (v.view < 0) break;
+                    Eigen::Vector3f others = Eigen::Vector3f::Zero();
+                    float w_others = 0;
+                    for (const Sample& o : s) {
+                        if (o.view < 0) break;
+                        if (o.view == v.view) continue;
+                        others += o.weight * gains[static_cast<size_t>(o.view)].cwiseProduct(o.bgr);
+                        w_others += o.weight;
+                    }
+                    if (!(w_others > 0)) continue;
+                    // Where both are well seen: the lesser of the two weights, flattened (every view counts).
+                    const double w = std::sqrt(static_cast<double>(std::min(v.weight, w_others)));
+                    num_sum[static_cast<size_t>(v.view)] += w * (others / w_others).cast<double>();
+                    den_sum[static_cast<size_t>(v.view)] += w * v.bgr.cast<double>();
+                }
+            }
+            std::vector<float> per_channel[3];
+            for (const int v : usable) {
+                const size_t i = static_cast<size_t>(v);
+                for (int c = 0; c < 3; ++c) {
+                    if (den_sum[i][c] > 1e-6)
+                        gains[i][c] = std::clamp(float(num_sum[i][c] / den_sum[i][c]), 0.5f, 2.0f);
+                    per_channel[c].push_back(gains[i][c]);
+                }
+            }
+            // Most views are exposed alike: the median gain is 1, and the odd view is brought to the others.
+            for (int c = 0; c < 3; ++c) {
+                std::vector<float>& g = per_channel[c];
+                std::nth_element(g.begin(), g.begin() + g.size() / 2, g.end());
+                const float median = g[g.size() / 2];
+                if (median > 0) {
+                    for (Eigen::Vector3f& gain : gains) gain[c] /= median;
+                }
+            }
+        }
+    }
+    report.gains = gains;
+
+    // The atlas: blended texels, vertex colours where no view saw, then padding.
+    cv::Mat filled(height, width, CV_8U, cv::Scalar(0));
+    std::vector<uint8_t> painted_by(views.size(), 0);
+    for (size_t i = 0; i < texels.size(); ++i) {
+        Eigen::Vector3f bgr;
+        if (!blend(samples[i], gains, bgr)) {
+            bgr = texels[i].vertex_bgr;
+            ++report.texels_unseen;
+        } else {
+            for (const Sample& s : samples[i]) {
+                if (s.view >= 0) painted_by[static_cast<size_t>(s.view)] = 1;
+            }
+        }
+        cv::Vec3b& px = out.atlas_bgr.at<cv::Vec3b>(texels[i].y, texels[i].x);
+        for (int c = 0; c < 3; ++c) px[c] = cv::saturate_cast<uint8_t>(bgr[c]);
+        filled.at<uint8_t>(texels[i].y, texels[i].x) = 1;
+    }
+    for (const uint8_t p : painted_by) report.views_used += p;
+    for (int pass = 0; pass < params.padding_px + 1; ++pass) {
+        cv::Mat next = filled.clone();
+        for (int y = 0; y < height; ++y) {
+            for (int x = 0; x < width; ++x) {
+                if (filled.at<uint8_t>(y, x)) continue;
+                Eigen::Vector3f sum = Eigen::Vector3f::Zero();
+                int count = 0;
+                for (int dy = -1; dy <= 1; ++dy) {
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int nx = x + dx, ny = y + dy;
+                        if (nx < 0 || ny < 0 || nx >= width || ny >= height || !filled.at<uint8_t>(ny, nx)) continue;
+                        const cv::Vec3b& c = out.atlas_bgr.at<cv::Vec3b>(ny, nx);
+                        sum += Eigen::Vector3f(c[0], c[1], c[2]);
+                        ++count;
+                    }
+                }
+                if (count == 0) continue;
+                sum /= static_cast<float>(count);
+                out.atlas_bgr.at<cv::Vec3b>(y, x) =
+                    cv::Vec3b(cv::saturate_cast<uint8_t>(sum[0]), cv::saturate_cast<uint8_t>(sum[1]),
+                              cv::saturate_cast<uint8_t>(sum[2]));
+                next.at<uint8_t>(y, x) = 1;
+            }
+        }
+        filled = next;
+    }
+    report.ms_bake = msSince(t0);
+    if (report.texels_surface > 0 && report.texels_unseen * 5 > report.texels_surface) {
+        report.notes.push_back(num(100.0 * double(report.texels_unseen) / double(report.texels_surface)) +
+                               "% of the surface was seen by no colour frame: painted from the vertex colours");
+    }
+    return report;
+}
+
+}  // namespace facescan::recon
