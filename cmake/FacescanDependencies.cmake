@@ -52,6 +52,10 @@ facescan_require(TurboJpeg_FOUND "libjpeg-turbo (TurboJPEG API)" "libturbojpeg0-
 pkg_check_modules(Jpeg QUIET IMPORTED_TARGET libjpeg)
 facescan_require(Jpeg_FOUND "libjpeg-turbo (libjpeg API)" "libjpeg62-turbo-dev")
 
+# Recordings of today's depth cameras: Azure Kinect / Orbbec Femto .mkv files, demuxed by FFmpeg's libavformat.
+pkg_check_modules(AvFormat QUIET IMPORTED_TARGET libavformat libavcodec libavutil)
+facescan_require(AvFormat_FOUND "FFmpeg's libavformat" "libavformat-dev libavcodec-dev libavutil-dev")
+
 find_package(Threads REQUIRED)
 
 # The client's GLB export (glTF 2.0 binary) and the web viewer's HTTP and WebSocket server.

@@ -362,7 +362,7 @@ int runRecon(const std::vector<std::string>& args) {
                 "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply] [--observed-tol-m M]\n"
                 "       [--volume-m M] [--trunc-m M] [--mask input|pipeline|none] [--twin] [--serial] [--verbose]\n"
                 "       [--model-level L] [--cast-every N] [--fuse-every N] [--unfused-level L] [--json]\n"
-                "SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR\n"
+                "SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR | mkv:FILE (Azure Kinect, Femto recording)\n"
                 "Synthetic input also reports robustness figures (tracked share, re-acquisition,\n"
                 "wrong poses, foreign surface). --twin (implies --gt-accuracy) also scans the same motion without the\n"
                 "scenario's event (the gap's subject turns in view; no occluder) and prints the difference of means.\n"
