@@ -49,6 +49,8 @@ options:
                           tum:DIR                a TUM RGB-D folder
                           mkv:FILE               an Azure Kinect or Orbbec Femto recording (.mkv): depth,
                                                  MJPEG colour, the calibration; undistorted to a pinhole
+                          bag:FILE               an Intel RealSense recording (.bag, librealsense's ROS
+                                                 layout): depth, colour, camera_info, extrinsics
                           synthetic[:k=v,...]    the virtual Kinect filming a head scan; keys: scenario
                                                  (gentle|wide|chin|gap|occluder), frames, distance (m),
                                                  yaw, pitch (deg), period (frames), seed, noise (0/1),
@@ -65,7 +67,7 @@ options:
                         frame lost (recordings); HZ: a fixed rate
   --jpeg-quality Q      colour JPEG quality 1-100 (default 90)
   --no-colour           send depth only
-  --preload             read the whole recording into memory first (tum:, oni:, mkv:, synthetic), then stream it at
+  --preload             read the whole recording into memory first (tum:, oni:, mkv:, bag:, synthetic), then stream it at
                         its rate: the agent then costs only its encoding, as on a capture PC of its own
                         (memory: about 1.5 MB per VGA frame with colour)
   --hold-until FILE     after opening (and preloading) the source, wait until FILE exists before announcing the

@@ -200,8 +200,9 @@ Status loadSequence(const std::string& in, int frames, Sequence& seq) {
     if (in.rfind("synthetic", 0) == 0) return loadSynthetic(in.size() > 10 ? in.substr(10) : "", frames, seq);
     if (in.rfind("tum:", 0) == 0) return loadTum(in.substr(4), frames, seq);
     if (in.rfind("7scenes:", 0) == 0) return load7Scenes(in.substr(8), frames, seq);
-    if (in.rfind("mkv:", 0) == 0) return loadRecording(in, frames, seq);
-    return invalidArgument("unknown --input '" + in + "' (synthetic[:k=v,...], tum:DIR, 7scenes:DIR, mkv:FILE)");
+    if (in.rfind("mkv:", 0) == 0 || in.rfind("bag:", 0) == 0) return loadRecording(in, frames, seq);
+    return invalidArgument("unknown --input '" + in +
+                           "' (synthetic[:k=v,...], tum:DIR, 7scenes:DIR, mkv:FILE, bag:FILE)");
 }
 
 }  // namespace facescan::bench

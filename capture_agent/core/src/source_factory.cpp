@@ -21,9 +21,13 @@ StatusOr<std::unique_ptr<FrameSource>> openSource(const std::string& spec, const
         if (rest.empty()) return invalidArgument("mkv: needs a file, e.g. --source mkv:scan.mkv (Azure Kinect, Femto)");
         return openMkvSource(rest, options);
     }
+    if (kind == "bag") {
+        if (rest.empty()) return invalidArgument("bag: needs a file, e.g. --source bag:scan.bag (RealSense)");
+        return openBagSource(rest, options);
+    }
     if (kind == "synthetic") return openSyntheticSource(rest, options);
     return invalidArgument("unknown source '" + spec +
-                           "': use openni2[:URI], oni:FILE, tum:DIR, mkv:FILE or synthetic[:key=value,...]");
+                           "': use openni2[:URI], oni:FILE, tum:DIR, mkv:FILE, bag:FILE or synthetic[:key=value,...]");
 }
 
 }  // namespace facescan::capture

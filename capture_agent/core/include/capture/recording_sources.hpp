@@ -19,6 +19,10 @@ namespace facescan::capture {
 // time.
 StatusOr<std::unique_ptr<FrameSource>> openMkvSource(const std::string& path, const SourceOptions& options);
 
+// bag:FILE -- an Intel RealSense recording (ROS 1 bag in librealsense's layout): depth (16UC1) and colour
+// (rgb8/bgr8) images, their camera_info, the depth units and the depth-to-colour extrinsics.
+StatusOr<std::unique_ptr<FrameSource>> openBagSource(const std::string& path, const SourceOptions& options);
+
 // One camera of an Azure Kinect calibration at the resolution it was recorded in: pinhole intrinsics (OpenCV
 // convention, pixel centres at integers) and the Brown-Conrady distortion in OpenCV's rational-model order
 // (k1, k2, p1, p2, k3, k4, k5, k6).
