@@ -75,6 +75,8 @@ options:
   --depth-codec NAME    lossless depth codec: packed-delta-zstd (default), delta-zstd, rvl-zstd, rvl, zstd,
                         raw16, png (`facescan-bench codecs` compares them on your frames)
   --tum-depth-scale S   raw depth units per metre of tum: sources (default 5000; Kinect millimetres: 1000)
+  --depth-scale S       raw depth units per metre of mkv: and bag: recordings, over what the recording says
+                        (mkv: millimetres, 1000; bag: its Depth Units option)
   --wait-for-server S   give up when no server takes the session within S seconds (default: wait forever)
   --keep-frames N       recording frames kept until the owning server confirms them (replicated to its
                         standby or on its disk), to resend after a takeover; when full, the agent waits
@@ -175,6 +177,11 @@ int main(int argc, char** argv) {
             const float per_m = std::strtof(text.c_str(), nullptr);
             if (!(per_m > 0)) return usageError("--tum-depth-scale takes raw units per metre, e.g. 5000");
             options.source_options.tum_depth_units_m = 1.0f / per_m;
+        } else if (arg == "--depth-scale") {
+            const float per_m = std::strtof(text.c_str(), nullptr);
+            if (!(per_m >= 100 && per_m <= 1e6))
+                return usageError("--depth-scale takes raw units per metre, e.g. 1000");
+            options.source_options.recording_depth_units_m = 1.0f / per_m;
         } else if (arg == "--wait-for-server") {
             options.wait_for_server_s = std::strtof(text.c_str(), nullptr);
         } else if (arg == "--keep-frames") {

@@ -91,7 +91,8 @@ TEST(RecordingEndToEnd, RealSenseBag) {
     fs::remove(bag);
 }
 
-// The agent checks its first frame against the camera before sending anything: wrong units stop it with one line.
+// The agent checks its first frame against the camera before sending anything: wrong units stop it with one line,
+// which says how to give the right ones; given, the recording is scanned.
 TEST(RecordingEndToEnd, DepthInWrongUnitsIsStoppedWithOneLine) {
     const std::string domain = std::to_string(facescan::testing::privateDomain(12));
     const fs::path dir = fs::temp_directory_path() / ("facescan_units-" + std::to_string(::getpid()));
@@ -115,8 +116,17 @@ TEST(RecordingEndToEnd, DepthInWrongUnitsIsStoppedWithOneLine) {
              at = agent.out.find("depth units look wrong", at + 1))
             ++lines_saying;
         EXPECT_EQ(lines_saying, 1u) << agent.out;
+        EXPECT_TRUE(contains(agent.out, "--depth-scale")) << "says what to do: " << agent.out;
         fs::remove(bag);
     }
+    // What the line says to do: the millimetres of the second bag, given as such, are scanned.
+    const fs::path bag = writeBag("near-fixed", 3, near);
+    const CommandRun fixed = facescan::testing::runCommand(
+        "timeout 60 " + std::string(FACESCAN_AGENT_BIN) + " --profile loopback --domain " + domain +
+        " --wait-for-server 30 --depth-scale 1000 --source bag:" + bag.string() + " --rate max");
+    EXPECT_EQ(fixed.exit_code, 0) << fixed.out;
+    EXPECT_FALSE(contains(fixed.out, "depth units look wrong")) << fixed.out;
+    fs::remove(bag);
     fs::remove_all(dir);
 }
 

@@ -241,6 +241,7 @@ StatusOr<std::unique_ptr<FrameSource>> openBagSource(const std::string& path, co
                                 " m, outside (1e-6, 0.01]: the option is damaged");
             }
         }
+        if (options.recording_depth_units_m > 0) info.depth_units_m = options.recording_depth_units_m;
         info.has_colour = options.colour && !streams.colour.empty() && !streams.colour_info.empty();
         info.colour_registered = false;
         if (info.has_colour) {

@@ -249,6 +249,7 @@ StatusOr<std::unique_ptr<FrameSource>> openMkvSource(const std::string& path, co
     SourceInfo info;
     info.intrinsics = calibration->depth.intrinsics;
     info.depth_units_m = 0.001f;  // b16g depth is in millimetres
+    if (options.recording_depth_units_m > 0) info.depth_units_m = options.recording_depth_units_m;
     info.has_colour = colour_stream >= 0;
     info.colour_registered = false;
     if (info.has_colour) {
