@@ -285,6 +285,29 @@ TEST_F(MkvSource, ARecordingWithoutItsCalibrationIsRefused) {
     EXPECT_NE(source.status().message().find("no calibration.json"), std::string::npos) << source.status().message();
 }
 
+TEST_F(MkvSource, ColourOfAnotherFormatReplaysDepthOnlyAndSaysSo) {
+    FACESCAN_REQUIRE_DATA(data, "azure_kinect_mkv");
+    std::vector<uint8_t> bytes = readFile(data / "recording.mkv");
+    const Element tracks = find(segmentChildren(bytes), kTracks);
+    const std::string mjpeg = "MJPG";  // the COLOR track's FourCC (a VFW bitmap header)
+    const auto at = std::search(bytes.begin() + static_cast<long>(tracks.body),
+                                bytes.begin() + static_cast<long>(tracks.end), mjpeg.begin(), mjpeg.end());
+    ASSERT_NE(at, bytes.begin() + static_cast<long>(tracks.end));
+    std::copy_n(std::string("NV12").begin(), 4, at);  // as the recorder writes NV12 colour
+    const fs::path other = dir_ / "other-colour.mkv";
+    writeFile(other, bytes);
+    auto source = openMkvSource(other.string(), {});
+    ASSERT_TRUE(source.isOk()) << source.status().toString();
+    EXPECT_FALSE((*source)->info().has_colour);
+    EXPECT_NE((*source)->info().description.find("depth only"), std::string::npos) << (*source)->info().description;
+    CapturedFrame frame;
+    auto got = (*source)->next(frame);
+    ASSERT_TRUE(got.isOk()) << got.status().toString();
+    EXPECT_TRUE(*got);
+    EXPECT_EQ(frame.depth_raw.cols, 640);
+    EXPECT_TRUE(frame.colour_bgr.empty());
+}
+
 TEST_F(MkvSource, NotARecordingAtAll) {
     const fs::path text = dir_ / "notes.mkv";
     std::ofstream(text) << "these are notes, not a recording\n";

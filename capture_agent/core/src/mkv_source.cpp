@@ -231,11 +231,15 @@ StatusOr<std::unique_ptr<FrameSource>> openMkvSource(const std::string& path, co
     if (dpar->codec_id != AV_CODEC_ID_RAWVIDEO || dpar->codec_tag != MKTAG('b', '1', '6', 'g')) {
         return dataLoss(what + "has a DEPTH track that is not 16-bit raw depth (b16g): an unknown layout");
     }
-    if (colour_stream >= 0 &&
-        (!options.colour || format->streams[colour_stream]->codecpar->codec_id != AV_CODEC_ID_MJPEG)) {
-        // Other colour formats (YUY2, NV12, BGRA) are not decoded: replay depth only rather than refuse the scan.
+    std::string colour_note;
+    if (colour_stream >= 0 && options.colour &&
+        format->streams[colour_stream]->codecpar->codec_id != AV_CODEC_ID_MJPEG) {
+        // Other colour formats (YUY2, NV12, BGRA) are not decoded: replay depth only rather than refuse the scan,
+        // and say so where the source is described.
+        colour_note = " (colour not MJPG: depth only)";
         colour_stream = -1;
     }
+    if (!options.colour) colour_stream = -1;
     if (calibration_json.empty()) {
         return dataLoss(what +
                         "has no calibration.json attachment, so its cameras' intrinsics are unknown: "
@@ -265,7 +269,7 @@ StatusOr<std::unique_ptr<FrameSource>> openMkvSource(const std::string& path, co
     }
     info.is_recording = true;
     info.expected_frames = options.max_frames;  // Matroska does not count frames; 0 = unknown
-    info.description = "mkv:" + path;
+    info.description = "mkv:" + path + colour_note;
     if (const auto preset = recon::findSensorPreset("azure-kinect"); preset.isOk()) {
         // Femto Bolt and Mega carry the same time-of-flight sensor and write the same recordings.
         info.sensor = preset->sensor;
