@@ -13,6 +13,7 @@
 
 #include "capture/frame_source.hpp"
 #include "child_process.hpp"
+#include "matroska_edit.hpp"
 #include "realsense_bag.hpp"
 #include "run_command.hpp"
 #include "test_data.hpp"
@@ -73,6 +74,35 @@ void scanRecording(const std::string& source, const std::string& name, int frame
 TEST(RecordingEndToEnd, AzureKinectMkv) {
     FACESCAN_REQUIRE_DATA(data, "azure_kinect_mkv");
     scanRecording("mkv:" + (data / "recording.mkv").string(), "mkv", 1);
+}
+
+// A recording that breaks off after some frames: the agent stops with one line and the server still finishes the
+// scan with the frames it got (nothing already scanned is lost).
+TEST(RecordingEndToEnd, ACutShortRecordingKeepsWhatWasScanned) {
+    FACESCAN_REQUIRE_DATA(data, "azure_kinect_mkv");
+    namespace mk = facescan::testing::matroska;
+    // Five captures 200 ms apart, cut inside the fourth one's depth block: three whole frames, then the break.
+    std::vector<uint8_t> bytes = mk::repeated(mk::readFile(data / "recording.mkv"), 5, -1);
+    bytes.resize(bytes.size() - 1691600 - 1200000);
+    const std::string domain = std::to_string(facescan::testing::privateDomain(13));
+    const std::string session = "mkvcut-" + std::to_string(::getpid());
+    const std::string dds = " --profile loopback --domain " + domain;
+    const fs::path dir = fs::temp_directory_path() / ("facescan_" + session);
+    fs::create_directories(dir);
+    mk::writeFile(dir / "cut.mkv", bytes);
+    ChildProcess server(
+        {FACESCAN_SERVER_BIN, "--profile", "loopback", "--domain", domain, "--data-dir", (dir / "data").string()},
+        dir / "server.log");
+    const CommandRun agent = facescan::testing::runCommand(
+        "timeout 90 " + std::string(FACESCAN_AGENT_BIN) + dds + " --session " + session +
+        " --wait-for-server 30 --source mkv:" + (dir / "cut.mkv").string() + " --rate max");
+    EXPECT_NE(agent.exit_code, 0) << agent.out;
+    EXPECT_TRUE(contains(agent.out, "is cut short: it ends at 0.86 s of its 1.26 s")) << agent.out;
+    const CommandRun status = runCli("status " + session + dds);
+    EXPECT_EQ(status.exit_code, 0) << status.out << "\nserver:\n" << readText(dir / "server.log");
+    EXPECT_TRUE(contains(status.out, "FINISHED")) << status.out;
+    EXPECT_TRUE(contains(status.out, "3 received, 3 integrated")) << status.out;
+    fs::remove_all(dir);
 }
 
 // A RealSense bag of the synthetic Kinect filming the built-in head.
