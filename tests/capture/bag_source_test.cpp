@@ -106,6 +106,21 @@ TEST_F(BagSource, DepthOnlyAndMaxFrames) {
     EXPECT_EQ(frames, 3);
 }
 
+TEST_F(BagSource, ColourOfAnotherEncodingReplaysDepthOnlyAndSaysSo) {
+    RealSenseBagSpec spec;
+    spec.colour_encoding = "yuyv";
+    auto source = openBagSource(write("yuyv.bag", 2, spec).string(), {});
+    ASSERT_TRUE(source.isOk()) << source.status().toString();
+    EXPECT_FALSE((*source)->info().has_colour);
+    EXPECT_NE((*source)->info().description.find("colour yuyv is not rgb8/bgr8: depth only"), std::string::npos)
+        << (*source)->info().description;
+    CapturedFrame frame;
+    auto got = (*source)->next(frame);
+    ASSERT_TRUE(got.isOk()) << got.status().toString();
+    EXPECT_TRUE(*got);
+    EXPECT_TRUE(frame.colour_bgr.empty());
+}
+
 TEST_F(BagSource, ABagWithoutDepthOrItsCameraIsRefused) {
     RealSenseBagSpec no_depth;
     no_depth.depth_stream = false;

@@ -17,6 +17,7 @@ struct RealSenseBagSpec {
     float depth_units_m = 0.001f;  // the Depth Units option written
     float raw_per_mm = 1.0f;       // the recorded raw depth = the source's millimetres times this
     bool colour = true;
+    std::string colour_encoding = "rgb8";  // written as the encoding's name; the pixels are rgb8's either way
     bool depth_camera_info = true;
     bool depth_stream = true;
     recon::Pose T_colour_depth = recon::Pose::Identity();
@@ -86,7 +87,7 @@ inline void writeRealSenseBag(const std::string& path, capture::FrameSource& sou
             c.header.stamp = t;
             c.width = static_cast<uint32_t>(frame.colour_bgr.cols);
             c.height = static_cast<uint32_t>(frame.colour_bgr.rows);
-            c.encoding = "rgb8";
+            c.encoding = spec.colour_encoding;
             c.step = c.width * 3;
             c.data.resize(static_cast<size_t>(c.step) * c.height);
             for (int v = 0; v < frame.colour_bgr.rows; ++v) {

@@ -243,6 +243,7 @@ StatusOr<std::unique_ptr<FrameSource>> openBagSource(const std::string& path, co
         }
         if (options.recording_depth_units_m > 0) info.depth_units_m = options.recording_depth_units_m;
         info.has_colour = options.colour && !streams.colour.empty() && !streams.colour_info.empty();
+        std::string colour_note;
         info.colour_registered = false;
         if (info.has_colour) {
             const auto colour_info = firstMessage<CameraInfo>(*bag, streams.colour_info);
@@ -250,6 +251,14 @@ StatusOr<std::unique_ptr<FrameSource>> openBagSource(const std::string& path, co
             auto colour_k = intrinsicsOf(**colour_info, streams.colour_info);
             if (!colour_k.isOk()) return dataLoss(what + colour_k.status().message());
             info.colour_intrinsics = *colour_k;
+            // Colour in another encoding (YUYV, a Bayer pattern) is not converted: replay depth only, and say so.
+            if (const auto first = firstMessage<Image>(*bag, streams.colour)) {
+                const std::string e((*first)->encoding.begin(), (*first)->encoding.end());
+                if (e != "rgb8" && e != "bgr8" && e != "rgba8" && e != "bgra8") {
+                    info.has_colour = false;
+                    colour_note = " (colour " + e + " is not rgb8/bgr8: depth only)";
+                }
+            }
             if (const auto tf = firstMessage<ros1::Transform>(*bag, streams.colour_tf)) {
                 const auto& q = (*tf)->rotation;
                 const auto& t = (*tf)->translation;
@@ -264,6 +273,10 @@ StatusOr<std::unique_ptr<FrameSource>> openBagSource(const std::string& path, co
                     Eigen::Vector3f(static_cast<float>(t.x), static_cast<float>(t.y), static_cast<float>(t.z));
             }
         }
+        if (!info.has_colour) {
+            info.colour_intrinsics = recon::Intrinsics{0, 0, 0.0f, 0.0f, 0.0f, 0.0f};
+            info.T_colour_depth = recon::Pose::Identity();
+        }
         rosbag::View depth_view(*bag, rosbag::TopicQuery(streams.depth));
         const int frames = static_cast<int>(depth_view.size());
         if (frames == 0) return dataLoss(what + "holds no depth frame");
@@ -271,7 +284,7 @@ StatusOr<std::unique_ptr<FrameSource>> openBagSource(const std::string& path, co
         info.rate_hz = frames > 1 && span_s > 0 ? static_cast<float>((frames - 1) / span_s) : 30.0f;
         info.is_recording = true;
         info.expected_frames = options.max_frames > 0 ? std::min(options.max_frames, frames) : frames;
-        info.description = "bag:" + path;
+        info.description = "bag:" + path + colour_note;
         if (const auto preset = recon::findSensorPreset("realsense-d415"); preset.isOk()) {
             info.sensor = preset->sensor;  // the D400 family's active stereo
             info.sensor_known = true;
