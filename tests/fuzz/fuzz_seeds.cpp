@@ -6,6 +6,7 @@
 #include <fstream>
 #include <string>
 
+#include "capture/ros_messages.hpp"
 #include "sample_replica.hpp"
 #include "test_data.hpp"
 #include "wire/cluster_codec.hpp"
@@ -164,6 +165,46 @@ int main(int argc, char** argv) {
         in.read(reinterpret_cast<char*>(head.data()), static_cast<std::streamsize>(head.size()));
         head.resize(static_cast<size_t>(in.gcount()));
         writeFile(out / "mkv" / "azure_kinect_head.mkv", head);
+        ++written;
+    }
+    // The bag reader: a tiny RealSense bag (16x12 depth and colour, two frames) in librealsense's layout.
+    fs::create_directories(out / "bag");
+    {
+        namespace ros1 = facescan::capture::ros1;
+        rosbag::Bag bag;
+        bag.open((out / "bag" / "realsense_tiny.bag").string(), rosbag::bagmode::Write);
+        const std::string depth = "/device_0/sensor_0/Depth_0", colour = "/device_0/sensor_1/Color_0";
+        ros1::CameraInfo info;
+        info.width = 16;
+        info.height = 12;
+        info.K = {14.0, 0, 7.5, 0, 14.0, 5.5, 0, 0, 1};
+        bag.write(depth + "/info/camera_info", ros::Time(0, 1), info);
+        bag.write(colour + "/info/camera_info", ros::Time(0, 1), info);
+        ros1::Transform tf;
+        tf.rotation.w = 1;
+        tf.translation.x = 0.015;
+        bag.write(colour + "/tf/0", ros::Time(0, 1), tf);
+        ros1::Float32 units;
+        units.data = 0.001f;
+        bag.write("/device_0/sensor_0/option/Depth Units/value", ros::Time(0, 1), units);
+        const cv::Mat dome = depthFrames().front();
+        for (uint32_t n = 0; n < 2; ++n) {
+            const ros::Time t(1, n * 33333333);
+            ros1::Image d;
+            d.header.stamp = t;
+            d.width = 16;
+            d.height = 12;
+            d.encoding = "16UC1";
+            d.step = 32;
+            d.data.assign(dome.data, dome.data + dome.total() * 2);
+            bag.write(depth + "/image/data", t, d);
+            ros1::Image c = d;
+            c.encoding = "rgb8";
+            c.step = 48;
+            c.data.assign(16 * 12 * 3, static_cast<uint8_t>(90 + n));
+            bag.write(colour + "/image/data", t, c);
+        }
+        bag.close();
         ++written;
     }
     std::printf("wrote %d seeds under %s\n", written, out.c_str());
