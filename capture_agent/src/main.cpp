@@ -67,9 +67,9 @@ options:
                         frame lost (recordings); HZ: a fixed rate
   --jpeg-quality Q      colour JPEG quality 1-100 (default 90)
   --no-colour           send depth only
-  --preload             read the whole recording into memory first (tum:, oni:, mkv:, bag:, synthetic), then stream it at
-                        its rate: the agent then costs only its encoding, as on a capture PC of its own
-                        (memory: about 1.5 MB per VGA frame with colour)
+  --preload             read the whole recording into memory first (tum:, oni:, mkv:, bag:, synthetic), then
+                        stream it at its rate: the agent then costs only its encoding, as on a capture PC of its
+                        own (memory: about 1.5 MB per VGA frame with colour)
   --hold-until FILE     after opening (and preloading) the source, wait until FILE exists before announcing the
                         session: several agents then start streaming together (tests/bench/server_realtime.sh)
   --depth-codec NAME    lossless depth codec: packed-delta-zstd (default), delta-zstd, rvl-zstd, rvl, zstd,
