@@ -8,9 +8,12 @@
 // D400 depth is computed on rectified stereo images and the colour cameras' calibrations are (near) distortion-free,
 // so the recorded K is used as a pinhole (the thesis' projection, eq. 2.1) and the distortion coefficients are not
 // applied. Colour is paired with the depth frame nearest in time.
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <deque>
 #include <fstream>
+#include <functional>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 #include <regex>
@@ -198,9 +201,98 @@ class BagSource final : public FrameSource {
     uint32_t index_ = 0;
 };
 
+// ROS's bag library trusts the lengths and positions it reads (a damaged file makes it read past its buffers), so
+// the record structure of a ROS bag 2.0 file is checked first: every record's header and data, and every header
+// field, lie inside the file (inside its record), a connection record's data is a list of fields too, the records
+// inside uncompressed chunks are checked the same way, and the positions the bag header and chunk infos point at
+// (index_pos, chunk_pos) are starts of records. Compressed chunks' insides are left to the library.
+Status checkBagStructure(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    const std::vector<char> d((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const auto u32 = [&](size_t at) {
+        uint32_t v = 0;
+        std::memcpy(&v, d.data() + at, 4);  // little-endian on the machines facescan runs on
+        return static_cast<size_t>(v);
+    };
+    std::vector<size_t> starts, targets;  // top-level record starts; positions the file points at
+    std::vector<int> ops;                 // the op of each top-level record
+    size_t index_pos = 0, conn_count = 0, chunk_count = 0;
+    // A list of fields "len name=value" filling [at, end); calls `field(name, value)` on each.
+    const auto fields = [&](size_t at, size_t end,
+                            const std::function<void(const std::string&, const std::string&)>& field) {
+        while (at < end) {
+            if (end - at < 4 || u32(at) > end - at - 4) return false;
+            const std::string text(d.data() + at + 4, u32(at));
+            const size_t eq = text.find('=');
+            if (eq == std::string::npos) return false;
+            field(text.substr(0, eq), text.substr(eq + 1));
+            at += 4 + u32(at);
+        }
+        return true;
+    };
+    const auto position = [](const std::string& value) {
+        uint64_t v = 0;
+        std::memcpy(&v, value.data(), std::min<size_t>(8, value.size()));
+        return static_cast<size_t>(v);
+    };
+    const std::function<bool(size_t, size_t, int)> records = [&](size_t at, size_t end, int depth) {
+        while (at < end) {
+            if (depth == 0) starts.push_back(at);
+            if (end - at < 4 || u32(at) > end - at - 4) return false;
+            const size_t header = at + 4, header_end = header + u32(at);
+            int op = -1;
+            bool compressed = false;
+            const bool ok = fields(header, header_end, [&](const std::string& name, const std::string& value) {
+                if (name == "op" && value.size() == 1) op = static_cast<unsigned char>(value[0]);
+                if (name == "compression") compressed = value != "none";
+                if ((name == "index_pos" || name == "chunk_pos") && value.size() == 8) {
+                    targets.push_back(position(value));
+                }
+                if (depth == 0 && name == "index_pos" && value.size() == 8) index_pos = position(value);
+                if (depth == 0 && name == "conn_count" && value.size() == 4) conn_count = position(value);
+                if (depth == 0 && name == "chunk_count" && value.size() == 4) chunk_count = position(value);
+            });
+            if (!ok) return false;
+            if (depth == 0) ops.push_back(op);
+            if (end - header_end < 4 || u32(header_end) > end - header_end - 4) return false;
+            const size_t data = header_end + 4, data_end = data + u32(header_end);
+            if (op == 0x05 && !compressed && depth == 0 && !records(data, data_end, 1)) return false;
+            if (op == 0x07 && !fields(data, data_end, [](const std::string&, const std::string&) {})) return false;
+            at = data_end;
+        }
+        return true;
+    };
+    bool ok = d.size() >= 13 && records(13, d.size(), 0);
+    for (const size_t target : targets) {
+        if (ok && !std::binary_search(starts.begin(), starts.end(), target)) ok = false;
+    }
+    if (ok) {
+        // From index_pos on the library reads conn_count connection records, then chunk_count chunk infos.
+        const auto first = std::lower_bound(starts.begin(), starts.end(), index_pos);
+        const auto from = static_cast<size_t>(first - starts.begin());
+        size_t conns = 0, infos = 0;
+        for (size_t i = from; i < ops.size(); ++i) {
+            conns += ops[i] == 0x07 ? 1 : 0;
+            infos += ops[i] == 0x06 ? 1 : 0;
+        }
+        if (index_pos == 0 || conns < conn_count || infos < chunk_count) ok = false;
+    }
+    if (!ok) {
+        return dataLoss("'" + path +
+                        "' is cut short or damaged: its records do not fit together; copy the whole "
+                        "recording again");
+    }
+    return Status::ok();
+}
+
 }  // namespace
 
 StatusOr<std::unique_ptr<FrameSource>> openBagSource(const std::string& path, const SourceOptions& options) {
+    {
+        char magic[13] = {};
+        std::ifstream(path, std::ios::binary).read(magic, sizeof(magic));
+        if (std::string(magic, sizeof(magic)) == "#ROSBAG V2.0\n") RETURN_IF_ERROR(checkBagStructure(path));
+    }
     auto bag = std::make_unique<rosbag::Bag>();
     try {
         bag->open(path, rosbag::bagmode::Read);
