@@ -52,6 +52,37 @@ facescan_require(TurboJpeg_FOUND "libjpeg-turbo (TurboJPEG API)" "libturbojpeg0-
 pkg_check_modules(Jpeg QUIET IMPORTED_TARGET libjpeg)
 facescan_require(Jpeg_FOUND "libjpeg-turbo (libjpeg API)" "libjpeg62-turbo-dev")
 
+# Recordings of today's depth cameras: Azure Kinect / Orbbec Femto .mkv files, demuxed by FFmpeg's libavformat.
+pkg_check_modules(AvFormat QUIET IMPORTED_TARGET libavformat libavcodec libavutil)
+facescan_require(AvFormat_FOUND "FFmpeg's libavformat" "libavformat-dev libavcodec-dev libavutil-dev")
+
+# Intel RealSense .bag recordings: ROS 1 bags, read with ROS's rosbag storage library. Debian's rosbag_storage.pc
+# requires pluginlib's, which Debian does not ship, so the headers and libraries are found directly.
+find_path(ROSBAG_INCLUDE_DIR rosbag/bag.h)
+find_path(SENSOR_MSGS_INCLUDE_DIR sensor_msgs/Image.h)
+facescan_require(ROSBAG_INCLUDE_DIR "rosbag storage (ROS 1 bags)" "librosbag-storage-dev")
+facescan_require(SENSOR_MSGS_INCLUDE_DIR "ROS sensor_msgs" "libsensor-msgs-dev libgeometry-msgs-dev libstd-msgs-dev")
+# rosbag/bag.h includes pluginlib (for its encryption plugins), which includes class_loader and ROS 2's utilities;
+# Debian installs each of these headers one folder down (/usr/include/NAME/NAME/...).
+set(ROSBAG_EXTRA_INCLUDE_DIRS "")
+foreach(name pluginlib class_loader ament_index_cpp rcpputils rcutils)
+    if(EXISTS /usr/include/${name}/${name})
+        list(APPEND ROSBAG_EXTRA_INCLUDE_DIRS /usr/include/${name})
+    elseif(NOT EXISTS /usr/include/${name})
+        facescan_require(FALSE "${name}'s headers (needed by rosbag storage)" "librosbag-storage-dev")
+    endif()
+endforeach()
+if(NOT TARGET facescan::rosbag)
+    add_library(facescan::rosbag INTERFACE IMPORTED)
+    foreach(lib rosbag_storage roscpp_serialization rostime cpp_common console_bridge)
+        find_library(ROSBAG_LIB_${lib} ${lib})
+        facescan_require(ROSBAG_LIB_${lib} "lib${lib}" "librosbag-storage-dev")
+        target_link_libraries(facescan::rosbag INTERFACE ${ROSBAG_LIB_${lib}})
+    endforeach()
+    target_include_directories(facescan::rosbag SYSTEM INTERFACE ${ROSBAG_INCLUDE_DIR} ${SENSOR_MSGS_INCLUDE_DIR}
+                                                                   ${ROSBAG_EXTRA_INCLUDE_DIRS})
+endif()
+
 find_package(Threads REQUIRED)
 
 # The client's GLB export (glTF 2.0 binary) and the web viewer's HTTP and WebSocket server.

@@ -26,6 +26,11 @@ PACKAGES=(
     libopenni2-dev
     # codecs and nearest-neighbour search
     libzstd-dev libturbojpeg0-dev libjpeg62-turbo-dev libnanoflann-dev
+    # recordings of today's depth cameras: Azure Kinect / Orbbec Femto .mkv (Matroska, demuxed by FFmpeg's
+    # libavformat); Intel RealSense .bag (ROS 1 bags: ROS's own rosbag storage library and the C++ types of the
+    # messages librealsense records, sensor_msgs, geometry_msgs and std_msgs)
+    libavformat-dev libavcodec-dev libavutil-dev
+    librosbag-storage-dev libsensor-msgs-dev libgeometry-msgs-dev libstd-msgs-dev
     # DDS Security: identity checks (OpenSSL), the site script (openssl); the plugins come with cyclonedds-dev.
     # Also the viewer's HTTPS (linked: Debian's CivetWeb cannot load OpenSSL 3 itself) and its login hashes
     libssl-dev openssl

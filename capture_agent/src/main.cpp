@@ -49,6 +49,10 @@ options:
                           openni2[:URI]          the first OpenNI2 camera, or the one with this URI
                           oni:FILE               an OpenNI2 recording, every frame in order
                           tum:DIR                a TUM RGB-D folder
+                          mkv:FILE               an Azure Kinect or Orbbec Femto recording (.mkv): depth,
+                                                 MJPEG colour, the calibration; undistorted to a pinhole
+                          bag:FILE               an Intel RealSense recording (.bag, librealsense's ROS
+                                                 layout): depth, colour, camera_info, extrinsics
                           synthetic[:k=v,...]    the virtual Kinect filming a head scan; keys: scenario
                                                  (gentle|wide|chin|gap|occluder), frames, distance (m),
                                                  yaw, pitch (deg), period (frames), seed, noise (0/1),
@@ -65,14 +69,16 @@ options:
                         frame lost (recordings); HZ: a fixed rate
   --jpeg-quality Q      colour JPEG quality 1-100 (default 90)
   --no-colour           send depth only
-  --preload             read the whole recording into memory first (tum:, oni:, synthetic), then stream it at
-                        its rate: the agent then costs only its encoding, as on a capture PC of its own
-                        (memory: about 1.5 MB per VGA frame with colour)
+  --preload             read the whole recording into memory first (tum:, oni:, mkv:, bag:, synthetic), then
+                        stream it at its rate: the agent then costs only its encoding, as on a capture PC of its
+                        own (memory: about 1.5 MB per VGA frame with colour)
   --hold-until FILE     after opening (and preloading) the source, wait until FILE exists before announcing the
                         session: several agents then start streaming together (tests/bench/server_realtime.sh)
   --depth-codec NAME    lossless depth codec: packed-delta-zstd (default), delta-zstd, rvl-zstd, rvl, zstd,
                         raw16, png (`facescan-bench codecs` compares them on your frames)
   --tum-depth-scale S   raw depth units per metre of tum: sources (default 5000; Kinect millimetres: 1000)
+  --depth-scale S       raw depth units per metre of mkv: and bag: recordings, over what the recording says
+                        (mkv: millimetres, 1000; bag: its Depth Units option)
   --wait-for-server S   give up when no server takes the session within S seconds (default: wait forever)
   --keep-frames N       recording frames kept until the owning server confirms them (replicated to its
                         standby or on its disk), to resend after a takeover; when full, the agent waits
@@ -173,6 +179,11 @@ int main(int argc, char** argv) {
             const float per_m = std::strtof(text.c_str(), nullptr);
             if (!(per_m > 0)) return usageError("--tum-depth-scale takes raw units per metre, e.g. 5000");
             options.source_options.tum_depth_units_m = 1.0f / per_m;
+        } else if (arg == "--depth-scale") {
+            const float per_m = std::strtof(text.c_str(), nullptr);
+            if (!(per_m >= 100 && per_m <= 1e6))
+                return usageError("--depth-scale takes raw units per metre, e.g. 1000");
+            options.source_options.recording_depth_units_m = 1.0f / per_m;
         } else if (arg == "--wait-for-server") {
             options.wait_for_server_s = std::strtof(text.c_str(), nullptr);
         } else if (arg == "--keep-frames") {

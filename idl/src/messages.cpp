@@ -70,11 +70,12 @@ Status CameraInfoData::checkDepthUnits(const cv::Mat& depth_raw) const {
     const float median_m = static_cast<float>(median_raw) * depth_units_m;
     // A scene is never tenths of the sensor's near limit away, nor ten times its far limit.
     if (median_m < 0.1f * sensor.min_depth_m || median_m > 10.0f * sensor.max_depth_m) {
-        char text[320];
+        char text[512];
         std::snprintf(text, sizeof(text),
                       "depth units look wrong: the frame's median depth is %.4g m (raw %d x %g m), but '%s' "
-                      "measures %.2f-%.2f m; give the depth units of the source (e.g. --tum-depth-scale 1000 for "
-                      "millimetres) or the right --sensor",
+                      "measures %.2f-%.2f m; give the source's depth units in raw units per metre (--tum-depth-scale "
+                      "for a TUM folder, --depth-scale for an .mkv or .bag recording: 1000 for millimetres) or "
+                      "the right --sensor",
                       static_cast<double>(median_m), median_raw, static_cast<double>(depth_units_m),
                       sensor.name.c_str(), static_cast<double>(sensor.min_depth_m),
                       static_cast<double>(sensor.max_depth_m));

@@ -10,6 +10,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
+#include "capture/frame_source.hpp"
+
 namespace facescan::bench {
 namespace {
 
@@ -164,13 +166,43 @@ Status loadTum(const fs::path& dir, int frames, Sequence& seq) {
     return Status::ok();
 }
 
+// mkv:FILE / bag:FILE -- a depth camera's own recording, read by the agent's source for it (the same reader, the
+// same calibration and undistortion). Colour that is not registered to depth is left out: the bench measures
+// geometry, and frames carry registered colour only.
+Status loadRecording(const std::string& spec, int frames, Sequence& seq) {
+    capture::SourceOptions options;
+    options.max_frames = frames;
+    ASSIGN_OR_RETURN(std::unique_ptr<capture::FrameSource> source, capture::openSource(spec, options));
+    const capture::SourceInfo& info = source->info();
+    seq.k = info.intrinsics;
+    if (info.sensor_known) seq.sensor = info.sensor;
+    capture::CapturedFrame captured;
+    for (;;) {
+        ASSIGN_OR_RETURN(const bool got, source->next(captured));
+        if (!got) break;
+        recon::RgbdFrame f;
+        recon::depthRawToMetres(captured.depth_raw, info.depth_units_m, f.depth_m);
+        if (info.colour_registered && captured.colour_bgr.size() == captured.depth_raw.size()) {
+            f.colour_bgr = captured.colour_bgr.clone();
+        }
+        f.timestamp_ns = captured.timestamp_ns;
+        seq.frames.push_back(std::move(f));
+        seq.masks.emplace_back();
+        seq.T_ref_camera.emplace_back();
+    }
+    if (seq.frames.empty()) return notFound(spec + " holds no frame");
+    return Status::ok();
+}
+
 }  // namespace
 
 Status loadSequence(const std::string& in, int frames, Sequence& seq) {
     if (in.rfind("synthetic", 0) == 0) return loadSynthetic(in.size() > 10 ? in.substr(10) : "", frames, seq);
     if (in.rfind("tum:", 0) == 0) return loadTum(in.substr(4), frames, seq);
     if (in.rfind("7scenes:", 0) == 0) return load7Scenes(in.substr(8), frames, seq);
-    return invalidArgument("unknown --input '" + in + "' (synthetic[:k=v,...], tum:DIR, 7scenes:DIR)");
+    if (in.rfind("mkv:", 0) == 0 || in.rfind("bag:", 0) == 0) return loadRecording(in, frames, seq);
+    return invalidArgument("unknown --input '" + in +
+                           "' (synthetic[:k=v,...], tum:DIR, 7scenes:DIR, mkv:FILE, bag:FILE)");
 }
 
 }  // namespace facescan::bench

@@ -1,6 +1,6 @@
 // Inputs of facescan-bench recon (docs/design.md s6): synthetic[:OPTIONS] rendered by the project's synthetic Kinect
-// (with its ground truth), TUM RGB-D folders and 7-Scenes folders (with their reference poses). Everything is
-// loaded before the timed loop.
+// (with its ground truth), TUM RGB-D folders and 7-Scenes folders (with their reference poses), depth cameras' own
+// recordings (mkv:, bag:). Everything is loaded before the timed loop.
 #pragma once
 
 #include <optional>
@@ -28,7 +28,9 @@ struct Sequence {
     recon::SensorModel sensor;                  // the camera (synthetic: its sensor=; otherwise a Kinect v1)
 };
 
-// SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR; frames > 0 limits (synthetic: sets) the frame count.
+// SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR | mkv:FILE (Azure Kinect, Femto) | bag:FILE (RealSense);
+// frames > 0 limits
+// (synthetic: sets) the frame count.
 Status loadSequence(const std::string& input, int frames, Sequence& seq);
 
 }  // namespace facescan::bench

@@ -6,7 +6,9 @@
 #include <fstream>
 #include <string>
 
+#include "capture/ros_messages.hpp"
 #include "sample_replica.hpp"
+#include "test_data.hpp"
 #include "wire/cluster_codec.hpp"
 #include "wire/codecs.hpp"
 
@@ -133,6 +135,76 @@ int main(int argc, char** argv) {
         std::vector<uint8_t> seed(64 + 32 * i);
         for (size_t k = 0; k < seed.size(); ++k) seed[k] = static_cast<uint8_t>("srv-a\0scan-1\0"[k % 14] + i);
         writeFile(out / "cluster_messages" / ("pattern" + std::to_string(i) + ".bin"), seed);
+        ++written;
+    }
+    // The Azure Kinect calibration of a recording (its layout; the fixture's values, rounded), and variants.
+    fs::create_directories(out / "azure_kinect_calibration");
+    const std::string camera_rt = R"("Rt":{"Rotation":[1,0,0,0,1,0,0,0,1],"Translation":[0,0,0]})";
+    const std::string calibration =
+        R"({"CalibrationInformation":{"Cameras":[{"Intrinsics":{"ModelParameterCount":14,"ModelParameters":)"
+        R"([0.513,0.517,0.493,0.493,0.548,-0.021,-0.0027,0.89,0.086,-0.014,0,0,-7.2E-5,2.1E-5],)"
+        R"("ModelType":"CALIBRATION_LensDistortionModelBrownConrady"},"Location":"CALIBRATION_CameraLocationD0",)"
+        R"("Purpose":"CALIBRATION_CameraPurposeDepth","MetricRadius":1.74,)" +
+        camera_rt +
+        R"(,"SensorHeight":1024,"SensorWidth":1024},{"Intrinsics":{"ModelParameterCount":14,"ModelParameters":)"
+        R"([0.4998,0.5066,0.478,0.637,0.33,-2.49,1.45,0.209,-2.30,1.375,0,0,-1.3E-4,-1.6E-4],)"
+        R"("ModelType":"CALIBRATION_LensDistortionModelBrownConrady"},"Location":"CALIBRATION_CameraLocationPV0",)"
+        R"("Purpose":"CALIBRATION_CameraPurposePhotoVideo","MetricRadius":0,"Rt":{"Rotation":)"
+        R"([0.99999922,0.00118,-0.000448,-0.001139,0.99628,0.08616,0.000548,-0.08616,0.99628],)"
+        R"("Translation":[-0.0321,-0.0022,0.0039]},"SensorHeight":3072,"SensorWidth":4096}]}})";
+    std::ofstream(out / "azure_kinect_calibration" / "two_cameras.json") << calibration;
+    std::ofstream(out / "azure_kinect_calibration" / "depth_only.json")
+        << calibration.substr(0, calibration.find(R"(,{"Intrinsics")")) << "]}}";
+    written += 2;
+    // The mkv reader: the head of the real recording (EBML header, tracks, the calibration attachment, tags and
+    // the first, small cluster; the frames' megabytes are left out).
+    fs::create_directories(out / "mkv");
+    if (const auto data = facescan::testing::sharedData("azure_kinect_mkv")) {
+        std::ifstream in(*data / "recording.mkv", std::ios::binary);
+        std::vector<uint8_t> head(7546);
+        in.read(reinterpret_cast<char*>(head.data()), static_cast<std::streamsize>(head.size()));
+        head.resize(static_cast<size_t>(in.gcount()));
+        writeFile(out / "mkv" / "azure_kinect_head.mkv", head);
+        ++written;
+    }
+    // The bag reader: a tiny RealSense bag (16x12 depth and colour, two frames) in librealsense's layout.
+    fs::create_directories(out / "bag");
+    {
+        namespace ros1 = facescan::capture::ros1;
+        rosbag::Bag bag;
+        bag.open((out / "bag" / "realsense_tiny.bag").string(), rosbag::bagmode::Write);
+        const std::string depth = "/device_0/sensor_0/Depth_0", colour = "/device_0/sensor_1/Color_0";
+        ros1::CameraInfo info;
+        info.width = 16;
+        info.height = 12;
+        info.K = {14.0, 0, 7.5, 0, 14.0, 5.5, 0, 0, 1};
+        bag.write(depth + "/info/camera_info", ros::Time(0, 1), info);
+        bag.write(colour + "/info/camera_info", ros::Time(0, 1), info);
+        ros1::Transform tf;
+        tf.rotation.w = 1;
+        tf.translation.x = 0.015;
+        bag.write(colour + "/tf/0", ros::Time(0, 1), tf);
+        ros1::Float32 units;
+        units.data = 0.001f;
+        bag.write("/device_0/sensor_0/option/Depth Units/value", ros::Time(0, 1), units);
+        const cv::Mat dome = depthFrames().front();
+        for (uint32_t n = 0; n < 2; ++n) {
+            const ros::Time t(1, n * 33333333);
+            ros1::Image d;
+            d.header.stamp = t;
+            d.width = 16;
+            d.height = 12;
+            d.encoding = "16UC1";
+            d.step = 32;
+            d.data.assign(dome.data, dome.data + dome.total() * 2);
+            bag.write(depth + "/image/data", t, d);
+            ros1::Image c = d;
+            c.encoding = "rgb8";
+            c.step = 48;
+            c.data.assign(16 * 12 * 3, static_cast<uint8_t>(90 + n));
+            bag.write(colour + "/image/data", t, c);
+        }
+        bag.close();
         ++written;
     }
     std::printf("wrote %d seeds under %s\n", written, out.c_str());

@@ -43,8 +43,9 @@ StatusOr<std::unique_ptr<FrameSource>> preloadSource(std::unique_ptr<FrameSource
     if (!source) return invalidArgument("preload: no source");
     const SourceInfo info = source->info();
     if (!info.is_recording) {
-        return invalidArgument("--preload needs a recording (tum:DIR, oni:FILE or synthetic), not a live camera (" +
-                               info.description + ")");
+        return invalidArgument(
+            "--preload needs a recording (tum:DIR, oni:FILE, mkv:FILE, bag:FILE or synthetic), not a live camera (" +
+            info.description + ")");
     }
     std::vector<CapturedFrame> frames;
     if (info.expected_frames > 0) frames.reserve(static_cast<size_t>(info.expected_frames));

@@ -53,9 +53,10 @@ class FrameSource {
 };
 
 struct SourceOptions {
-    bool colour = true;                 // false: do not read colour at all (--no-colour)
-    int max_frames = 0;                 // 0 = all; otherwise stop after this many
-    float tum_depth_units_m = 0.0002f;  // TUM PNG units (5000 per metre); 0.001 for Kinect/OpenNI millimetres
+    bool colour = true;                    // false: do not read colour at all (--no-colour)
+    int max_frames = 0;                    // 0 = all; otherwise stop after this many
+    float tum_depth_units_m = 0.0002f;     // TUM PNG units (5000 per metre); 0.001 for Kinect/OpenNI millimetres
+    float recording_depth_units_m = 0.0f;  // mkv:/bag: metres per raw unit over the file's own; 0 = the file's
 };
 
 // Opens a source from its command-line spec:
