@@ -225,7 +225,6 @@ FrameFate Session::pushFrame(const facescan_wire_RgbdFrame& msg) {
     if (recording && msg.seq > next_seq_) return FrameFate::kAhead;
     if (msg.seq > next_seq_) stats_.frames_dropped += msg.seq - next_seq_;  // live: lost on the way
     next_seq_ = msg.seq + 1;
-    if (!msg.end_of_stream) ++stats_.frames_received;
     if (takeover_from_ns_ != 0 && takeover_received_ns_ == 0) takeover_received_ns_ = steadyNowNs();
     if (camera_ && !camera_->every_frame && !msg.end_of_stream) {
         // Live: anything still waiting is older than this frame and will never be worth processing.
@@ -243,6 +242,10 @@ FrameFate Session::pushFrame(const facescan_wire_RgbdFrame& msg) {
     lk.unlock();
     slot.assign(msg);  // the copy out of the loan, outside the lock
     lk.lock();
+    // Counted received as it enters the queue, under the same lock: a replica captured meanwhile subtracts the
+    // queued frames from the received ones, and a frame counted before it was queued was counted twice once
+    // the agent resent it to whoever continued from that replica.
+    if (!msg.end_of_stream) ++stats_.frames_received;
     queue_.push_back(std::move(slot));
     lk.unlock();
     cv_.notify_all();
