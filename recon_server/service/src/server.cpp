@@ -125,6 +125,7 @@ Status Server::start() {
     loadResumable();
     RETURN_IF_ERROR(join());
     joined_ = true;
+    joined_ns_ = steadyNowNs();
     replicator_->start();
     intake_ = std::thread([this] { intakeLoop(); });
     command_ = std::thread([this] { commandLoop(); });

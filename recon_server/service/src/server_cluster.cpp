@@ -411,21 +411,33 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             std::fprintf(stderr, "facescan-server: cannot take over %s: %s\n", id.c_str(), s.toString().c_str());
         }
     }
-    // 2. Replicas in the data dir of sessions with no claim left anywhere (their owner's lapsed long ago, or the
-    //    agent is gone too): resumed. Those that finished stay on disk. One that another live server continues is
-    //    kept ready as well: if that server fails too before its own copy reached a standby, this copy is the
-    //    only one left of the frames the agent has dropped (a restart of each server in turn lost them).
+    // 2. Replicas in the data dir of sessions with no claim left anywhere (their owner's lapsed long ago): resumed
+    //    while their agent streams, or by a lone server whatever the agent does. Those that finished stay on disk. One
+    //    that another live server continues is kept ready as well: if that server fails too before its own copy reached
+    //    a standby, this copy is the only one left of the frames the agent has dropped (a restart of each server in
+    //    turn lost them).
     for (auto it = resumable_.begin(); it != resumable_.end();) {
         const auto view = owners.find(it->first);
         const auto elsewhere = held_elsewhere_.find(it->first);
-        if (view == owners.end() && elsewhere != held_elsewhere_.end() && !agentLives(it->first)) {
-            // Continued elsewhere and then its claim went with its agent: it ended there (finished, or its owner's
-            // files hold it). Resuming this older copy now would write a second, partial result.
-            std::fprintf(stderr, "facescan-server: session %s ended on server '%s': the replica in %s stays as it is\n",
-                         it->first.c_str(), elsewhere->second.owner_id.c_str(), params_.data_dir.c_str());
-            held_elsewhere_.erase(elsewhere);
-            it = resumable_.erase(it);
-            continue;
+        if (view == owners.end() && cluster_->othersKnown() > 0) {
+            // No claim in view, in a cluster. Right after the join the other servers' claims may still be on their
+            // way: a resume then would compete with the scan's live owner. And once the agent is gone too, the
+            // scan ended somewhere (finished there, its claim since retired) or cannot go on: resuming this copy
+            // would write a second, partial result beside the real one. So only a scan whose agent still streams,
+            // and only once the view had two leases to fill in, is resumed from the data dir.
+            if (steadyNowNs() - joined_ns_ < 2 * lease_ns_) {
+                ++it;
+                continue;
+            }
+            if (!agentLives(it->first)) {
+                std::fprintf(stderr,
+                             "facescan-server: session %s: no server owns it and its agent is gone (it ended "
+                             "elsewhere or cannot go on): the replica in %s stays as it is\n",
+                             it->first.c_str(), params_.data_dir.c_str());
+                if (elsewhere != held_elsewhere_.end()) held_elsewhere_.erase(elsewhere);
+                it = resumable_.erase(it);
+                continue;
+            }
         }
         if (view == owners.end()) {
             auto o = std::make_shared<OwnedSession>();

@@ -239,6 +239,7 @@ class Server {
         uint32_t epoch = 0;
     };
     std::map<std::string, HeldElsewhere> held_elsewhere_;
+    int64_t joined_ns_ = 0;         // steady clock: when the join ended
     int64_t cut_off_since_ns_ = 0;  // steady clock: since when this server sees no other server and no agent
     int64_t rejoin_until_ns_ = 0;   // steady clock: re-observing the cluster until then (rejoining)
     bool had_peers_ = false;
