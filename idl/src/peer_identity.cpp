@@ -13,6 +13,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "openssl_ptr.hpp"
 #include "wire/security.hpp"
 
 namespace facescan::wire {
@@ -22,18 +23,11 @@ namespace {
 constexpr const char* kUserDataTag = "facescan-identity-certificate\n";
 constexpr size_t kMaxKnown = 4096;  // participants whose subject is cached
 
-template <auto Free>
-struct OpenSslFree {
-    template <typename T>
-    void operator()(T* p) const {
-        Free(p);
-    }
-};
-using BioPtr = std::unique_ptr<BIO, OpenSslFree<BIO_free_all>>;
-using X509Ptr = std::unique_ptr<X509, OpenSslFree<X509_free>>;
-using CrlPtr = std::unique_ptr<X509_CRL, OpenSslFree<X509_CRL_free>>;
-using StorePtr = std::unique_ptr<X509_STORE, OpenSslFree<X509_STORE_free>>;
-using StoreCtxPtr = std::unique_ptr<X509_STORE_CTX, OpenSslFree<X509_STORE_CTX_free>>;
+using openssl::BioPtr;
+using openssl::CrlPtr;
+using openssl::StoreCtxPtr;
+using openssl::StorePtr;
+using openssl::X509Ptr;
 
 StatusOr<std::string> readWhole(const fs::path& path) {
     std::ifstream in(path, std::ios::binary);

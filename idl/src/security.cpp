@@ -18,24 +18,19 @@
 #include <set>
 #include <sstream>
 
+#include "openssl_ptr.hpp"
+
 namespace facescan::wire {
 namespace fs = std::filesystem;
 namespace {
 
-template <auto Free>
-struct OpenSslFree {
-    template <typename T>
-    void operator()(T* p) const {
-        Free(p);
-    }
-};
-using BioPtr = std::unique_ptr<BIO, OpenSslFree<BIO_free_all>>;
-using X509Ptr = std::unique_ptr<X509, OpenSslFree<X509_free>>;
-using CrlPtr = std::unique_ptr<X509_CRL, OpenSslFree<X509_CRL_free>>;
-using KeyPtr = std::unique_ptr<EVP_PKEY, OpenSslFree<EVP_PKEY_free>>;
-using Pkcs7Ptr = std::unique_ptr<PKCS7, OpenSslFree<PKCS7_free>>;
-using StorePtr = std::unique_ptr<X509_STORE, OpenSslFree<X509_STORE_free>>;
-using StoreCtxPtr = std::unique_ptr<X509_STORE_CTX, OpenSslFree<X509_STORE_CTX_free>>;
+using openssl::BioPtr;
+using openssl::CrlPtr;
+using openssl::KeyPtr;
+using openssl::Pkcs7Ptr;
+using openssl::StoreCtxPtr;
+using openssl::StorePtr;
+using openssl::X509Ptr;
 
 // Every message names the file and says what is wrong with it, on one line.
 Status fileError(const fs::path& path, const std::string& what) {

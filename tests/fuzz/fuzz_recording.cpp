@@ -1,6 +1,10 @@
-// libFuzzer target: the whole mkv: reader (openMkvSource: libavformat's Matroska demuxer, the track and attachment
-// checks, the calibration, the depth and colour frames) over a recording held in memory (a memfd, opened by its
-// /proc path as any file). Whatever it opens must give frames of its stated size or a Status, never a crash.
+// libFuzzer targets: a whole recording reader over a recording held in memory (a memfd, opened by its /proc path as
+// any file). Whatever it opens must give frames of its stated size or a Status, never a crash. Built once per
+// reader (tests/fuzz/CMakeLists.txt), FUZZ_RECORDING_OPEN naming it:
+//   - fuzz_mkv, openMkvSource: libavformat's Matroska demuxer, the track and attachment checks, the calibration,
+//     the depth and colour frames;
+//   - fuzz_bag, openBagSource: ROS's rosbag storage library reading the bag's records and index, the RealSense
+//     topics, camera_info, Depth Units and extrinsics, then the images.
 #include <sys/mman.h>
 #include <unistd.h>
 
@@ -10,13 +14,13 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     using namespace facescan::capture;
-    static const int fd = memfd_create("fuzz_mkv", 0);
+    static const int fd = memfd_create("fuzz_recording", 0);
     if (fd < 0) __builtin_trap();
     if (ftruncate(fd, 0) != 0 || pwrite(fd, data, size, 0) != static_cast<ssize_t>(size)) __builtin_trap();
     const std::string path = "/proc/self/fd/" + std::to_string(fd);
     SourceOptions options;
     options.max_frames = 4;
-    auto source = openMkvSource(path, options);
+    auto source = FUZZ_RECORDING_OPEN(path, options);
     if (!source.isOk()) {
         if (source.status().message().empty()) __builtin_trap();
         return 0;
