@@ -434,7 +434,7 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                              "facescan-server: session %s: no server owns it and its agent is gone (it ended "
                              "elsewhere or cannot go on): the replica in %s stays as it is\n",
                              it->first.c_str(), params_.data_dir.c_str());
-                if (elsewhere != held_elsewhere_.end()) held_elsewhere_.erase(elsewhere);
+                held_elsewhere_.erase(it->first);
                 it = resumable_.erase(it);
                 continue;
             }
@@ -444,8 +444,8 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             o->takeover_from_ns = steadyNowNs();
             // Above every epoch this session had, including those of the servers that continued it meanwhile.
             const uint32_t epoch =
-                std::max(it->second.epoch, elsewhere != held_elsewhere_.end() ? elsewhere->second.epoch : 0u) + 1;
-            if (elsewhere != held_elsewhere_.end()) held_elsewhere_.erase(elsewhere);
+                std::max(it->second.epoch, elsewhere != held_elsewhere_.end() ? elsewhere->second : 0u) + 1;
+            held_elsewhere_.erase(it->first);
             std::fprintf(stderr, "facescan-server: session %s: resuming from %s at frame %u (epoch %u)\n",
                          it->first.c_str(), params_.data_dir.c_str(), it->second.next_seq, epoch);
             o->restore_from = std::move(it->second);
@@ -465,9 +465,8 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         const wire::SessionOwnerData& claim = view->second.data;
         if (view->second.alive && holding(claim.state) && claim.owner_id != params_.server_id) {
             const bool first = elsewhere == held_elsewhere_.end();
-            HeldElsewhere& held = held_elsewhere_[it->first];
-            held.epoch = std::max(held.epoch, claim.epoch);
-            held.owner_id = claim.owner_id;
+            uint32_t& held_epoch = held_elsewhere_[it->first];
+            held_epoch = std::max(held_epoch, claim.epoch);
             if (first) {
                 std::fprintf(stderr,
                              "facescan-server: session %s is %s on server '%s': this server keeps its replica in %s "
@@ -481,7 +480,7 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         std::fprintf(stderr, "facescan-server: session %s is %s on server '%s': the replica in %s stays as it is\n",
                      it->first.c_str(), wire::ownerStateName(claim.state), claim.owner_id.c_str(),
                      params_.data_dir.c_str());
-        if (elsewhere != held_elsewhere_.end()) held_elsewhere_.erase(elsewhere);
+        held_elsewhere_.erase(it->first);
         it = resumable_.erase(it);
     }
 }

@@ -233,12 +233,8 @@ class Server {
     // Intake thread only.
     std::map<std::string, Candidate> candidates_;
     std::map<std::string, wire::ReplicaData> resumable_;  // from the data dir, waiting for the join to end
-    // Of those, the ones another live server continues: the last claim seen there, kept for a takeover.
-    struct HeldElsewhere {
-        std::string owner_id;
-        uint32_t epoch = 0;
-    };
-    std::map<std::string, HeldElsewhere> held_elsewhere_;
+    // Of those, the ones another live server continues: the highest epoch seen there, kept for a takeover.
+    std::map<std::string, uint32_t> held_elsewhere_;
     int64_t joined_ns_ = 0;         // steady clock: when the join ended
     int64_t cut_off_since_ns_ = 0;  // steady clock: since when this server sees no other server and no agent
     int64_t rejoin_until_ns_ = 0;   // steady clock: re-observing the cluster until then (rejoining)
