@@ -61,6 +61,9 @@ TEST_F(SessionGap, FramesTheAgentNoLongerHoldsAreCountedLostAndTheScanGoesOn) {
     EXPECT_EQ(push(9, 7), FrameFate::kAccepted);
     EXPECT_EQ(session_.nextSeq(), 10u);
     EXPECT_EQ(session_.stats().frames_dropped, 6u);
+    // Each processed frame rewrites the detail; the loss is still said after them.
+    const std::string later = session_.stats().detail;
+    EXPECT_NE(later.find("frames 1-6 lost"), std::string::npos) << later;
 }
 
 TEST_F(SessionGap, AnOlderAgentThatSaysNothingOfItsFramesIsAlwaysWaitedFor) {

@@ -216,10 +216,13 @@ FrameFate Session::pushFrame(const facescan_wire_RgbdFrame& msg) {
     if (recording && msg.seq > next_seq_ && msg.oldest_kept_seq > next_seq_) {
         const uint32_t lost = msg.oldest_kept_seq - next_seq_;
         stats_.frames_dropped += lost;
-        stats_.detail = "frames " + std::to_string(next_seq_) + "-" + std::to_string(msg.oldest_kept_seq - 1) +
-                        " lost: an earlier owner confirmed them and no copy survived it";
-        std::fprintf(stderr, "facescan-server: session %s: %s (%u frames); going on from frame %u\n", id_.c_str(),
-                     stats_.detail.c_str(), lost, msg.oldest_kept_seq);
+        if (!frames_lost_note_.empty()) frames_lost_note_ += "; ";
+        frames_lost_note_ += "frames " + std::to_string(next_seq_) + "-" + std::to_string(msg.oldest_kept_seq - 1) +
+                             " lost: an earlier owner confirmed them and no copy survived it";
+        std::fprintf(stderr,
+                     "facescan-server: session %s: frames %u-%u lost: an earlier owner confirmed them and no copy "
+                     "survived it (%u frames); going on from frame %u\n",
+                     id_.c_str(), next_seq_, msg.oldest_kept_seq - 1, lost, msg.oldest_kept_seq);
         next_seq_ = msg.oldest_kept_seq;
     }
     if (recording && msg.seq > next_seq_) return FrameFate::kAhead;
@@ -530,6 +533,8 @@ SessionStats Session::stats() const {
                       100.0f * s.skipped_recent, s.frame_cpu_ms, s.frame_budget_ms, s.throttled ? ", throttled" : "");
         s.detail = lost ? s.detail + "; " + what : std::string(what) + "; " + s.detail;
     }
+    if (!frames_lost_note_.empty())
+        s.detail = s.detail.empty() ? frames_lost_note_ : s.detail + "; " + frames_lost_note_;
     s.latency_p50_ms = percentile(latency_ms_, 0.5f);
     s.latency_p95_ms = percentile(latency_ms_, 0.95f);
     if (stats_.state != SessionState::kFinished) {

@@ -280,6 +280,9 @@ class Session {
     std::function<bool()> hold_;
     SessionStats stats_;
     uint32_t next_seq_ = 0;  // the next frame to take (intake side)
+    // Frames no copy of which survived a takeover: kept apart from the detail, which each frame rewrites, so the
+    // status and the summary say it for the rest of the scan.
+    std::string frames_lost_note_;
     // Worker side of replication: where the last capture ended, and the frames processed.
     uint32_t processed_next_seq_ = 0;
     uint64_t replica_generation_ = 0;
