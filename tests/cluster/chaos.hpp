@@ -1,12 +1,6 @@
 // The pieces of the chaos test (chaos_test.cpp) and of its long soak (tests/bench/chaos.sh): a seeded schedule of
 // faults, a network partition of one process on the loopback profile, a watch on the live sessions' progress, and
-// a process's resident memory.
-//
-// The partition: on the loopback profile every process talks over 127.0.0.1, each from UDP ports of its own (its
-// DDS participant's discovery and data ports and its transmit socket). An nftables table of this test drops every
-// UDP packet from or to the ports of the cut process, so it neither hears nor is heard by anyone (servers, agents,
-// clients), while it goes on running. The ports are elements of a set with a timeout: a partition heals by itself
-// even when the test dies before healing it.
+// a process's resident memory. The partition itself is partition.hpp.
 #pragma once
 
 #include <dirent.h>
@@ -28,6 +22,7 @@
 
 #include "client/scan_client.hpp"
 #include "cluster_rig.hpp"
+#include "partition.hpp"
 
 namespace facescan::testing {
 
@@ -106,79 +101,6 @@ class FaultSchedule {
     std::vector<std::string> servers_, killable_;
     bool partitions_;
     double lease_s_;
-};
-
-// The local UDP ports of a process's sockets (from /proc: its descriptors' socket inodes in /proc/net/udp{,6}).
-inline std::set<int> udpPorts(pid_t pid) {
-    std::set<std::string> inodes;
-    const std::string fd_dir = "/proc/" + std::to_string(pid) + "/fd";
-    if (DIR* d = ::opendir(fd_dir.c_str())) {
-        while (dirent* e = ::readdir(d)) {
-            char target[256] = {};
-            const std::string link = fd_dir + "/" + e->d_name;
-            const ssize_t n = ::readlink(link.c_str(), target, sizeof(target) - 1);
-            const std::string t(target, n > 0 ? static_cast<size_t>(n) : 0);
-            if (t.rfind("socket:[", 0) == 0) inodes.insert(t.substr(8, t.size() - 9));
-        }
-        ::closedir(d);
-    }
-    std::set<int> ports;
-    for (const char* table : {"/proc/net/udp", "/proc/net/udp6"}) {
-        std::istringstream in(readText(table));
-        std::string line;
-        std::getline(in, line);  // header
-        while (std::getline(in, line)) {
-            std::istringstream l(line);
-            std::string slot, local, remote, st, queues, tr, retr, uid, timeout, inode;
-            if (!(l >> slot >> local >> remote >> st >> queues >> tr >> retr >> uid >> timeout >> inode)) continue;
-            if (inodes.count(inode) == 0) continue;
-            const size_t colon = local.rfind(':');
-            if (colon != std::string::npos) ports.insert(std::stoi(local.substr(colon + 1), nullptr, 16));
-        }
-    }
-    return ports;
-}
-
-// Cuts one process at a time off the network (see the top of this file). available() is false without root or
-// nft: the schedule then freezes instead.
-class Partitioner {
- public:
-    Partitioner() : table_("facescan_chaos_" + std::to_string(::getpid())) {
-        if (::geteuid() != 0 || runCommand("command -v nft").exit_code != 0) return;
-        const std::string rules = "table inet " + table_ +
-                                  " {\n set cut { type inet_service; flags timeout; }\n"
-                                  " chain out { type filter hook output priority 0; policy accept;\n"
-                                  "  udp sport @cut drop\n  udp dport @cut drop\n }\n}";
-        const std::string file = (std::filesystem::temp_directory_path() / (table_ + ".nft")).string();
-        std::ofstream(file) << rules << "\n";
-        available_ = nft("-f " + file);
-        std::filesystem::remove(file);
-    }
-    ~Partitioner() {
-        if (available_) nft("delete table inet " + table_);
-    }
-    Partitioner(const Partitioner&) = delete;
-    Partitioner& operator=(const Partitioner&) = delete;
-
-    bool available() const { return available_; }
-    // Drops `pid`'s traffic for at most `seconds` (heal() ends it sooner); false when it has no UDP port.
-    bool cut(pid_t pid, double seconds) {
-        const std::set<int> ports = udpPorts(pid);
-        if (ports.empty()) return false;
-        std::string elements;
-        for (int p : ports) {
-            elements += (elements.empty() ? "" : ", ") + std::to_string(p) + " timeout " +
-                        std::to_string(static_cast<int>(seconds * 1000)) + "ms";
-        }
-        return nft("add element inet " + table_ + " cut { " + elements + " }");
-    }
-    void heal() { nft("flush set inet " + table_ + " cut"); }
-
- private:
-    static bool nft(const std::string& args) { return runCommand("nft " + args).exit_code == 0; }
-
-    std::string table_;
-    bool available_ = false;
 };
 
 // Resident memory of a process in kB (VmRSS), 0 when it is gone.

@@ -4,13 +4,17 @@
 //     the session up without writing anything for it, and the scan finishes once, on the other server, whole;
 //   - an owner whose intake thread stops for good while its DDS threads run on (a fault injected with
 //     FACESCAN_FAILPOINT): its claims lose their liveliness (usually within the lease, while the stuck process still
-//     lives), its watchdog ends it with a non-zero status, and the other server finishes the scan whole.
+//     lives), its watchdog ends it with a non-zero status, and the other server finishes the scan whole;
+//   - an owner cut off from the other servers but not from its agent (nftables): the others take the recording
+//     over, and the old owner, still fed by the agent, finishes it too; once the network heals, it removes its
+//     result for the new owner's: one result a scan.
 #include <gtest/gtest.h>
 
 #include <csignal>
 #include <cstdio>
 
 #include "cluster_rig.hpp"
+#include "partition.hpp"
 
 namespace facescan::testing {
 namespace {
@@ -145,6 +149,51 @@ TEST(StuckServer, AServerWhoseIntakeStallsIsListedAsNotResponding) {
     EXPECT_TRUE(processRuns(rig.server("srv-stuck").pid()));
     const auto table = rig.cli("servers");
     EXPECT_NE(table.out.find("NOT RESPONDING"), std::string::npos) << table.out;
+}
+
+// A switch between the servers fails, not the agent's link: the owner keeps receiving every frame and finishes the
+// recording unseen, while the others, a majority, take it over and finish it as well (the agent follows the
+// stronger claim and waits for its result). Two results of one scan, each whole: the old owner's goes once it sees
+// the new owner's FINISHED claim with every frame it had.
+TEST(StuckServer, AnOwnerCutOffFromTheOtherServersOnlyFinishesTooAndRemovesItsResultOnceTheNetworkHeals) {
+    Partitioner net;
+    if (!net.available()) GTEST_SKIP() << "needs root and nft to cut the servers apart";
+    ClusterRig rig("cutoff", 64);
+    const std::vector<std::string> ids = {"srv-a", "srv-b", "srv-c"};
+    for (const std::string& id : ids) rig.startServer(id);
+    ASSERT_TRUE(rig.waitForServers(3, 30s));
+    rig.startAgent("rec", kFrames, "max", ",period=900");
+    const std::string owner = rig.waitForOwner("rec", 30s);
+    ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("rec"));
+    ASSERT_TRUE(waitUntil([&] { return rig.published("rec") >= 20; }, 60s));
+    std::vector<pid_t> others;
+    for (const std::string& id : ids) {
+        if (id != owner) others.push_back(rig.server(id).pid());
+    }
+    ASSERT_TRUE(net.cutBetween(rig.server(owner).pid(), others, 120));
+    std::string winner;
+    ASSERT_TRUE(waitUntil(
+        [&] {
+            for (const std::string& id : ids) {
+                if (id != owner && readText(rig.serverLog(id)).find("session rec: owner '" + owner + "' is gone") !=
+                                       std::string::npos) {
+                    winner = id;
+                }
+            }
+            return !winner.empty();
+        },
+        30s));
+    ASSERT_EQ(rig.agent("rec").wait(180s), 0) << readText(rig.agentLog("rec"));
+    // The old owner finished it too, behind the cut (or the path under test was never taken).
+    const fs::path old_result = rig.dataDir(owner) / "rec" / "summary.json";
+    ASSERT_TRUE(waitUntil([&] { return fs::exists(old_result); }, 30s)) << readText(rig.serverLog(owner));
+    net.heal();
+    EXPECT_TRUE(waitUntil([&] { return !fs::exists(rig.dataDir(owner) / "rec"); }, 30s))
+        << readText(rig.serverLog(owner));
+    EXPECT_NE(readText(rig.serverLog(owner)).find("session rec: server '" + winner + "' finished it too"),
+              std::string::npos)
+        << readText(rig.serverLog(owner));
+    expectFinishedOnceWhole(rig, "rec", winner);
 }
 
 }  // namespace

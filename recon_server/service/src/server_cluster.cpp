@@ -36,6 +36,7 @@ void Server::clusterTick() {
     cluster_->announce(open, standbySessions());
     const std::map<std::string, OwnerView> owners = cluster_->owners();
     settleClaims(owners);  // while the view is stale, only to give up what another server owns now
+    dropSupersededResults(owners);
     if (!viewFresh()) return;
     // A server back from a cut-off sees the agents again before the other servers' claims: every session would
     // look unplaced, and a claim on one that another server is scanning wins on its tie-break and splits the
@@ -233,8 +234,10 @@ void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
         }
         if (o->phase == OwnedSession::Phase::kClaiming) {
             if (beaten) {
-                yield(o->id, "server '" + view->data.owner_id + "' claimed it too (epoch " +
-                                 std::to_string(view->data.epoch) + ")");
+                yield(o->id,
+                      "server '" + view->data.owner_id + "' claimed it too (epoch " +
+                          std::to_string(view->data.epoch) + ")",
+                      *view);
             } else if (ours && viewFresh() && steadyNowNs() - o->claimed_ns >= settle_ns &&
                        (!o->engine.valid() ||
                         o->engine.wait_for(std::chrono::seconds(0)) == std::future_status::ready)) {
@@ -247,8 +250,10 @@ void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
         } else if (beaten) {
             // A stronger claim: a takeover that happened while this server could not be seen (split brain), or
             // a claim made at the same moment from another view. The other one continues; this one stops.
-            yield(o->id, "server '" + view->data.owner_id + "' owns it (epoch " + std::to_string(view->data.epoch) +
-                             ", this server's epoch " + std::to_string(o->epoch) + ")");
+            yield(o->id,
+                  "server '" + view->data.owner_id + "' owns it (epoch " + std::to_string(view->data.epoch) +
+                      ", this server's epoch " + std::to_string(o->epoch) + ")",
+                  *view);
         }
     }
 }
@@ -295,31 +300,27 @@ Status Server::activate(OwnedSession& o) {
     return Status::ok();
 }
 
-void Server::yield(const std::string& session_id, const std::string& why) {
+void Server::yield(const std::string& session_id, const std::string& why, const OwnerView& winner) {
     std::shared_ptr<OwnedSession> o = owned(session_id);
     if (!o) return;
     // The stronger claim continues the scan from its replica and from the frames the agent keeps until they are
     // confirmed, so nothing is lost if this server stops here. Writing what it integrated would split the scan
     // (two results for one session), so it writes, replicates and answers nothing more for it.
     const uint32_t integrated = o->session ? o->session->stats().frames_integrated : 0;
+    const uint32_t next_seq = o->session ? o->session->nextSeq() : 0;
     // Finished here while this server was frozen or cut off, and taken over meanwhile: the new owner finishes it
     // again from the replica and the frames the agent keeps (an agent follows the strongest claim, so it waits for
     // that owner's result, not this one's). This server's files would be a second result for one scan: they go.
-    // Without the agent, the new owner has only the replica, and these files may be the whole scan: they stay.
+    // Without the agent, the new owner has only the replica, and these files may be the whole scan: they stay,
+    // unless the new owner has finished the scan with every frame this server had.
     const std::filesystem::path written = o->session ? o->session->filesDir() : std::filesystem::path();
     const bool agent_lives = agentLives(session_id);
+    const bool superseded = resultSuperseded(winner, o->epoch, next_seq);
     if (o->session) o->session->abandon();
     retireOwned(o, /*dispose_claim=*/false);
     unlist(session_id);
-    if (!written.empty() && agent_lives) {
-        retirer_->retire([written] {
-            std::error_code ec;
-            std::filesystem::remove_all(written, ec);
-        });
-        std::fprintf(stderr,
-                     "facescan-server: session %s: gave it up, %s; it had finished here meanwhile: the files written "
-                     "for it in %s are removed (the new owner writes the scan, with every frame from its agent)\n",
-                     session_id.c_str(), why.c_str(), written.c_str());
+    if (!written.empty() && (agent_lives || superseded)) {
+        removeResultFiles(session_id, written, "gave it up, " + why);
         return;
     }
     if (!written.empty()) {
@@ -606,7 +607,12 @@ void Server::releaseStale() {
             retirer_->retire([reader = std::shared_ptr<wire::Reader<facescan_wire_RgbdFrame>>(
                                   std::move(o->frames))]() mutable { reader.reset(); });
             o->phase = OwnedSession::Phase::kFinished;
-            o->claim->update([](wire::SessionOwnerData& r) { r.state = wire::OwnerState::kFinished; });
+            // How far the scan got: a server that finished it too, unseen (cut off), compares (resultSuperseded).
+            const uint32_t last = o->session->nextSeq();
+            o->claim->update([last](wire::SessionOwnerData& r) {
+                r.state = wire::OwnerState::kFinished;
+                r.resume_seq = last;
+            });
         }
     }
 }

@@ -68,6 +68,46 @@ void Server::retireFinished(std::map<std::string, bool>& final_sent) {
 
 void Server::forgetFinished(const FinishedSession& f) { unlist(f.stats.session_id); }
 
+bool Server::resultSuperseded(const OwnerView& view, uint32_t epoch, uint32_t next_seq) const {
+    // The reader holds the strongest claim's record (EXCLUSIVE ownership: a later epoch, or the tie-break within
+    // one), so another server's record at this epoch or later is the claim that the agent and the clients follow.
+    // Its FINISHED record says how far its scan got (resume_seq); with fewer frames than this one had, these files
+    // may hold the only whole scan, and they stay.
+    const wire::SessionOwnerData& d = view.data;
+    return d.owner_id != params_.server_id && d.state == wire::OwnerState::kFinished && d.epoch >= epoch &&
+           d.resume_seq >= next_seq;
+}
+
+void Server::dropSupersededResults(const std::map<std::string, OwnerView>& owners) {
+    for (const SessionStats& s : finished_.stats()) {
+        const auto it = owners.find(s.session_id);
+        if (it == owners.end() || !resultSuperseded(it->second, s.epoch, s.next_seq)) continue;
+        std::optional<FinishedSession> f = finished_.remove(s.session_id);
+        if (!f) continue;
+        forgetFinished(*f);
+        const OwnerView& winner = it->second;
+        removeResultFiles(s.session_id, f->dir,
+                          "server '" + winner.data.owner_id + "' finished it too (epoch " +
+                              std::to_string(winner.data.epoch) + ", " + std::to_string(winner.data.resume_seq) +
+                              " frames; this server's epoch " + std::to_string(s.epoch) + ", " +
+                              std::to_string(s.next_seq) + " frames)");
+        // The claim (FINISHED, this epoch) goes with the record without disposing: the winner's stays.
+    }
+}
+
+void Server::removeResultFiles(const std::string& session_id, const std::filesystem::path& dir,
+                               const std::string& why) {
+    if (dir.empty()) return;
+    retirer_->retire([dir] {
+        std::error_code ec;
+        std::filesystem::remove_all(dir, ec);
+    });
+    std::fprintf(stderr,
+                 "facescan-server: session %s: %s; it had finished here meanwhile: the files written for it in %s are "
+                 "removed (one result a scan: the new owner's, which its agent and clients follow)\n",
+                 session_id.c_str(), why.c_str(), dir.c_str());
+}
+
 void Server::unlist(const std::string& session_id) {
     // Its last status and mesh from this server leave the writers' histories: late subscribers no longer get them,
     // and `facescan sessions` no longer shows this server's last word on it (after a yield, a stale one: the new

@@ -141,6 +141,12 @@ class Server {
     // owned_ and memory for finished_; those beyond --keep-finished or older than --keep-finished-s are unlisted.
     void retireFinished(std::map<std::string, bool>& final_sent);
     void forgetFinished(const FinishedSession& f);
+    // A result finished here while this server was cut off or frozen, and finished again by the server that took
+    // the scan over meanwhile: the winner's claim (view) says FINISHED with every frame this one had (up to
+    // next_seq). Then this one is a second result for one scan and goes (dropSupersededResults, yield).
+    bool resultSuperseded(const OwnerView& view, uint32_t epoch, uint32_t next_seq) const;
+    void dropSupersededResults(const std::map<std::string, OwnerView>& owners);
+    void removeResultFiles(const std::string& session_id, const std::filesystem::path& dir, const std::string& why);
     void unlist(const std::string& session_id);  // this server's status and mesh of it leave the writers
     // A finished session that this server retired: listed, or its files in the data dir name this server.
     bool answersFromFiles(const std::string& session_id) const;
@@ -168,7 +174,7 @@ class Server {
                         const wire::SessionOwnerData& previous);
     void buildEngine(OwnedSession& owned);  // starts the build of owned.engine
     Status activate(OwnedSession& owned);
-    void yield(const std::string& session_id, const std::string& why);
+    void yield(const std::string& session_id, const std::string& why, const OwnerView& winner);
     // The one way a session's endpoints end: out of owned_, its frame reader's condition off the waitset (both here,
     // on the intake thread), then reader, claim and session ended in that order on the retiring thread.
     // `dispose_claim`: the claim says RELEASED first (nobody owns the session); else it is withdrawn, as if this
