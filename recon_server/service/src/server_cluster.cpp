@@ -235,8 +235,8 @@ void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
         if (o->phase == OwnedSession::Phase::kClaiming) {
             if (beaten) {
                 yield(o->id,
-                      "server '" + view->data.owner_id + "' claimed it too (epoch " +
-                          std::to_string(view->data.epoch) + ")",
+                      "server '" + view->data.owner_id + "' claimed it too (epoch " + std::to_string(view->data.epoch) +
+                          ")",
                       *view);
             } else if (ours && viewFresh() && steadyNowNs() - o->claimed_ns >= settle_ns &&
                        (!o->engine.valid() ||
