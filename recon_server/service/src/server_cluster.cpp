@@ -1,5 +1,6 @@
 // The server's part in the cluster, on the intake thread: which new session to claim, when a claim has
-// settled, when to give one up, when to take over from a dead owner or resume from the data dir. Every decision
+// settled, when to give one up, when to resume from the data dir (taking over from a dead owner is
+// server_takeover.cpp). Every decision
 // is a function of the view that DDS gives (announcements with liveliness, claims with EXCLUSIVE ownership and
 // instance states); there is no protocol of our own beyond writing and reading those topics.
 #include <algorithm>
@@ -21,12 +22,7 @@ namespace facescan::service {
 namespace {
 
 constexpr int64_t kClaimBatchNs = 150'000'000;    // CameraInfos that arrive together are placed together
-constexpr int64_t kFallbackNs = 2'000'000'000;    // a takeover: the next server in line claims after this per rank
 constexpr int64_t kReplayRepeatNs = 300'000'000;  // at most this often a new request to resend frames
-
-bool holding(wire::OwnerState s) {
-    return s == wire::OwnerState::kClaiming || s == wire::OwnerState::kReady || s == wire::OwnerState::kActive;
-}
 
 }  // namespace
 
@@ -81,7 +77,8 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
             // Claimed once: never placed again (a dead owner's session waits for its standby). A live claim
             // keeps its place in the order, so that this server places the sessions around it as every other
             // server does, whether or not they have seen the claim yet.
-            if (view->second.alive && holding(st)) eligible.push_back({id, c.order_key, view->second.data.owner_id});
+            if (view->second.alive && holdsSession(st))
+                eligible.push_back({id, c.order_key, view->second.data.owner_id});
             continue;
         }
         if (owned(id) || resumable_.count(id)) continue;
@@ -355,220 +352,6 @@ void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_cl
         held->session.reset();  // its worker stops; joined here, never on itself
         held.reset();
     });
-}
-
-void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
-    // 1. Sessions whose owner is gone (its claim lapsed with its liveliness, or it is a dead process of this
-    //    host) and that this server can continue: as their named standby, or from its own data dir after a
-    //    restart. The new claim's epoch is higher, so it beats the old one even before that one lapses.
-    for (const auto& [id, view] : owners) {
-        if (view.disposed || !holding(view.data.state) || owned(id)) continue;
-        // Gone: its claim lapsed with its liveliness. A server restarted on the dead owner's data dir need not wait
-        // for the lease when the owner was an earlier process with its id, or a dead process of this host.
-        const bool restart = resumable_.count(id) > 0;
-        const bool stale_self = restart && view.data.owner_id == params_.server_id;
-        const bool gone = !view.alive || stale_self || (restart && cluster_->diedOnThisHost(view.data.owner_id));
-        if (!gone) {
-            owner_gone_since_ns_.erase(id);
-            continue;
-        }
-        const int64_t gone_since_ns = owner_gone_since_ns_.try_emplace(id, steadyNowNs()).first->second;
-        if (!witnessed(id, steadyNowNs() - gone_since_ns)) continue;
-        std::optional<wire::ReplicaData> standby;
-        if (view.data.standby_id == params_.server_id) standby = replicator_->standbyCopy(id);
-        const auto disk = resumable_.find(id);
-        const TakeoverChoice choice = chooseTakeover(view.data, standby ? &*standby : nullptr,
-                                                     disk != resumable_.end() ? &disk->second : nullptr);
-        if (choice.kind == TakeoverChoice::Kind::kFromFirstFrame) {
-            // Nobody holds a replica (the owner died before its first one reached a standby or its disk), and the
-            // agent still keeps every frame from the first: the scan starts over from there and loses nothing.
-            takeOverFromFirstFrame(id, view);
-            continue;
-        }
-        if (choice.kind == TakeoverChoice::Kind::kRefuse) {
-            if (refusals_logged_.insert(id + ":" + choice.why).second) {
-                std::fprintf(stderr, "facescan-server: %s\n", choice.why.c_str());
-            }
-            continue;
-        }
-        if (choice.kind == TakeoverChoice::Kind::kWait) continue;  // a server that has its replica continues it
-        std::optional<wire::ReplicaData> copy = *choice.copy;
-        if (disk != resumable_.end()) resumable_.erase(disk);
-        held_elsewhere_.erase(id);
-        auto o = std::make_shared<OwnedSession>();
-        // The takeover time runs from the old owner's last sign of life (an announcement or a replica).
-        const int64_t heard =
-            std::max(replicator_->lastHeardFrom(view.data.owner_id), cluster_->lastHeard(view.data.owner_id));
-        o->takeover_from_ns = heard > 0 ? heard : steadyNowNs();
-        const uint32_t epoch = choice.epoch;
-        std::fprintf(
-            stderr,
-            "facescan-server: session %s: owner '%s' is gone; taking over at frame %u (epoch %u, %.0f ms after "
-            "its last sign of life)\n",
-            id.c_str(), view.data.owner_id.c_str(), copy->next_seq, epoch,
-            static_cast<double>(steadyNowNs() - o->takeover_from_ns) * 1e-6);
-        o->restore_from = std::move(copy);
-        if (const Status s = claimSession(id, epoch, o, view.data); !s.isOk()) {
-            std::fprintf(stderr, "facescan-server: cannot take over %s: %s\n", id.c_str(), s.toString().c_str());
-        }
-    }
-    // 2. Replicas in the data dir of sessions with no claim left anywhere (their owner's lapsed long ago): resumed
-    //    while their agent streams, or by a lone server whatever the agent does. Those that finished stay on disk. One
-    //    that another live server continues is kept ready as well: if that server fails too before its own copy reached
-    //    a standby, this copy is the only one left of the frames the agent has dropped (a restart of each server in
-    //    turn lost them).
-    for (auto it = resumable_.begin(); it != resumable_.end();) {
-        const auto view = owners.find(it->first);
-        const auto elsewhere = held_elsewhere_.find(it->first);
-        if (view == owners.end() && cluster_->othersKnown() > 0) {
-            // No claim in view, in a cluster. Right after the join the other servers' claims may still be on their
-            // way: a resume then would compete with the scan's live owner. And once the agent is gone too, the
-            // scan ended somewhere (finished there, its claim since retired) or cannot go on: resuming this copy
-            // would write a second, partial result beside the real one. So only a scan whose agent still streams,
-            // and only once the view had two leases to fill in, is resumed from the data dir.
-            if (steadyNowNs() - joined_ns_ < 2 * lease_ns_) {
-                ++it;
-                continue;
-            }
-            if (!agentLives(it->first)) {
-                std::fprintf(stderr,
-                             "facescan-server: session %s: no server owns it and its agent is gone (it ended "
-                             "elsewhere or cannot go on): the replica in %s stays as it is\n",
-                             it->first.c_str(), params_.data_dir.c_str());
-                held_elsewhere_.erase(it->first);
-                it = resumable_.erase(it);
-                continue;
-            }
-        }
-        if (view == owners.end()) {
-            auto o = std::make_shared<OwnedSession>();
-            o->takeover_from_ns = steadyNowNs();
-            // Above every epoch this session had, including those of the servers that continued it meanwhile.
-            const uint32_t epoch =
-                std::max(it->second.epoch, elsewhere != held_elsewhere_.end() ? elsewhere->second : 0u) + 1;
-            held_elsewhere_.erase(it->first);
-            std::fprintf(stderr, "facescan-server: session %s: resuming from %s at frame %u (epoch %u)\n",
-                         it->first.c_str(), params_.data_dir.c_str(), it->second.next_seq, epoch);
-            o->restore_from = std::move(it->second);
-            wire::SessionOwnerData previous;
-            previous.failovers = o->restore_from->counters.failovers;
-            if (const Status s = claimSession(it->first, epoch, o, previous); !s.isOk()) {
-                std::fprintf(stderr, "facescan-server: cannot resume %s: %s\n", it->first.c_str(),
-                             s.toString().c_str());
-            }
-            it = resumable_.erase(it);
-            continue;
-        }
-        if (!view->second.alive && !view->second.disposed && holding(view->second.data.state)) {
-            ++it;  // its owner is gone: the takeover above decides (it may be waiting for its view to catch up)
-            continue;
-        }
-        const wire::SessionOwnerData& claim = view->second.data;
-        if (view->second.alive && holding(claim.state) && claim.owner_id != params_.server_id) {
-            const bool first = elsewhere == held_elsewhere_.end();
-            uint32_t& held_epoch = held_elsewhere_[it->first];
-            held_epoch = std::max(held_epoch, claim.epoch);
-            if (first) {
-                std::fprintf(stderr,
-                             "facescan-server: session %s is %s on server '%s': this server keeps its replica in %s "
-                             "(frame %u) in case that one fails too\n",
-                             it->first.c_str(), wire::ownerStateName(claim.state), claim.owner_id.c_str(),
-                             params_.data_dir.c_str(), it->second.next_seq);
-            }
-            ++it;
-            continue;
-        }
-        std::fprintf(stderr, "facescan-server: session %s is %s on server '%s': the replica in %s stays as it is\n",
-                     it->first.c_str(), wire::ownerStateName(claim.state), claim.owner_id.c_str(),
-                     params_.data_dir.c_str());
-        held_elsewhere_.erase(it->first);
-        it = resumable_.erase(it);
-    }
-}
-
-bool Server::rejoining() {
-    // A server that sees no other server and no agent any more, after it had seen other servers, is cut off from
-    // the network. When it comes back, its view of the others' claims lags behind its view of the agents for a
-    // moment: every owner still looks gone while the agents look alive again, and a takeover then would be a split.
-    // So it takes nothing over and places nothing until it has re-observed the cluster for two leases after the
-    // cut, as a server that was frozen does. (A server whose peers died keeps seeing its agents, and takes their
-    // sessions over.)
-    const int64_t now = steadyNowNs();
-    const int others = cluster_->othersAlive();
-    bool agents = false;
-    for (const auto& [id, c] : candidates_) agents = agents || c.writer_alive;
-    if (others > 0) had_peers_ = true;
-    if (had_peers_ && others == 0 && !agents) {
-        if (cut_off_since_ns_ == 0) cut_off_since_ns_ = now;
-        rejoin_until_ns_ = now + 2 * lease_ns_;
-    } else if (cut_off_since_ns_ != 0) {
-        std::fprintf(stderr,
-                     "facescan-server: this server saw no other server and no agent for %.1f s (cut off from the "
-                     "network): re-observing the cluster for %.1f s before taking over or placing any session\n",
-                     static_cast<double>(now - cut_off_since_ns_) * 1e-9,
-                     static_cast<double>(rejoin_until_ns_ - now) * 1e-9);
-        cut_off_since_ns_ = 0;
-    }
-    return now < rejoin_until_ns_;
-}
-
-bool Server::witnessed(const std::string& session_id, int64_t owner_gone_for_ns) const {
-    // A server cut off from the network sees every other server and every agent go. A takeover on that view would
-    // win when the network heals (its epoch is higher) over the owner that went on scanning, and would ask the
-    // agent for frames that it dropped once that owner had them confirmed: the scan would stall for good. So a
-    // takeover needs a witness that the owner, not this server, is the one gone: most of the servers this one knows
-    // still in view (a server cut off never has that), or else the session's agent still heard half a lease after
-    // the owner's claim lapsed. An agent's lease lapses later than a claim's (its participant goes only once
-    // Cyclone has collected it, slower on a loaded machine); the wait is what a server cut off needs to see it go,
-    // and what a cluster of two, where the survivor never has a majority, pays on every takeover.
-    //
-    // Losing every one of two or more other servers at once is, seen from inside, what a cut-off looks like (two
-    // failures at the same moment are rare). The agent then goes from this server's view too, but Cyclone can
-    // take seconds longer to notice it than the claim's lapse (in a chaos run a server cut off took a
-    // session over 2.4 s after the owner's lapse, its agent still in view, and split the scan). So that case waits
-    // two leases for the agent to go; a single lost peer (a cluster of two) keeps the short wait.
-    if (cluster_->seesMajority()) return true;
-    const bool lost_all = cluster_->othersAlive() == 0 && cluster_->othersKnown() >= 2;
-    if (owner_gone_for_ns < (lost_all ? 2 * lease_ns_ : lease_ns_ / 2)) return false;
-    return agentLives(session_id);
-}
-
-bool Server::agentLives(const std::string& session_id) const {
-    const auto agent = candidates_.find(session_id);
-    return agent != candidates_.end() && agent->second.writer_alive;
-}
-
-void Server::takeOverFromFirstFrame(const std::string& session_id, const OwnerView& view) {
-    const auto c = candidates_.find(session_id);
-    if (c == candidates_.end()) return;  // its agent is gone too: nothing to start from
-    // One server takes it: its named standby while that one lives (its replica may be on the way), else the
-    // first in claim order, and the next in line after kFallbackNs per rank.
-    const int64_t now = steadyNowNs();
-    const std::string& standby = view.data.standby_id;
-    if (!standby.empty() && cluster_->serverAlive(standby)) {
-        if (standby != params_.server_id) return;
-    } else {
-        const std::vector<std::string> order = claimOrder(session_id, cluster_->liveLoads());
-        const auto me = std::find(order.begin(), order.end(), params_.server_id);
-        if (me == order.end()) return;  // no room here
-        const int64_t since = orphaned_since_ns_.try_emplace(session_id, now).first->second;
-        if (now - since < static_cast<int64_t>(me - order.begin()) * kFallbackNs) return;
-    }
-    orphaned_since_ns_.erase(session_id);
-    auto o = std::make_shared<OwnedSession>();
-    o->camera = c->second.camera;
-    o->camera_writer = c->second.writer;
-    const int64_t heard = cluster_->lastHeard(view.data.owner_id);
-    o->takeover_from_ns = heard > 0 ? heard : now;
-    o->failovers_before = view.data.failovers;
-    const uint32_t epoch = view.data.epoch + 1;
-    std::fprintf(stderr,
-                 "facescan-server: session %s: owner '%s' is gone and left no replica; its agent keeps every frame: "
-                 "starting over from the first (epoch %u)\n",
-                 session_id.c_str(), view.data.owner_id.c_str(), epoch);
-    if (const Status s = claimSession(session_id, epoch, o, view.data); !s.isOk()) {
-        std::fprintf(stderr, "facescan-server: cannot take over %s: %s\n", session_id.c_str(), s.toString().c_str());
-    }
 }
 
 void Server::requestReplays() {

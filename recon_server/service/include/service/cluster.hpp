@@ -25,6 +25,11 @@
 namespace facescan::service {
 
 // The last claim seen for a session, and whether a live writer still holds it.
+// A claim in one of these states holds its session (an owner is scanning it, or about to).
+inline bool holdsSession(wire::OwnerState s) {
+    return s == wire::OwnerState::kClaiming || s == wire::OwnerState::kReady || s == wire::OwnerState::kActive;
+}
+
 struct OwnerView {
     wire::SessionOwnerData data;
     bool alive = false;     // a live server holds the claim (false: its owner died, or released it)
