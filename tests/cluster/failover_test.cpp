@@ -3,7 +3,8 @@
 //     the mesh matches an uninterrupted run's, the trajectory has no jump, the frames arrive bit-exact;
 //   - a lone server killed and restarted on the same data dir resumes the scan without losing a frame;
 //   - an owner killed before its first replica: the other server starts over from the agent's kept frames;
-//   - a live scan carries on after a takeover, and its status reports the takeover and the gap.
+//   - a live scan carries on after a takeover, and its status reports the takeover and the gap;
+//   - an owner killed mid-scan and restarted after the scan finished elsewhere removes its stale copy.
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -193,6 +194,34 @@ TEST(Failover, OwnerKilledBeforeItsFirstReplicaLosesNoFrame) {
     const fs::path dir = rig.dataDir(other) / "rec";
     const Finished got = finishedSession(dir);
     expectNoFrameLost(got, rig, dir);
+}
+
+// The copy a killed owner leaves in its data dir (its replica, perhaps a half-written result) is a second, partial
+// scan of the person. Once the server that took over has finished the scan with every frame of that copy, nothing
+// will ever read it: the restarted server removes it.
+TEST(Failover, AnOwnerRestartedAfterTheScanFinishedElsewhereRemovesItsStaleCopy) {
+    ClusterRig rig("stale-copy", 46);
+    rig.startServer("srv-a");
+    rig.startServer("srv-b");
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    rig.startAgent("rec", kFrames, "max");
+    const std::string owner = rig.waitForOwner("rec", 30s);
+    ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("rec"));
+    const std::string other = owner == "srv-a" ? "srv-b" : "srv-a";
+    const fs::path copy = rig.dataDir(owner) / "rec";
+    ASSERT_TRUE(waitUntil([&] { return fs::exists(copy / "replica.log"); }, 60s)) << readText(rig.serverLog(owner));
+    rig.server(owner).kill9();
+    ASSERT_EQ(rig.agent("rec").wait(120s), 0) << readText(rig.agentLog("rec"));
+    ASSERT_TRUE(fs::exists(rig.dataDir(other) / "rec" / "summary.json"));
+    ASSERT_TRUE(fs::exists(copy / "replica.log")) << "the kill left no copy: nothing to test";
+    rig.startServer(owner);
+    const std::string log = rig.serverLog(owner).string() + ".2";
+    EXPECT_TRUE(waitUntil([&] { return !fs::exists(copy); }, 30s)) << readText(log);
+    EXPECT_NE(readText(log).find("session rec is finished on server '" + other + "' with every frame of the copy"),
+              std::string::npos)
+        << readText(log);
+    const Finished got = finishedSession(rig.dataDir(other) / "rec");
+    expectNoFrameLost(got, rig, rig.dataDir(other) / "rec");
 }
 
 TEST(Failover, LiveScanCarriesOnAfterATakeoverAndItsStatusReportsIt) {

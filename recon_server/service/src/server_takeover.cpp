@@ -140,12 +140,36 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             ++it;
             continue;
         }
-        std::fprintf(stderr, "facescan-server: session %s is %s on server '%s': the replica in %s stays as it is\n",
-                     it->first.c_str(), wire::ownerStateName(claim.state), claim.owner_id.c_str(),
-                     params_.data_dir.c_str());
+        if (resultSuperseded(view->second, it->second.epoch, it->second.next_seq)) {
+            // Finished elsewhere with every frame this copy holds: the copy (and whatever an interrupted finish
+            // wrote beside it here) is a second, partial scan of the person that nothing will ever read.
+            removeCopy(params_.data_dir / it->first);
+            std::fprintf(stderr,
+                         "facescan-server: session %s is finished on server '%s' with every frame of the copy here: "
+                         "the copy in %s is removed\n",
+                         it->first.c_str(), claim.owner_id.c_str(), params_.data_dir.c_str());
+        } else {
+            std::fprintf(stderr, "facescan-server: session %s is %s on server '%s': the replica in %s stays as it is\n",
+                         it->first.c_str(), wire::ownerStateName(claim.state), claim.owner_id.c_str(),
+                         params_.data_dir.c_str());
+        }
         held_elsewhere_.erase(it->first);
         it = resumable_.erase(it);
     }
+}
+
+void Server::removeCopy(const std::filesystem::path& dir) {
+    // Only the files of the copy: a folder beside them holds another result (a server's own, written beside
+    // another owner's files) and stays.
+    retirer_->retire([dir] {
+        std::error_code ec;
+        std::vector<std::filesystem::path> files;
+        for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+            if (entry.is_regular_file(ec)) files.push_back(entry.path());
+        }
+        for (const auto& f : files) std::filesystem::remove(f, ec);
+        std::filesystem::remove(dir, ec);  // only when empty
+    });
 }
 
 bool Server::rejoining() {

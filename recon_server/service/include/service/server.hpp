@@ -146,6 +146,8 @@ class Server {
     // next_seq). Then this one is a second result for one scan and goes (dropSupersededResults, yield).
     bool resultSuperseded(const OwnerView& view, uint32_t epoch, uint32_t next_seq) const;
     void dropSupersededResults(const std::map<std::string, OwnerView>& owners);
+    // The files of a copy in the data dir (a replica, and what an interrupted finish wrote beside it), not folders.
+    void removeCopy(const std::filesystem::path& dir);
     void removeResultFiles(const std::string& session_id, const std::filesystem::path& dir, const std::string& why);
     void unlist(const std::string& session_id);  // this server's status and mesh of it leave the writers
     // A finished session that this server retired: listed, or its files in the data dir name this server.
