@@ -39,11 +39,16 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         std::optional<wire::ReplicaData> standby;
         if (view.data.standby_id == params_.server_id) standby = replicator_->standbyCopy(id);
         const auto disk = resumable_.find(id);
+        const auto candidate = candidates_.find(id);
+        const bool live = (candidate != candidates_.end() && !candidate->second.camera.every_frame) ||
+                          (standby && !standby->camera.every_frame) ||
+                          (disk != resumable_.end() && !disk->second.camera.every_frame);
         const TakeoverChoice choice = chooseTakeover(view.data, standby ? &*standby : nullptr,
-                                                     disk != resumable_.end() ? &disk->second : nullptr);
+                                                     disk != resumable_.end() ? &disk->second : nullptr, live);
         if (choice.kind == TakeoverChoice::Kind::kFromFirstFrame) {
             // Nobody holds a replica (the owner died before its first one reached a standby or its disk), and the
-            // agent still keeps every frame from the first: the scan starts over from there and loses nothing.
+            // agent still keeps every frame from the first: the scan starts over from there and loses nothing. A
+            // live scan starts over from the frames that come now.
             takeOverFromFirstFrame(id, view);
             continue;
         }
@@ -248,10 +253,11 @@ void Server::takeOverFromFirstFrame(const std::string& session_id, const OwnerVi
     o->takeover_from_ns = heard > 0 ? heard : now;
     o->failovers_before = view.data.failovers;
     const uint32_t epoch = view.data.epoch + 1;
-    std::fprintf(stderr,
-                 "facescan-server: session %s: owner '%s' is gone and left no replica; its agent keeps every frame: "
-                 "starting over from the first (epoch %u)\n",
-                 session_id.c_str(), view.data.owner_id.c_str(), epoch);
+    std::fprintf(stderr, "facescan-server: session %s: owner '%s' is gone and left no replica; %s (epoch %u)\n",
+                 session_id.c_str(), view.data.owner_id.c_str(),
+                 c->second.camera.every_frame ? "its agent keeps every frame: starting over from the first"
+                                              : "a live scan: starting over from the frames that come now",
+                 epoch);
     if (const Status s = claimSession(session_id, epoch, o, view.data); !s.isOk()) {
         std::fprintf(stderr, "facescan-server: cannot take over %s: %s\n", session_id.c_str(), s.toString().c_str());
     }

@@ -3,7 +3,7 @@
 namespace facescan::service {
 
 TakeoverChoice chooseTakeover(const wire::SessionOwnerData& last_claim, const wire::ReplicaData* standby_copy,
-                              const wire::ReplicaData* disk_copy) {
+                              const wire::ReplicaData* disk_copy, bool live_scan) {
     TakeoverChoice c;
     const wire::ReplicaData* copy = standby_copy;
     if (disk_copy && (!copy || disk_copy->epoch > copy->epoch ||
@@ -11,7 +11,8 @@ TakeoverChoice chooseTakeover(const wire::SessionOwnerData& last_claim, const wi
         copy = disk_copy;
     }
     if (!copy) {
-        c.kind = last_claim.confirmed_seq == 0 ? TakeoverChoice::Kind::kFromFirstFrame : TakeoverChoice::Kind::kWait;
+        c.kind = last_claim.confirmed_seq == 0 || live_scan ? TakeoverChoice::Kind::kFromFirstFrame
+                                                            : TakeoverChoice::Kind::kWait;
         c.epoch = last_claim.epoch + 1;
         return c;
     }
@@ -25,7 +26,7 @@ TakeoverChoice chooseTakeover(const wire::SessionOwnerData& last_claim, const wi
                 "sees the newer owner";
         return c;
     }
-    if (copy->next_seq < last_claim.confirmed_seq) {
+    if (copy->next_seq < last_claim.confirmed_seq && !live_scan) {
         c.kind = TakeoverChoice::Kind::kRefuse;
         c.why = "session " + id + ": this server's replica (frame " + std::to_string(copy->next_seq) +
                 ") is older than what the agent still keeps (from frame " + std::to_string(last_claim.confirmed_seq) +
