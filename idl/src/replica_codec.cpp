@@ -36,6 +36,7 @@ class ByteWriter {
             for (int c = 0; c < 4; ++c) put<float>(T.matrix()(r, c));
         }
     }
+    void bytes(const uint8_t* p, size_t n) { out_.insert(out_.end(), p, p + n); }
 
  private:
     std::vector<uint8_t>& out_;
@@ -106,8 +107,7 @@ void putCamera(ByteWriter& w, const CameraInfoData& c) {
     w.pose(c.T_colour_depth);
 }
 
-// format_version 2 has no camera description: its sessions were all Kinect v1 with registered colour.
-bool getCamera(ByteReader& r, CameraInfoData& c, uint16_t format_version) {
+bool getCamera(ByteReader& r, CameraInfoData& c) {
     uint32_t w = 0, h = 0;
     uint8_t reg = 0, every = 0;
     if (!r.get(w) || !r.get(h) || w > 4096 || h > 4096) return false;
@@ -121,10 +121,6 @@ bool getCamera(ByteReader& r, CameraInfoData& c, uint16_t format_version) {
     c.colour_registered = reg != 0;
     c.every_frame = every != 0;
     if (!r.str(c.source) || !r.str(c.agent_host)) return false;
-    if (format_version < 3) {
-        c.sensor = recon::SensorModel::kinectV1();
-        return true;
-    }
     uint8_t family = 0;
     uint32_t cw = 0, ch = 0;
     if (!r.str(c.sensor.name) || !r.get(family) || family > static_cast<uint8_t>(recon::SensorFamily::kTimeOfFlight))
@@ -276,6 +272,45 @@ Status getState(ByteReader& r, recon::ReconState& s) {
     return Status::ok();
 }
 
+// Version 4, at the end of the body: a flag, then the keyframes.
+void putKeyframes(ByteWriter& w, const ReplicaData& d) {
+    w.put<uint8_t>(d.has_keyframes ? 1 : 0);
+    if (!d.has_keyframes) return;
+    w.put<uint32_t>(static_cast<uint32_t>(d.keyframes.size()));
+    for (const ReplicaKeyframe& k : d.keyframes) {
+        w.put<uint32_t>(k.seq);
+        w.pose(k.T_world_depth);
+        w.put<uint32_t>(static_cast<uint32_t>(k.jpeg.size()));
+        w.bytes(k.jpeg.data(), k.jpeg.size());
+    }
+}
+
+Status getKeyframes(ByteReader& r, ReplicaData& d) {
+    const Status truncated = dataLoss("replica body truncated in its keyframes");
+    uint8_t has = 0;
+    if (!r.get(has) || has > 1) return truncated;
+    d.has_keyframes = has != 0;
+    if (!d.has_keyframes) return Status::ok();
+    uint32_t n = 0;
+    if (!r.get(n)) return truncated;
+    if (n > kMaxReplicaKeyframes) return outOfRange("replica holds " + std::to_string(n) + " keyframes");
+    d.keyframes.reserve(std::min<size_t>(n, r.left() / 56));  // what the bytes can hold, whatever n says
+    for (uint32_t i = 0; i < n; ++i) {
+        ReplicaKeyframe k;
+        uint32_t size = 0;
+        if (!r.get(k.seq) || !r.pose(k.T_world_depth) || !r.get(size)) return truncated;
+        if (size > kMaxReplicaKeyframeBytes)
+            return outOfRange("replica keyframe of " + std::to_string(size) + " bytes");
+        const uint8_t* bytes = r.take(size);
+        if (!bytes) return truncated;
+        k.jpeg.assign(bytes, bytes + size);
+        if (!k.T_world_depth.matrix().allFinite())
+            return invalidArgument("replica keyframe with a pose that is not finite");
+        d.keyframes.push_back(std::move(k));
+    }
+    return Status::ok();
+}
+
 }  // namespace
 
 uint64_t frameDigest(uint64_t digest, const uint8_t* depth, size_t depth_size, const uint8_t* colour,
@@ -306,8 +341,14 @@ ReplicaEncoder::~ReplicaEncoder() = default;
 
 Status ReplicaEncoder::encode(const ReplicaData& r, std::vector<uint8_t>& out) {
     if (r.full() != r.state.full) return invalidArgument("replica: base round and state disagree on full");
+    size_t keyframe_bytes = 0;
+    for (const ReplicaKeyframe& k : r.keyframes) {
+        if (k.jpeg.size() > kMaxReplicaKeyframeBytes) return invalidArgument("replica: a keyframe is too large");
+        keyframe_bytes += 56 + k.jpeg.size();
+    }
+    if (r.keyframes.size() > kMaxReplicaKeyframes) return invalidArgument("replica: too many keyframes");
     body_.clear();
-    body_.reserve(1024 + r.state.blocks.voxels.size() * kVoxelBytes + r.state.trajectory.size() * 56);
+    body_.reserve(1024 + r.state.blocks.voxels.size() * kVoxelBytes + r.state.trajectory.size() * 56 + keyframe_bytes);
     ByteWriter w(body_);
     w.str(r.session_id);
     w.str(r.owner_id);
@@ -315,6 +356,7 @@ Status ReplicaEncoder::encode(const ReplicaData& r, std::vector<uint8_t>& out) {
     putCamera(w, r.camera);
     putCounters(w, r.counters);
     putState(w, r.state, body_);
+    putKeyframes(w, r);
     return frameBody(body_.data(), body_.size(), r.full(), out);
 }
 
@@ -423,10 +465,11 @@ Status decodeReplica(const uint8_t* data, size_t size, ReplicaData& out) {
     ByteReader r(body.data(), body.size());
     ReplicaData d;
     if (!r.str(d.session_id) || !r.str(d.owner_id) || !r.get(d.epoch) || !r.get(d.round) || !r.get(d.base_round) ||
-        !r.get(d.next_seq) || !getCamera(r, d.camera, version) || !getCounters(r, d.counters)) {
+        !r.get(d.next_seq) || !getCamera(r, d.camera) || !getCounters(r, d.counters)) {
         return dataLoss("replica body truncated in its header fields");
     }
     RETURN_IF_ERROR(getState(r, d.state));
+    if (version >= 4) RETURN_IF_ERROR(getKeyframes(r, d));
     if (r.left() != 0) return dataLoss("replica body has " + std::to_string(r.left()) + " trailing bytes");
     d.state.full = (flags & kFlagFull) != 0;
     if (d.full() != d.state.full) return invalidArgument("replica: full flag and base round disagree");
@@ -460,6 +503,10 @@ Status mergeReplica(ReplicaData& base, const ReplicaData& delta) {
     base.next_seq = delta.next_seq;
     base.camera = delta.camera;
     base.counters = delta.counters;
+    if (delta.has_keyframes) {
+        base.has_keyframes = true;
+        base.keyframes = delta.keyframes;
+    }
     return Status::ok();
 }
 

@@ -154,6 +154,19 @@ TEST(Failover, KilledOwnerMidRecordingLosesNoFrameAndMatchesAnUninterruptedRun) 
     }
     EXPECT_LT(worst_mm, 0.5) << "the trajectory left the uninterrupted run's";
     EXPECT_LT(worst_step_mm, ref_worst_step_mm + 0.5) << "a jump in the trajectory";
+
+    // The texture: the replica carried the old owner's colour keyframes, so the standby bakes from the views of
+    // the whole scan, as the uninterrupted run did, not only from those after the takeover.
+    const std::string taker_log = readText(rig.serverLog(standby));
+    const std::string restored =
+        lastMatch(taker_log, "owns session rec \\(epoch 2, resuming at frame [0-9]+ with ([0-9]+) texture");
+    ASSERT_FALSE(restored.empty()) << taker_log;
+    EXPECT_GT(std::stoi(restored), 0) << taker_log;
+    const std::string kept = lastMatch(taker_log, "session rec: texture .*\\(([0-9]+) keyframes");
+    const std::string kept_base =
+        lastMatch(readText(base.serverLog("base")), "session rec: texture .*\\(([0-9]+) keyframes");
+    ASSERT_FALSE(kept.empty() || kept_base.empty()) << taker_log;
+    EXPECT_EQ(kept, kept_base) << taker_log;
 }
 
 TEST(Failover, LoneServerKilledAndRestartedOnItsDataDirResumesWithoutLosingAFrame) {

@@ -101,5 +101,42 @@ TEST(TextureKeyframes, RawColourIsNotKeptAndBadJpegIsLeftOutWithANote) {
     EXPECT_FALSE(bad.validate().isOk());
 }
 
+// A takeover continues the texture from the old owner's keyframes (a replica carries them): they come back as they
+// were, within this session's own bounds, and each change shows in version() so that a replica carries them only
+// when they changed.
+TEST(TextureKeyframes, SavedKeyframesRestoreWithinTheBoundsAndEveryChangeShowsInTheVersion) {
+    const std::vector<uint8_t> colour = jpeg(64, 48, 120);
+    KeyframeParams params;
+    params.min_angle_deg = 5;
+    TextureKeyframes owner(params);
+    const uint64_t v0 = owner.version();
+    for (int yaw = 0; yaw <= 40; yaw += 10) owner.offer(uint32_t(yaw), wire::ColourCodecId::kJpeg, colour, poseAt(yaw));
+    ASSERT_EQ(owner.count(), 5u);
+    EXPECT_GT(owner.version(), v0);
+    const uint64_t v1 = owner.version();
+    EXPECT_FALSE(owner.offer(99, wire::ColourCodecId::kJpeg, colour, poseAt(41)));  // too near 40: no change
+    EXPECT_EQ(owner.version(), v1);
+    const std::vector<wire::ReplicaKeyframe> saved = owner.save();
+    ASSERT_EQ(saved.size(), 5u);
+    EXPECT_EQ(saved[2].seq, 20u);
+
+    TextureKeyframes taker(params);
+    taker.restore(saved);
+    EXPECT_EQ(taker.count(), 5u);
+    EXPECT_EQ(taker.bytes(), owner.bytes());
+    EXPECT_NE(taker.version(), 0u);
+    // The restored views cover the head as the old owner's did: a frame near one of them adds nothing.
+    EXPECT_FALSE(taker.offer(100, wire::ColourCodecId::kJpeg, colour, poseAt(21)));
+    EXPECT_TRUE(taker.offer(101, wire::ColourCodecId::kJpeg, colour, poseAt(60)));
+
+    KeyframeParams smaller = params;
+    smaller.max_keyframes = 3;
+    TextureKeyframes bounded(smaller);
+    bounded.restore(saved);
+    EXPECT_EQ(bounded.count(), 3u) << "another server's settings bound what it restores";
+    bounded.restore({});
+    EXPECT_EQ(bounded.count(), 0u);
+}
+
 }  // namespace
 }  // namespace facescan::service

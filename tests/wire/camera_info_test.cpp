@@ -2,7 +2,6 @@
 // CameraInfo (the appended fields zero) and an older server's replica (format 2) read as a Kinect v1; and each
 // description that cannot be right, and depth in the wrong units, is refused with one line saying what to do.
 #include <gtest/gtest.h>
-#include <zstd.h>
 
 #include <cstring>
 
@@ -123,7 +122,7 @@ TEST(CameraInfo, AnUnknownPresetListsTheKnownOnes) {
     }
 }
 
-TEST(CameraInfo, TheReplicaCarriesTheCameraAndAnOlderServersReplicaReadsAsKinectV1) {
+TEST(CameraInfo, TheReplicaCarriesTheCamera) {
     ReplicaData r = testing::sampleReplica(6, true);
     const std::string session = r.session_id;
     r.camera = trueDepthCamera();
@@ -136,37 +135,6 @@ TEST(CameraInfo, TheReplicaCarriesTheCameraAndAnOlderServersReplicaReadsAsKinect
     EXPECT_EQ(out.camera.sensor, r.camera.sensor);
     EXPECT_EQ(out.camera.colour_intrinsics, r.camera.colour_intrinsics);
     EXPECT_TRUE(out.camera.T_colour_depth.matrix().isApprox(r.camera.T_colour_depth.matrix()));
-
-    // Format 2, as an older server wrote it: the same body without the camera's fields after agent_host.
-    r.camera = CameraInfoData{};
-    r.camera.session_id = session;
-    r.camera.every_frame = true;
-    r.camera.source = "synthetic:test";
-    ASSERT_TRUE(encodeReplica(r, bytes).isOk());
-    uint32_t body_size = 0;
-    std::memcpy(&body_size, bytes.data() + 8, 4);
-    std::vector<uint8_t> body(body_size);
-    ASSERT_EQ(ZSTD_decompress(body.data(), body.size(), bytes.data() + kReplicaHeaderBytes,
-                              bytes.size() - kReplicaHeaderBytes),
-              body_size);
-    const size_t camera_at = 2 + r.session_id.size() + 2 + r.owner_id.size() + 16;
-    const size_t tail_at = camera_at + 8 + 24 + 2 + 4 + 2 + r.camera.source.size() + 2 + r.camera.agent_host.size();
-    const size_t tail_bytes = 2 + r.camera.sensor.name.size() + 1 + 20 + 8 + 16 + 48;
-    body.erase(body.begin() + static_cast<ptrdiff_t>(tail_at),
-               body.begin() + static_cast<ptrdiff_t>(tail_at + tail_bytes));
-    std::vector<uint8_t> v2;
-    ASSERT_TRUE(frameReplicaBody(body.data(), body.size(), true, v2).isOk());
-    const uint16_t version = 2;
-    std::memcpy(v2.data() + 4, &version, 2);
-    const Status s = decodeReplica(v2.data(), v2.size(), out);
-    ASSERT_TRUE(s.isOk()) << s.toString();
-    EXPECT_EQ(out.camera.sensor, recon::SensorModel::kinectV1());
-    EXPECT_EQ(out.camera.source, "synthetic:test");
-    EXPECT_EQ(out.counters.frames_integrated, r.counters.frames_integrated);
-    // A version older than that is refused, with what to do.
-    const uint16_t ancient = 1;
-    std::memcpy(v2.data() + 4, &ancient, 2);
-    EXPECT_EQ(decodeReplica(v2.data(), v2.size(), out).code(), StatusCode::kUnimplemented);
 }
 
 }  // namespace

@@ -1,8 +1,10 @@
 // The cluster's messages and the replica format: round trips, and every kind of bad input refused with
 // a Status that says what is wrong (truncated, corrupt, another format version, values out of range).
 #include <gtest/gtest.h>
+#include <zstd.h>
 
 #include <cstring>
+#include <tuple>
 
 #include "sample_replica.hpp"
 #include "wire/cluster_codec.hpp"
@@ -87,6 +89,125 @@ TEST(ReplicaCodec, TruncatedCorruptAndForeignBytesAreRefusedWithAReason) {
     impossible.state.blocks.voxels[7].tsdf = 5.0f;
     ASSERT_TRUE(encodeReplica(impossible, bytes).isOk());
     EXPECT_FALSE(decodeReplica(bytes.data(), bytes.size(), out).isOk());
+}
+
+ReplicaKeyframe keyframe(uint32_t seq, size_t bytes) {
+    ReplicaKeyframe k;
+    k.seq = seq;
+    k.jpeg.assign(bytes, static_cast<uint8_t>(seq));
+    k.T_world_depth.translation() = Eigen::Vector3f(0.01f * static_cast<float>(seq), 0, 0.6f);
+    return k;
+}
+
+// The texture's keyframes travel with the replica: in full rounds, and in a delta only when they changed; a delta
+// without them keeps its base's, so that a takeover still textures the head from the old owner's views.
+TEST(ReplicaCodec, KeyframesRoundTripAndADeltaWithoutThemKeepsItsBases) {
+    ReplicaData full = sampleReplica(4, true);
+    full.has_keyframes = true;
+    full.keyframes = {keyframe(3, 1000), keyframe(40, 2000)};
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(encodeReplica(full, bytes).isOk());
+    ReplicaData base;
+    ASSERT_TRUE(decodeReplica(bytes.data(), bytes.size(), base).isOk());
+    ASSERT_TRUE(base.has_keyframes);
+    ASSERT_EQ(base.keyframes.size(), 2u);
+    EXPECT_EQ(base.keyframes[1].seq, 40u);
+    EXPECT_EQ(base.keyframes[1].jpeg, full.keyframes[1].jpeg);
+    EXPECT_TRUE(base.keyframes[1].T_world_depth.isApprox(full.keyframes[1].T_world_depth));
+
+    // A delta that joins the base: no new blocks, the next generation, the trajectory going on.
+    ReplicaData delta = sampleReplica(0, false);
+    delta.base_round = base.round;
+    delta.round = base.round + 1;
+    delta.state.since_generation = base.state.generation;
+    delta.state.generation = base.state.generation + 1;
+    delta.state.trajectory_begin = base.state.trajectorySize();
+    delta.state.total_blocks = static_cast<uint32_t>(base.state.blocks.count());
+    ReplicaData decoded;
+    ASSERT_TRUE(encodeReplica(delta, bytes).isOk());
+    ASSERT_TRUE(decodeReplica(bytes.data(), bytes.size(), decoded).isOk());
+    EXPECT_FALSE(decoded.has_keyframes);
+    ASSERT_TRUE(mergeReplica(base, decoded).isOk());
+    EXPECT_EQ(base.keyframes.size(), 2u) << "a delta without keyframes keeps the base's";
+
+    delta.has_keyframes = true;
+    delta.keyframes = {keyframe(70, 500)};
+    delta.base_round = base.round;
+    delta.round = base.round + 1;
+    delta.state.since_generation = base.state.generation;
+    delta.state.generation = base.state.generation + 1;
+    delta.state.trajectory_begin = base.state.trajectorySize();
+    ASSERT_TRUE(encodeReplica(delta, bytes).isOk());
+    ASSERT_TRUE(decodeReplica(bytes.data(), bytes.size(), decoded).isOk());
+    ASSERT_TRUE(mergeReplica(base, decoded).isOk());
+    ASSERT_EQ(base.keyframes.size(), 1u) << "a delta with keyframes replaces them";
+    EXPECT_EQ(base.keyframes[0].seq, 70u);
+}
+
+// A server reads the format before its own (a rolling upgrade): version 3 is version 4 without the keyframes at
+// the end of the body. Older ones are refused with what to do.
+TEST(ReplicaCodec, TheFormatBeforeReadsWithoutKeyframesAndOlderOnesAreRefused) {
+    const ReplicaData r = sampleReplica(3, true);
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(encodeReplica(r, bytes).isOk());
+    uint32_t body_size = 0;
+    std::memcpy(&body_size, bytes.data() + 8, 4);
+    std::vector<uint8_t> body(body_size);
+    ASSERT_EQ(ZSTD_decompress(body.data(), body.size(), bytes.data() + kReplicaHeaderBytes,
+                              bytes.size() - kReplicaHeaderBytes),
+              body_size);
+    ASSERT_EQ(body.back(), 0) << "no keyframes: the body ends with their flag";
+    body.pop_back();
+    std::vector<uint8_t> v3;
+    ASSERT_TRUE(frameReplicaBody(body.data(), body.size(), true, v3).isOk());
+    uint16_t version = 3;
+    std::memcpy(v3.data() + 4, &version, 2);
+    ReplicaData out;
+    const Status s = decodeReplica(v3.data(), v3.size(), out);
+    ASSERT_TRUE(s.isOk()) << s.toString();
+    EXPECT_FALSE(out.has_keyframes);
+    EXPECT_EQ(out.counters.frames_digest, r.counters.frames_digest);
+    EXPECT_EQ(out.state.blocks.count(), 3u);
+    // The same bytes read as version 4 lack the flag.
+    version = 4;
+    std::memcpy(v3.data() + 4, &version, 2);
+    EXPECT_EQ(decodeReplica(v3.data(), v3.size(), out).code(), StatusCode::kDataLoss);
+    version = 2;
+    std::memcpy(v3.data() + 4, &version, 2);
+    const Status old = decodeReplica(v3.data(), v3.size(), out);
+    EXPECT_EQ(old.code(), StatusCode::kUnimplemented);
+    EXPECT_NE(old.message().find("run the same facescan version on every server"), std::string::npos) << old.message();
+}
+
+TEST(ReplicaCodec, LyingKeyframeCountsAndSizesAreRefusedBeforeAnythingIsAllocated) {
+    ReplicaData r = sampleReplica(1, true);
+    r.has_keyframes = true;
+    r.keyframes = {keyframe(1, 64)};
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(encodeReplica(r, bytes).isOk());
+    uint32_t body_size = 0;
+    std::memcpy(&body_size, bytes.data() + 8, 4);
+    std::vector<uint8_t> body(body_size);
+    ASSERT_EQ(ZSTD_decompress(body.data(), body.size(), bytes.data() + kReplicaHeaderBytes,
+                              bytes.size() - kReplicaHeaderBytes),
+              body_size);
+    // The tail: flag, count, seq, pose (48), size, 64 bytes.
+    const size_t count_at = body.size() - (64 + 4 + 48 + 4 + 4);
+    const size_t size_at = body.size() - (64 + 4);
+    ReplicaData out;
+    for (const auto& [at, value, code] : {std::tuple{count_at, uint32_t{1000}, StatusCode::kOutOfRange},
+                                          std::tuple{count_at, uint32_t{2}, StatusCode::kDataLoss},
+                                          std::tuple{size_at, uint32_t{1} << 30, StatusCode::kOutOfRange},
+                                          std::tuple{size_at, uint32_t{65}, StatusCode::kDataLoss}}) {
+        std::vector<uint8_t> bad = body;
+        std::memcpy(bad.data() + at, &value, 4);
+        std::vector<uint8_t> framed;
+        ASSERT_TRUE(frameReplicaBody(bad.data(), bad.size(), true, framed).isOk());
+        EXPECT_EQ(decodeReplica(framed.data(), framed.size(), out).code(), code) << at << " = " << value;
+    }
+    // A writer that has more than the format allows says so instead of writing it.
+    r.keyframes.assign(kMaxReplicaKeyframes + 1, keyframe(2, 1));
+    EXPECT_EQ(encodeReplica(r, bytes).code(), StatusCode::kInvalidArgument);
 }
 
 TEST(ClusterCodec, AnnouncementsAndClaimsRoundTripAndBadOnesAreRefused) {

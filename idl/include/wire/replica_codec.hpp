@@ -21,10 +21,13 @@
 
 namespace facescan::wire {
 
-// 2: SessionCounters::frames_tracked_only; 3: the camera (CameraInfoData::sensor, its colour camera and extrinsics).
+// 2: SessionCounters::frames_tracked_only; 3: the camera (CameraInfoData::sensor, its colour camera and extrinsics);
+// 4: the texture's colour keyframes (ReplicaData::keyframes).
 // A server reads its own version and the one before, so a rolling upgrade keeps the older servers' replicas.
-inline constexpr uint16_t kReplicaFormatVersion = 3;
-inline constexpr uint16_t kOldestReplicaFormatVersion = 2;
+inline constexpr uint16_t kReplicaFormatVersion = 4;
+inline constexpr uint16_t kOldestReplicaFormatVersion = 3;
+inline constexpr uint32_t kMaxReplicaKeyframes = 256;
+inline constexpr size_t kMaxReplicaKeyframeBytes = size_t{16} << 20;  // one JPEG: far above a 4K frame
 inline constexpr size_t kReplicaHeaderBytes = 24;
 inline constexpr size_t kMaxReplicaBodyBytes = size_t{512} << 20;  // 512 MiB: far above a face volume
 
@@ -44,6 +47,14 @@ struct SessionCounters {
     uint64_t frames_digest = 0;  // FNV-1a over the payloads of every frame accepted, in order (frameDigest)
 };
 
+// A colour keyframe the texture is baked from (the session's TextureKeyframes): its bytes as received (JPEG) and
+// the depth camera's pose in the model's frame when it was tracked.
+struct ReplicaKeyframe {
+    uint32_t seq = 0;
+    std::vector<uint8_t> jpeg;
+    recon::Pose T_world_depth = recon::Pose::Identity();
+};
+
 struct ReplicaData {
     std::string session_id;
     std::string owner_id;
@@ -54,6 +65,11 @@ struct ReplicaData {
     CameraInfoData camera;
     SessionCounters counters;
     recon::ReconState state;  // full iff base_round == 0
+    // The texture's keyframes, in a full replica and in a delta whose keyframes changed since the round before
+    // (has_keyframes); a delta without them keeps its base's (mergeReplica). They are small beside the volume
+    // (a few hundred KB) and change seldom once the head has been seen from all sides.
+    bool has_keyframes = false;
+    std::vector<ReplicaKeyframe> keyframes;
 
     bool full() const { return base_round == 0; }
 };

@@ -146,6 +146,8 @@ void Replicator::replicate(OwnedSession& o, Outgoing& out) {
     r.camera = std::move(cap.camera);
     r.counters = cap.counters;
     r.state = std::move(cap.state);
+    r.has_keyframes = cap.has_keyframes;
+    r.keyframes = std::move(cap.keyframes);
     std::vector<uint8_t>& bytes = bytes_;
     t0 = steadyNowNs();
     Status status = encoder_.encode(r, bytes);

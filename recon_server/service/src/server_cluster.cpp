@@ -290,10 +290,14 @@ Status Server::activate(OwnedSession& o) {
         r.resume_seq = next;
         r.confirmed_seq = next;
     });
+    std::string resumed;
+    if (next > 0) resumed = ", resuming at frame " + std::to_string(next);
+    if (o.restore_from && o.restore_from->has_keyframes) {
+        resumed += " with " + std::to_string(o.restore_from->keyframes.size()) + " texture keyframes";
+    }
     o.restore_from.reset();  // the state lives in the session now
     std::fprintf(stderr, "facescan-server: owns session %s (epoch %u%s, %.0f ms after the claim)\n", o.id.c_str(),
-                 o.epoch, next > 0 ? (", resuming at frame " + std::to_string(next)).c_str() : "",
-                 static_cast<double>(steadyNowNs() - o.claimed_ns) * 1e-6);
+                 o.epoch, resumed.c_str(), static_cast<double>(steadyNowNs() - o.claimed_ns) * 1e-6);
     return Status::ok();
 }
 

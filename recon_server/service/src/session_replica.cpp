@@ -58,6 +58,8 @@ void Session::applyReplicaLocked(const wire::ReplicaData& r, int64_t takeover_fr
     last_pose_ = r.state.T_world_camera;
     replica_generation_ = r.state.generation;
     replica_trajectory_ = r.state.trajectorySize();
+    // The old owner's texture views (their poses are in the restored model's frame); the worker has not started.
+    if (r.has_keyframes) keyframes_.restore(r.keyframes);
     takeover_from_ns_ = takeover_from_ns;
     takeover_started_ns_ = steadyNowNs();
     takeover_received_ns_ = 0;
@@ -104,6 +106,13 @@ void Session::captureOnWorker(bool full, ReplicaCapture& out) {
     recon_->captureState(full ? 0 : replica_generation_, full ? 0 : replica_trajectory_, out.state);
     replica_generation_ = out.state.generation;
     replica_trajectory_ = out.state.trajectorySize();
+    // The keyframes are the worker's (it offers them): taken here, between two frames, like the state.
+    out.has_keyframes = full || keyframes_.version() != replica_keyframes_version_;
+    out.keyframes.clear();
+    if (out.has_keyframes) {
+        out.keyframes = keyframes_.save();
+        replica_keyframes_version_ = keyframes_.version();
+    }
     std::lock_guard lk(mutex_);
     out.camera = *camera_;
     out.next_seq = processed_next_seq_;

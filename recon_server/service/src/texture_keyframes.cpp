@@ -28,8 +28,31 @@ Status KeyframeParams::validate() const {
 }
 
 void TextureKeyframes::clear() {
+    if (!frames_.empty()) ++version_;
     frames_.clear();
     bytes_ = 0;
+}
+
+std::vector<wire::ReplicaKeyframe> TextureKeyframes::save() const {
+    std::vector<wire::ReplicaKeyframe> out;
+    out.reserve(frames_.size());
+    for (const Frame& f : frames_) out.push_back({f.seq, f.jpeg, f.T_world_depth});
+    return out;
+}
+
+void TextureKeyframes::restore(const std::vector<wire::ReplicaKeyframe>& frames) {
+    clear();
+    ++version_;
+    for (const wire::ReplicaKeyframe& k : frames) {
+        if (k.jpeg.empty() || !k.T_world_depth.matrix().allFinite()) continue;
+        frames_.push_back(Frame{k.seq, k.jpeg, k.T_world_depth, k.T_world_depth.linear().col(2).normalized()});
+        bytes_ += k.jpeg.size();
+    }
+    while (!frames_.empty() &&
+           (static_cast<int>(frames_.size()) > params_.max_keyframes || bytes_ > params_.max_bytes)) {
+        bytes_ -= frames_.front().jpeg.size();
+        frames_.erase(frames_.begin());
+    }
 }
 
 bool TextureKeyframes::offer(uint32_t seq, wire::ColourCodecId codec, const std::vector<uint8_t>& colour,
@@ -64,6 +87,7 @@ bool TextureKeyframes::offer(uint32_t seq, wire::ColourCodecId codec, const std:
     }
     frames_.push_back(Frame{seq, colour, T_world_depth, axis});
     bytes_ += colour.size();
+    ++version_;
     return true;
 }
 

@@ -106,6 +106,8 @@ struct ReplicaCapture {
     wire::SessionCounters counters;
     uint32_t next_seq = 0;  // frames before this one are in the state
     recon::ReconState state;
+    bool has_keyframes = false;  // a full capture, or the keyframes changed since the last capture
+    std::vector<wire::ReplicaKeyframe> keyframes;
 };
 
 struct MeshResult {
@@ -287,7 +289,8 @@ class Session {
     uint32_t processed_next_seq_ = 0;
     uint64_t replica_generation_ = 0;
     size_t replica_trajectory_ = 0;
-    int64_t takeover_from_ns_ = 0;      // steady clock; 0 = no takeover pending
+    uint64_t replica_keyframes_version_ = ~uint64_t{0};  // of the keyframes the last capture carried
+    int64_t takeover_from_ns_ = 0;                       // steady clock; 0 = no takeover pending
     int64_t takeover_started_ns_ = 0;   // steady clock: when this server started the taken-over session
     int64_t takeover_received_ns_ = 0;  // steady clock: its first frame here (0: none yet)
     std::vector<std::pair<int64_t, recon::Pose>> trajectory_;  // copy of the recon core's, for other threads

@@ -14,6 +14,7 @@
 #include "recon/status.hpp"
 #include "recon/texture_atlas.hpp"
 #include "wire/messages.hpp"
+#include "wire/replica_codec.hpp"
 
 namespace facescan::service {
 
@@ -39,6 +40,13 @@ class TextureKeyframes {
     size_t offered() const { return offered_; }
     size_t rawSkipped() const { return raw_skipped_; }  // colour frames not kept because they were not JPEG
     void clear();
+    // Grows whenever the kept set changes: a replica carries the keyframes only when they changed since its last.
+    uint64_t version() const { return version_; }
+
+    // For a replica, and back from one after a takeover: the scan's texture then still has the views the old owner
+    // kept. Restored frames beyond this session's bounds (another server's settings) are dropped, oldest first.
+    std::vector<wire::ReplicaKeyframe> save() const;
+    void restore(const std::vector<wire::ReplicaKeyframe>& frames);
 
     // The keyframes decoded for baking: each view at the colour camera's resolution and pose (T_colour_depth after
     // the depth camera's). A frame that does not decode is left out with a note (the rest still texture).
@@ -56,6 +64,7 @@ class TextureKeyframes {
     size_t bytes_ = 0;
     size_t offered_ = 0;
     size_t raw_skipped_ = 0;
+    uint64_t version_ = 0;
 };
 
 }  // namespace facescan::service
