@@ -125,6 +125,30 @@ TEST(StereoSensor, HolesWhereNeitherPatternNorTextureGivesAMatch) {
     EXPECT_LT(head_lost, head / 10);
 }
 
+// Beyond the pattern's reach a surface with its own texture is still matched, a plain one is not.
+TEST(StereoSensor, TheSurfacesOwnTextureIsMatchedBeyondThePatternsReach) {
+    const recon::Intrinsics k = preset("d415");
+    auto invalidShare = [&](bool textured) {
+        HeadModel h = gridHead(0.3f, 80, [](float, float) { return 0.0f; });
+        h.mesh.request_vertex_colors();
+        for (const auto vh : h.mesh.vertices()) {
+            const int i = vh.idx() / 81, j = vh.idx() % 81;
+            const uint8_t c = textured && (i + j) % 2 ? 60 : 200;
+            h.mesh.set_color(vh, recon::Mesh::Color(c, c, c));
+        }
+        SequenceParams p = stillWith(NoiseParams::activeStereo(k.fx_px));
+        p.distance_m = 1.5f;  // the plane faces the camera 1.5 m away, beyond the 1.2 m reach
+        const KinectSimulator sim(std::move(h), p, k);
+        recon::RgbdFrame f;
+        FrameTruth t;
+        sim.render(0, f, &t);
+        const cv::Rect centre(k.width_px / 2 - 60, k.height_px / 2 - 60, 120, 120);
+        return static_cast<double>(cv::countNonZero(f.depth_m(centre) == 0)) / centre.area();
+    };
+    EXPECT_GT(invalidShare(false), 0.95);
+    EXPECT_LT(invalidShare(true), 0.05);
+}
+
 TEST(TimeOfFlightSensor, RandomErrorAtTwoDistancesMatchesTheModel) {
     const recon::Intrinsics k = preset("azure-kinect");
     ASSERT_EQ(k.width_px, 640);
