@@ -1,4 +1,6 @@
-// The Kinect v1 noise model of docs/design.md s6 (Nguyen, Izadi, Lovell 2012), applied to an ideal depth image.
+// The depth noise models applied to an ideal depth image: the Kinect v1's of docs/design.md s6 (Nguyen, Izadi,
+// Lovell 2012) and, in the same form, those of the other synthetic sensors (stereo_tof_noise.cpp adds their own
+// failure modes).
 #include "depth_noise.hpp"
 
 #include <algorithm>
@@ -59,10 +61,10 @@ void projectorShadow(const NoiseParams& p, const recon::Intrinsics& k, const cv:
         for (int v = rows.start; v < rows.end; ++v) {
             const float* z = depth_true_m.ptr<float>(v);
             uint8_t* s = shadow.ptr<uint8_t>(v);
-            // The projector sits at +x of the camera, so its epipolar lines are the image rows and a surface
-            // point at column u lights up projector column u - f b / z. Scanning right to left, a point whose
-            // projector column is right of one already seen (nearer to the projector's view) is occluded from
-            // the projector: the classic shadow band left of every foreground edge.
+            // The projector (or the second imager) sits at +x of the camera, so its epipolar lines are the image rows
+            // and a surface point at column u lights up projector column u - f b / z. Scanning right to left, a point
+            // whose projector column is right of one already seen (nearer to the projector's view) is occluded from the
+            // projector: the classic shadow band left of every foreground edge.
             float min_up = std::numeric_limits<float>::max();
             for (int u = depth_true_m.cols - 1; u >= 0; --u) {
                 if (!(z[u] > 0)) continue;
@@ -77,10 +79,19 @@ void projectorShadow(const NoiseParams& p, const recon::Intrinsics& k, const cv:
     });
 }
 
-void applyKinectNoise(const NoiseParams& p, const recon::Intrinsics& k, const cv::Mat& depth_true_m,
-                      const cv::Mat& cos_incidence, uint64_t seed, cv::Mat& depth_m) {
+void applyDepthNoise(const NoiseParams& p, const recon::Intrinsics& k, const cv::Mat& depth_true_m,
+                     const cv::Mat& cos_incidence, const cv::Mat& colour_bgr, uint64_t seed, cv::Mat& depth_m) {
     cv::Mat shadow;
     projectorShadow(p, k, depth_true_m, shadow);
+    // What each pixel sees before the random noise: the ideal depth, or a time-of-flight camera's phase depth.
+    const bool tof = p.principle == DepthPrinciple::kTimeOfFlight;
+    cv::Mat tof_depth, flying, matchable;
+    if (tof) timeOfFlightDepth(p, depth_true_m, mix64(seed ^ 0x70F70Full), tof_depth, flying);
+    const cv::Mat& source = tof ? tof_depth : depth_true_m;
+    if (p.principle == DepthPrinciple::kActiveStereo) {
+        stereoMatchable(p, depth_true_m, cos_incidence, colour_bgr, matchable);
+        shadow.setTo(255, matchable == 0);
+    }
     depth_m.create(depth_true_m.size(), CV_32F);
     const float fb = k.fx_px * p.baseline_m;
     const float max_theta = p.max_incidence_deg * static_cast<float>(M_PI / 180.0);
@@ -95,19 +106,22 @@ void applyKinectNoise(const NoiseParams& p, const recon::Intrinsics& k, const cv
                     std::clamp(u + static_cast<int>(std::lround(p.lateral_sigma_px * rng.normal())), 0, w - 1);
                 const int sv =
                     std::clamp(v + static_cast<int>(std::lround(p.lateral_sigma_px * rng.normal())), 0, h - 1);
-                const float z_true = depth_true_m.at<float>(sv, su);
+                const float z_true = source.at<float>(sv, su);
                 const float n_axial = rng.normal();
                 const float dropout = rng.uniform();
                 out[u] = 0;
                 if (!(z_true > 0) || shadow.at<uint8_t>(sv, su)) continue;
-                const float theta = std::acos(std::clamp(cos_incidence.at<float>(sv, su), 0.0f, 1.0f));
+                // A flying pixel's return comes from two surfaces, whatever the incidence on either.
+                const bool mixed = tof && flying.at<uint8_t>(sv, su) != 0;
+                const float theta = mixed ? 0.0f : std::acos(std::clamp(cos_incidence.at<float>(sv, su), 0.0f, 1.0f));
                 if (theta > max_theta || dropout < p.dropout_rate) continue;
                 float z = z_true + axialSigmaM(p, z_true, theta) * n_axial;
-                // Disparity quantisation: the sensor measures d = f b / z in 1/8-pixel steps.
+                // Disparity quantisation: the sensor measures d = f b / z in steps (1/8 pixel on the Kinect v1).
                 if (p.disparity_step_px > 0 && z > 0) {
                     const float d = std::round(fb / z / p.disparity_step_px) * p.disparity_step_px;
                     z = d > 0 ? fb / d : 0.0f;
                 }
+                if (p.depth_step_m > 0) z = std::round(z / p.depth_step_m) * p.depth_step_m;
                 if (z < p.min_range_m || z > p.max_range_m) continue;
                 out[u] = z;
             }

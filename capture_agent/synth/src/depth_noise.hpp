@@ -1,4 +1,5 @@
-// Internal: the Kinect v1 depth noise model (Nguyen, Izadi, Lovell 2012; docs/design.md s6) and the random numbers
+// Internal: the depth noise models (Kinect v1: Nguyen, Izadi, Lovell 2012, docs/design.md s6; the other sensors:
+// kinect_simulator.hpp's NoiseParams factories) and the random numbers
 // it needs (counter-based seeding so any frame or row can be generated independently and deterministically).
 #pragma once
 
@@ -40,13 +41,26 @@ class FastRng {
 // sigma_z = a + b (z - z0)^2 + c / sqrt(z) * theta^2 / (pi/2 - theta)^2.
 float axialSigmaM(const NoiseParams& p, float z_m, float theta_rad);
 
-// Turns the ideal depth into a Kinect v1 measurement: projector shadows, lateral jitter, axial noise,
-// disparity quantisation, incidence and range limits, dropouts. `cos_incidence` (CV_32F) is |n . view| of
-// the ideal surface per pixel. `seed` selects the frame's random stream. Rows are processed in parallel.
-void applyKinectNoise(const NoiseParams& p, const recon::Intrinsics& k, const cv::Mat& depth_true_m,
-                      const cv::Mat& cos_incidence, uint64_t seed, cv::Mat& depth_m);
+// Turns the ideal depth into a measurement of the sensor p describes. Every principle: lateral jitter, axial noise
+// (axialSigmaM), incidence and range limits, dropouts. Structured light: projector shadows and disparity
+// quantisation. Active stereo: the second imager's shadow and holes where matching fails (stereoMatchable).
+// Time of flight: flying pixels and multipath (timeOfFlightDepth), depth quantisation. `cos_incidence` (CV_32F)
+// is |n . view| of the ideal surface per pixel, `colour_bgr` the rendered colour (the stereo texture). `seed`
+// selects the frame's random stream. Rows are processed in parallel.
+void applyDepthNoise(const NoiseParams& p, const recon::Intrinsics& k, const cv::Mat& depth_true_m,
+                     const cv::Mat& cos_incidence, const cv::Mat& colour_bgr, uint64_t seed, cv::Mat& depth_m);
 
-// The projector-shadow mask alone (CV_8U, 255 = the projector's light cannot reach that pixel's surface).
+// The shadow mask alone (CV_8U, 255 = the projector's light, or the second stereo imager, cannot reach that pixel's
+// surface): baseline_m to the +x side of the camera.
 void projectorShadow(const NoiseParams& p, const recon::Intrinsics& k, const cv::Mat& depth_true_m, cv::Mat& shadow);
+
+// Active stereo: CV_8U, 255 where the matcher finds texture (the projected pattern or the surface's own).
+void stereoMatchable(const NoiseParams& p, const cv::Mat& depth_true_m, const cv::Mat& cos_incidence,
+                     const cv::Mat& colour_bgr, cv::Mat& matchable);
+
+// Time of flight: the depth each pixel's phase says before random noise: flying pixels (flying: CV_8U, 255 where
+// the pixel mixes two surfaces) and the multipath bias in concavities. Deterministic in `seed`.
+void timeOfFlightDepth(const NoiseParams& p, const cv::Mat& depth_true_m, uint64_t seed, cv::Mat& depth_m,
+                       cv::Mat& flying);
 
 }  // namespace facescan::synth::detail

@@ -46,6 +46,46 @@ NoiseParams NoiseParams::nearRangeStructuredLight() {
     return p;
 }
 
+NoiseParams NoiseParams::activeStereo(float f_px) {
+    NoiseParams p;
+    p.principle = DepthPrinciple::kActiveStereo;
+    // Intel's sigma = z^2 * subpixel / (f * baseline): the b of a + b (z - z0)^2 with a = 0, z0 = 0.
+    constexpr float kSubpixel = 0.08f, kBaselineM = 0.055f;
+    p.axial_a_m = 0.0f;
+    p.axial_b_per_m = kSubpixel / (f_px * kBaselineM);
+    p.axial_z0_m = 0.0f;
+    p.baseline_m = kBaselineM;   // the right imager: its occlusion band is the stereo shadow
+    p.disparity_step_px = 0.0f;  // sub-pixel disparity; its error is the subpixel RMS above
+    p.lateral_sigma_px = 0.5f;
+    p.min_range_m = 0.3f;
+    p.max_range_m = 3.0f;
+    p.pattern_range_m = 1.2f;
+    return p;
+}
+
+NoiseParams NoiseParams::timeOfFlight() {
+    NoiseParams p;
+    p.principle = DepthPrinciple::kTimeOfFlight;
+    p.axial_a_m = 0.0008f;
+    p.axial_b_per_m = 0.0007f;
+    p.axial_z0_m = 0.0f;
+    p.lateral_sigma_px = 0.0f;  // each pixel measures its own footprint (its mixing is the flying pixels)
+    p.disparity_step_px = 0.0f;
+    p.depth_step_m = 0.001f;  // the depth image's 1 mm units
+    p.shadow = false;         // the illuminator sits beside the lens: no shadow band worth modelling
+    p.max_incidence_deg = 80.0f;
+    p.min_range_m = 0.5f;
+    p.max_range_m = 3.86f;
+    p.dropout_rate = 0.002f;
+    p.flying_pixel_rate = 0.5f;
+    // Over about 4 cm of a face at 0.65 m (31 px at f = 504 px): an eye socket 5-8 mm behind its surroundings
+    // reads 1.5-2.4 mm too far, at most 3 mm.
+    p.multipath_window_px = 31;
+    p.multipath_gain = 0.3f;
+    p.multipath_max_m = 0.003f;
+    return p;
+}
+
 Status NoiseParams::validate() const {
     if (!(axial_a_m >= 0 && axial_b_per_m >= 0 && angle_coeff_m >= 0 && lateral_sigma_px >= 0)) {
         return invalidArgument("noise: sigmas must be >= 0");
@@ -56,6 +96,18 @@ Status NoiseParams::validate() const {
     if (!(max_incidence_deg > 0 && max_incidence_deg <= 90)) return invalidArgument("noise: max incidence in (0, 90]");
     if (!(min_range_m >= 0 && max_range_m > min_range_m)) return invalidArgument("noise: need 0 <= min < max range");
     if (!(dropout_rate >= 0 && dropout_rate < 1)) return invalidArgument("noise: dropout rate in [0, 1)");
+    if (!(depth_step_m >= 0 && depth_step_m < 0.05f)) return invalidArgument("noise: depth step in [0, 0.05) m");
+    if (!(pattern_range_m >= 0 && texture_min_grey >= 0)) {
+        return invalidArgument("noise: pattern range and texture threshold must be >= 0");
+    }
+    if (texture_window_px < 3 || texture_window_px > 63 || texture_window_px % 2 == 0 || multipath_window_px < 3 ||
+        multipath_window_px > 63 || multipath_window_px % 2 == 0) {
+        return invalidArgument("noise: texture and multipath windows must be odd, 3-63 pixels");
+    }
+    if (!(flying_pixel_rate >= 0 && flying_pixel_rate <= 1 && flying_jump_m > 0 && multipath_gain >= 0 &&
+          multipath_max_m >= 0)) {
+        return invalidArgument("noise: flying-pixel rate in [0, 1], jump > 0, multipath gain and cap >= 0");
+    }
     return Status::ok();
 }
 
@@ -96,7 +148,7 @@ struct KinectSimulator::Scene {
     float sway_phase_x = 0, sway_phase_y = 0;
 
     void addTorso(const recon::Mesh& head_mesh);
-    void addWall(float distance_m);
+    void addWall(float distance_m, float half_m, int cells);
     void addOccluder();
 };
 
@@ -143,18 +195,26 @@ void KinectSimulator::Scene::addTorso(const recon::Mesh& head_mesh) {
     }
 }
 
-// The wall: one large quad facing the camera (camera frame), beyond the frustum on every side.
-void KinectSimulator::Scene::addWall(float distance_m) {
+// The wall: a large square facing the camera (camera frame at rest), `half` metres each side of the optical axis,
+// beyond the frustum on every side, as cells x cells quads (the rasteriser drops a triangle with a corner behind
+// the camera, so a wall seen from the side needs small ones).
+void KinectSimulator::Scene::addWall(float distance_m, float half, int cells) {
     const int base = static_cast<int>(points.size());
-    const float half = 1.2f * distance_m;
-    for (const auto& [x, y] : {std::pair{-half, -half}, {half, -half}, {half, half}, {-half, half}}) {
-        points.emplace_back(x, y, distance_m);
-        normals.emplace_back(0, 0, -1);
-        colours.emplace_back(175, 190, 200);
+    for (int i = 0; i <= cells; ++i) {
+        for (int j = 0; j <= cells; ++j) {
+            points.emplace_back(half * (2.0f * j / cells - 1.0f), half * (2.0f * i / cells - 1.0f), distance_m);
+            normals.emplace_back(0, 0, -1);
+            colours.emplace_back(175, 190, 200);
+        }
     }
-    tris.emplace_back(base, base + 1, base + 2);
-    tris.emplace_back(base, base + 2, base + 3);
-    tri_label.insert(tri_label.end(), 2, static_cast<uint8_t>(PixelLabel::kNone));
+    for (int i = 0; i < cells; ++i) {
+        for (int j = 0; j < cells; ++j) {
+            const int a = base + i * (cells + 1) + j, b = a + 1, c = a + cells + 2, d = a + cells + 1;
+            tris.emplace_back(a, b, c);
+            tris.emplace_back(a, c, d);
+        }
+    }
+    tri_label.insert(tri_label.end(), 2 * cells * cells, static_cast<uint8_t>(PixelLabel::kNone));
 }
 
 // The occluder: a flattened ellipsoid about the size of a hand (9 x 18 x 3 cm), skin-coloured, in its own frame
@@ -223,7 +283,14 @@ KinectSimulator::KinectSimulator(HeadModel head, SequenceParams params, recon::I
     s.head_tri_end = static_cast<int>(s.tris.size());
     if (params_.torso) s.addTorso(m);
     s.torso_end = static_cast<int>(s.points.size());
-    if (params_.wall) s.addWall(params_.wall_distance_m);
+    // A camera orbiting the head sees the wall obliquely and from the side: a wider wall keeps it behind the head.
+    if (params_.wall) {
+        if (params_.orbit) {
+            s.addWall(params_.wall_distance_m, 3.0f * params_.wall_distance_m, 24);
+        } else {
+            s.addWall(params_.wall_distance_m, 1.2f * params_.wall_distance_m, 1);
+        }
+    }
     s.wall_end = static_cast<int>(s.points.size());
     if (params_.occluder_start_frame >= 0) s.addOccluder();
     const uint64_t r = detail::mix64(params_.seed ^ 0x5157A7ull);
@@ -277,20 +344,40 @@ recon::Pose KinectSimulator::bodyPoseAt(int index) const {
     T.translation() = Vec3(side * p.gap_side_m, 0, p.distance_m) + sway;
     // Head frame (y up, face along +z) to camera (y down, looking along +z): 180 deg about x.
     T.linear() = Eigen::Vector3f(1, -1, -1).asDiagonal();
-    return turn != 0.0f ? T * aboutNeck(Vec3::UnitY(), turn * p.gap_turn_deg) : T;
+    if (turn != 0.0f) T = T * aboutNeck(Vec3::UnitY(), turn * p.gap_turn_deg);
+    return p.orbit ? cameraFromWorldAt(index) * T : T;
 }
 
-float KinectSimulator::yawDegAt(int index) const {
+// The yaw and pitch sweeps (degrees) of frame `index`: the head's turn, or the camera's orbit.
+float KinectSimulator::sweepYawDeg(int index) const {
     const float two_pi = 2.0f * static_cast<float>(M_PI);
     return params_.yaw_amplitude_deg * std::sin(two_pi * index / params_.yaw_period_frames);
 }
 
-float KinectSimulator::pitchDegAt(int index) const {
+float KinectSimulator::sweepPitchDeg(int index) const {
     const float phase = 2.0f * static_cast<float>(M_PI) * index / params_.pitch_period_frames;
     return params_.pitch_amplitude_deg * (params_.nod ? 0.5f * (1.0f - std::cos(phase)) : std::sin(phase));
 }
 
+float KinectSimulator::yawDegAt(int index) const { return params_.orbit ? 0.0f : sweepYawDeg(index); }
+
+float KinectSimulator::pitchDegAt(int index) const { return params_.orbit ? 0.0f : sweepPitchDeg(index); }
+
+recon::Pose KinectSimulator::cameraFromWorldAt(int index) const {
+    if (!params_.orbit) return recon::Pose::Identity();
+    // The camera turns about the head's middle (distance_m ahead of its rest pose): yaw about the vertical, then
+    // pitch about the horizontal axis, keeping its distance to the head.
+    const Vec3 centre(0, 0, params_.distance_m);
+    recon::Pose T_world_camera = recon::Pose::Identity();
+    T_world_camera.linear() = (Eigen::AngleAxisf(sweepYawDeg(index) * kDegToRad, Vec3::UnitY()) *
+                               Eigen::AngleAxisf(sweepPitchDeg(index) * kDegToRad, Vec3::UnitX()))
+                                  .toRotationMatrix();
+    T_world_camera.translation() = centre - T_world_camera.linear() * centre;
+    return T_world_camera.inverse();
+}
+
 recon::Pose KinectSimulator::poseAt(int index) const {
+    if (params_.orbit) return bodyPoseAt(index);  // the head does not turn; the camera moves
     const Eigen::Matrix3f R = (Eigen::AngleAxisf(yawDegAt(index) * kDegToRad, Vec3::UnitY()) *
                                Eigen::AngleAxisf(pitchDegAt(index) * kDegToRad, Vec3::UnitX()))
                                   .toRotationMatrix();
@@ -356,7 +443,15 @@ void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth
         pc[i] = T_camera_body * s.points[i];
         nc[i] = T_camera_body.linear() * s.normals[i];
     }
-    for (int i = s.torso_end; i < s.wall_end; ++i) pc[i] = s.points[i], nc[i] = s.normals[i];
+    if (params_.orbit) {
+        const recon::Pose T_camera_world = cameraFromWorldAt(index);
+        for (int i = s.torso_end; i < s.wall_end; ++i) {
+            pc[i] = T_camera_world * s.points[i];
+            nc[i] = T_camera_world.linear() * s.normals[i];
+        }
+    } else {
+        for (int i = s.torso_end; i < s.wall_end; ++i) pc[i] = s.points[i], nc[i] = s.normals[i];
+    }
     // The occluder when it is in the scene; otherwise behind the camera, where the rasteriser skips it.
     const Vec3 occluder_at = occluderActiveAt(index) ? occluderCentreAt(index) : Vec3(0, 0, -10);
     for (int i = s.wall_end; i < static_cast<int>(s.points.size()); ++i) {
@@ -423,8 +518,8 @@ void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth
     });
 
     if (params_.noise) {
-        detail::applyKinectNoise(
-            params_.noise_model, k, g.depth_m, cos_incidence,
+        detail::applyDepthNoise(
+            params_.noise_model, k, g.depth_m, cos_incidence, out.colour_bgr,
             detail::mix64(params_.seed) ^ detail::mix64(static_cast<uint64_t>(index) + 0x1234567ull), out.depth_m);
     } else {
         g.depth_m.copyTo(out.depth_m);

@@ -56,7 +56,17 @@ Status applyScenario(const std::string& name, SequenceParams& p) {
         p.occluder_start_frame = 120;
         return Status::ok();
     }
-    return invalidArgument("unknown synthetic scenario '" + name + "' (known: gentle, wide, chin, gap, occluder)");
+    if (name == "orbit") {
+        // The camera moves around a still head: +-40 deg about the vertical and +-10 about the horizontal, at
+        // most 40 * 2 pi / 300 = 0.84 deg a frame (and 0.42 pitch), the background sliding through the image.
+        p.orbit = true;
+        p.yaw_amplitude_deg = 40.0f;
+        p.pitch_amplitude_deg = 10.0f;
+        p.sway_amplitude_m = 0.0f;
+        return Status::ok();
+    }
+    return invalidArgument("unknown synthetic scenario '" + name +
+                           "' (known: gentle, wide, chin, gap, occluder, orbit)");
 }
 
 Status applySyntheticSensor(const std::string& name, SyntheticSpec& spec) {
@@ -65,20 +75,40 @@ Status applySyntheticSensor(const std::string& name, SyntheticSpec& spec) {
         p.noise_model = NoiseParams{};
         spec.intrinsics = recon::Intrinsics::kinectV1();
         spec.sensor_model = recon::SensorModel::kinectV1();
-    } else if (name == "truedepth") {
-        ASSIGN_OR_RETURN(const recon::SensorPreset preset, recon::findSensorPreset("truedepth"));
+        spec.sensor = name;
+        return Status::ok();
+    }
+    // The other sensors: the agent's preset of that camera (its range and depth stream), the synthetic noise
+    // model, and where its scans are made.
+    const char* preset_name = nullptr;
+    if (name == "truedepth") {
+        preset_name = "truedepth";
+    } else if (name == "d415" || name == "realsense-d415") {
+        preset_name = "realsense-d415";
+    } else if (name == "azure-kinect") {
+        preset_name = "azure-kinect";
+    } else {
+        return invalidArgument("unknown synthetic sensor '" + name +
+                               "' (known: kinect-v1, truedepth, d415, azure-kinect)");
+    }
+    ASSIGN_OR_RETURN(const recon::SensorPreset preset, recon::findSensorPreset(preset_name));
+    spec.intrinsics = preset.nominal_depth;
+    spec.sensor_model = preset.sensor;
+    if (name == "truedepth") {
         p.noise_model = NoiseParams::nearRangeStructuredLight();
-        spec.intrinsics = preset.nominal_depth;
-        spec.sensor_model = preset.sensor;
-        // The model's sigma(z), as the camera description carries it: a + b (z - z0)^2 expanded.
-        const NoiseParams& n = p.noise_model;
-        spec.sensor_model.noise = {n.axial_a_m + n.axial_b_per_m * n.axial_z0_m * n.axial_z0_m,
-                                   -2.0f * n.axial_b_per_m * n.axial_z0_m, n.axial_b_per_m};
         p.distance_m = 0.4f;  // the nose tip (0.1 m in front of the head frame's origin) at 0.3 m
         p.wall_distance_m = 1.0f;
+    } else if (preset_name == std::string("realsense-d415")) {
+        p.noise_model = NoiseParams::activeStereo(spec.intrinsics.fx_px);
+        p.distance_m = 0.55f;  // nose at 0.45 m, a quarter into the advised 0.375-0.75 m
     } else {
-        return invalidArgument("unknown synthetic sensor '" + name + "' (known: kinect-v1, truedepth)");
+        p.noise_model = NoiseParams::timeOfFlight();
+        p.distance_m = 0.75f;  // nose at 0.65 m, just inside the advised 0.625-1.25 m
     }
+    // The model's sigma(z), as the camera description carries it: a + b (z - z0)^2 expanded.
+    const NoiseParams& n = p.noise_model;
+    spec.sensor_model.noise = {n.axial_a_m + n.axial_b_per_m * n.axial_z0_m * n.axial_z0_m,
+                               -2.0f * n.axial_b_per_m * n.axial_z0_m, n.axial_b_per_m};
     spec.sensor = name;
     return Status::ok();
 }
@@ -136,6 +166,8 @@ StatusOr<SyntheticSpec> parseSyntheticOptions(const std::string& text) {
             p.shading = number != 0;
         } else if (key == "wall") {
             p.wall = number != 0;
+        } else if (key == "orbit") {
+            p.orbit = number != 0;
         } else if (key == "gap_start") {
             p.gap_start_frame = i;
         } else if (key == "gap_frames") {
@@ -172,15 +204,17 @@ StatusOr<HeadModel> loadSubject(const std::string& subject) {
 }
 
 const char* syntheticOptionsHelp() {
-    return "synthetic options (key=value, comma-separated): scenario=gentle|wide|chin|gap|occluder (sets the\n"
+    return "synthetic options (key=value, comma-separated): scenario=gentle|wide|chin|gap|occluder|orbit (sets the\n"
            "  motion and events; other keys override it), frames=N, distance=M (metres), yaw=DEG, pitch=DEG\n"
            "  (amplitudes), period=FRAMES (yaw; pitch gets half), yaw_period=FRAMES, pitch_period=FRAMES, nod=0|1\n"
            "  (pitch 0 -> amplitude -> 0), seed=N, noise=0|1, torso=0|1, shading=0|1 (0: unlit colour), wall=0|1,\n"
+           "  orbit=0|1 (1: the camera moves around the still head; yaw and pitch drive the camera),\n"
            "  subject=auto|builtin|scan|FILE (head= is an alias), gap_start=FRAME (-1 none), gap_frames=N, gap_walk=N, "
            "gap_turn=DEG,\n"
            "  gap_leave=0|1 (0: turn in view instead of leaving), occluder_start=FRAME (-1 none),\n"
-           "  occluder_frames=N, occluder_front=M (metres in front of the nose), sensor=kinect-v1|truedepth (the\n"
-           "  camera: its resolution, noise and range, and its distance unless distance= is given)";
+           "  occluder_frames=N, occluder_front=M (metres in front of the nose),\n"
+           "  sensor=kinect-v1|truedepth|d415|azure-kinect (the camera: its resolution, noise and range, and its\n"
+           "  distance unless distance= is given)";
 }
 
 }  // namespace facescan::synth

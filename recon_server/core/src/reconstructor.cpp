@@ -321,12 +321,22 @@ bool Reconstructor::registerFrame(int valid, float motion_scale, FrameResult& re
     // re-applies the error along the head's weakly constrained (sliding) direction every frame, and the error grew
     // twofold per frame.
     const bool reacquiring = consecutive_failures_ >= params_.icp.max_failures_before_reacquire;
-    if (reacquiring || frames_integrated_ == 1) {
+    const bool first_pair = frames_integrated_ == 1;
+    if (reacquiring || first_pair) {
         // Eq. 4.11 for the first frame pair and for re-acquisition after a loss: align the centroids.
         centroidAlignment(frame_.levels[0], model_.levels[0], estimate);
     }
     // Motion limits are measured from the last good pose, not from the centroid-shifted start.
     result.tracking = icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate, motion_scale);
+    if (first_pair && !reacquiring && !result.tracking.ok()) {
+        // The centroids of the first pair can belong to two different cuts of the head: the first frame's mask
+        // comes from detection and segmentation, this one's from the model's prediction, and a region a centimetre
+        // taller moves its centroid by more than the head moved between the frames (seen on the near stereo
+        // camera, where the fit from the shifted start then found no pairs). The fit from the last pose, as every
+        // later frame starts, before the frame counts as lost.
+        estimate = T_world_camera_;
+        result.tracking = icp_.align(frame_, model_, T_world_model_, T_world_camera_, estimate, motion_scale);
+    }
     if (!params_.reacquire.enabled) return result.tracking.ok();
     if (consecutive_failures_ > 0 || verify_next_) {
         // After a loss (or hidden frames) nothing is fused before a fit is verified: the plain fit, else the best

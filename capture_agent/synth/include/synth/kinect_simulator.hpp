@@ -1,9 +1,9 @@
 // The synthetic Kinect v1: THE renderer of the project (tests, capture agent `synthetic` source, benchmarks).
-// A head turns in front of a fixed camera, with a torso below it and a wall behind it; the output is 640x480
-// depth (metres) and colour registered to depth, with the Kinect v1 noise model of docs/design.md s6 (Nguyen, Izadi,
-// Lovell 2012), plus ground truth (pose, labels, noise-free depth, face box). Events for robustness tests: a nod
-// onto the chest, a gap in which the subject walks out of view and comes back turned, and a hand-sized occluder
-// crossing in front of the face.
+// A head turns in front of a fixed camera (or the camera moves around a still head), with a torso below it and a wall
+// behind it; the output is 640x480 depth (metres) and colour registered to depth, with the Kinect v1 noise model of
+// docs/design.md s6 (Nguyen, Izadi, Lovell 2012), plus ground truth (pose, labels, noise-free depth, face box). Events
+// for robustness tests: a nod onto the chest, a gap in which the subject walks out of view and comes back turned, and a
+// hand-sized occluder crossing in front of the face.
 #pragma once
 
 #include <cstdint>
@@ -18,8 +18,17 @@
 
 namespace facescan::synth {
 
-// Kinect v1 depth noise (Nguyen, Izadi, Lovell 2012; docs/design.md s6).
+// How the synthetic camera measures depth; each principle has its own failure modes (depth_noise.hpp).
+enum class DepthPrinciple : uint8_t {
+    kStructuredLight,  // projector + camera, disparity quantised: projector shadows (Kinect v1, TrueDepth)
+    kActiveStereo,     // two imagers + pattern projector: holes where matching finds no texture, stereo shadows
+    kTimeOfFlight,     // modulated light, phase per pixel: flying pixels at silhouettes, multipath in concavities
+};
+
+// Depth noise. The defaults are the Kinect v1 (Nguyen, Izadi, Lovell 2012; docs/design.md s6); the factories give
+// the other synthetic sensors. Axial sigma has the same form for all: a + b (z - z0)^2 + angle term.
 struct NoiseParams {
+    DepthPrinciple principle = DepthPrinciple::kStructuredLight;
     float axial_a_m = 0.0012f;         // metres; sigma_z = a + b (z - z0)^2 + angle term
     float axial_b_per_m = 0.0019f;     // 1/metre
     float axial_z0_m = 0.4f;           // metres
@@ -32,6 +41,23 @@ struct NoiseParams {
     float max_range_m = 4.0f;          // metres, farthest measurable depth
     float dropout_rate = 0.005f;       // share of valid pixels randomly lost, [0, 1)
     bool shadow = true;                // invalidate pixels the projector cannot see (edge shadow band)
+    float depth_step_m = 0.0f;         // metres, output quantisation of a sensor that reports depth directly
+    // Active stereo: a pixel is matched where the projected pattern is bright enough, i.e. the frontal-equivalent
+    // distance z / sqrt(cos incidence) is within pattern_range_m, or where the surface has its own texture (grey
+    // standard deviation over a texture_window_px square of at least texture_min_grey, 0-255 levels).
+    float pattern_range_m = 0.0f;  // metres
+    int texture_window_px = 7;     // pixels (odd)
+    float texture_min_grey = 6.0f;
+    // Time of flight. Flying pixels: a pixel whose footprint straddles a depth jump of more than flying_jump_m
+    // returns a phase mix of the two surfaces with probability flying_pixel_rate. Multipath: light scattered
+    // between the walls of a concavity lengthens the path; bias = multipath_gain * (how far the pixel lies behind
+    // the mean surface of a multipath_window_px square), at most multipath_max_m, only where that window holds no
+    // depth jump.
+    float flying_pixel_rate = 0.0f;  // [0, 1]
+    float flying_jump_m = 0.05f;     // metres
+    float multipath_gain = 0.0f;     // metres of bias per metre of concavity
+    float multipath_max_m = 0.0f;    // metres
+    int multipath_window_px = 15;    // pixels (odd)
 
     // A near-range structured-light camera like a phone's TrueDepth front camera (0.2-0.5 m). There is no
     // published noise model of it that this project could check; the figures are assumed, in the same form as
@@ -39,6 +65,21 @@ struct NoiseParams {
     // b = 0.01 /m, z0 = 0.2 m) and 1.3 mm at 0.5 m, the Kinect's incidence term scaled by the same 1/3, half a
     // pixel of lateral jitter, a 25 mm projector baseline and 1/64 px disparity steps (0.26 mm at 0.3 m).
     static NoiseParams nearRangeStructuredLight();
+    // An active stereo camera like the RealSense D415 at 848x480 (focal length f_px there), from Intel's RMS error
+    // of stereo depth (Grunnet-Jepsen et al., "Tuning depth cameras for best performance", Intel RealSense white
+    // paper, 2019): sigma = z^2 * subpixel / (f * baseline), subpixel 0.08 px, baseline 55 mm. Its range 0.3-3 m
+    // is Intel's; the pattern's reach (1.2 m on a frontal surface), the texture threshold, lateral jitter and
+    // incidence limit are assumed.
+    static NoiseParams activeStereo(float f_px);
+    // A time-of-flight camera like the Azure Kinect in NFOV unbinned mode (0.5-3.86 m, 1 mm depth units).
+    // Microsoft's specification (Azure Kinect DK hardware specification / "Azure Kinect DK depth camera") bounds
+    // the random error at std <= 17 mm and the systematic error at < 11 mm + 0.1 % of distance, both confirmed by
+    // Toelgyessy et al., "Evaluation of the Azure Kinect and its comparison to Kinect V1 and Kinect V2" (Sensors
+    // 21(2) 413, 2021), which also shows the flying pixels at edges and the multipath in corners that the same
+    // Microsoft page describes. A bound is not a model: the random sigma at a face's range (0.8 mm + 0.7 mm/m^2
+    // z^2: 1.05 mm at 0.6 m, 9.4 mm at 3.5 m, within the bound), the flying-pixel share and the multipath gain are
+    // assumed.
+    static NoiseParams timeOfFlight();
 
     Status validate() const;
 };
@@ -58,7 +99,11 @@ struct SequenceParams {
     // false: colour is the subject's own (albedo), unlit, so that colour measured on a model compares with the
     // subject's texture directly (the texture benchmark); true: a lamp above-left of the camera (Lambert + ambient)
     bool shading = true;
-    bool wall = true;              // render a wall behind the subject
+    bool wall = true;  // render a wall behind the subject
+    // true: the head, torso and wall stand still and the camera moves around the head instead (the background
+    // moves in the image): the yaw and pitch amplitudes and periods then drive the camera's orbit about the
+    // head-frame origin (the middle of the head) at distance_m, not the head's turn.
+    bool orbit = false;
     float wall_distance_m = 1.6f;  // metres, camera to wall
     NoiseParams noise_model;       // used when noise == true
 
@@ -114,7 +159,10 @@ class KinectSimulator {
     recon::Pose poseAt(int index) const;
     // T_camera_body: the torso (and the head at rest) of frame `index`; includes sway, the gap's walk and turn.
     recon::Pose bodyPoseAt(int index) const;
-    // Head yaw and pitch of frame `index` relative to the body (degrees), and whether the occluder is in the scene.
+    // T_camera_world: where the camera is. The world is the camera's rest pose (identity unless params().orbit).
+    recon::Pose cameraFromWorldAt(int index) const;
+    // Head yaw and pitch of frame `index` relative to the body (degrees; 0 when the camera orbits instead), and
+    // whether the occluder is in the scene.
     float yawDegAt(int index) const;
     float pitchDegAt(int index) const;
     bool occluderActiveAt(int index) const;
@@ -132,6 +180,8 @@ class KinectSimulator {
 
  private:
     struct Scene;
+    float sweepYawDeg(int index) const;
+    float sweepPitchDeg(int index) const;
     HeadModel head_;
     SequenceParams params_;
     recon::Intrinsics intrinsics_;

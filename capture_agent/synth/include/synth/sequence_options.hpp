@@ -29,6 +29,9 @@ struct SyntheticSpec {
 // distance its scans are made at:
 //   kinect-v1   the Kinect v1 (Nguyen et al. 2012), 640x480, head at 0.7 m (nose at 0.6 m)
 //   truedepth   a near-range structured-light camera (TrueDepth-like), 320x240, 0.2-0.5 m, nose at 0.3 m
+//   d415        an active stereo camera (RealSense D415-like; realsense-d415 is an alias), 848x480, 0.3-3 m,
+//               nose at 0.45 m
+//   azure-kinect a time-of-flight camera (Azure Kinect NFOV unbinned), 640x576, 0.5-3.86 m, nose at 0.65 m
 // Sets spec.intrinsics, spec.sensor_model and, in spec.sequence, the noise model, distance and wall.
 Status applySyntheticSensor(const std::string& name, SyntheticSpec& spec);
 
@@ -39,6 +42,7 @@ Status applySyntheticSensor(const std::string& name, SyntheticSpec& spec);
 //   gap       walks out of view for 1 s from frame 90 and back turned (head yaw +-20, pitch +-8, turn -20: the
 //             head returns 31 deg from its last pose before the gap), 240 frames
 //   occluder  the gentle sequence with a hand-sized occluder across the face for 1 s from frame 120
+//   orbit     the camera moves around a still head: yaw +-40 deg, pitch +-10 deg about the head, 300 frames
 // Unknown names give the list.
 Status applyScenario(const std::string& name, SequenceParams& p);
 
