@@ -146,6 +146,8 @@ StatusOr<SyntheticSpec> parseSyntheticOptions(const std::string& text) {
             p.gap_turn_deg = f;
         } else if (key == "gap_leave") {
             p.gap_leave = number != 0;
+        } else if (key == "roll") {
+            p.roll_deg = f;
         } else if (key == "occluder_start") {
             p.occluder_start_frame = i;
         } else if (key == "occluder_frames") {
@@ -180,7 +182,9 @@ const char* syntheticOptionsHelp() {
            "gap_turn=DEG,\n"
            "  gap_leave=0|1 (0: turn in view instead of leaving), occluder_start=FRAME (-1 none),\n"
            "  occluder_frames=N, occluder_front=M (metres in front of the nose), sensor=kinect-v1|truedepth (the\n"
-           "  camera: its resolution, noise and range, and its distance unless distance= is given)";
+           "  camera: its resolution, noise and range, and its distance unless distance= is given), roll=DEG (the\n"
+           "  camera turned about its optical axis: 90 or 270 portrait, 180 upside down; the image shows the scene\n"
+           "  turned clockwise by DEG)";
 }
 
 }  // namespace facescan::synth
