@@ -5,11 +5,16 @@
 #include <gtest/gtest.h>
 
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <string>
+#include <vector>
 
+#include "eval/scenario_figures.hpp"
 #include "recon/face_pipeline.hpp"
 #include "recon/image_roll.hpp"
+#include "recon/scan_step.hpp"
 #include "synth/kinect_simulator.hpp"
+#include "synth/sequence_options.hpp"
 
 namespace facescan::recon {
 namespace {
@@ -133,6 +138,88 @@ TEST(FacePipelineRoll, AFixedRollIsUsedAsGiven) {
     EXPECT_EQ(wrong.obs.roll_deg, 0);
     params.roll_deg = 45;
     EXPECT_FALSE(params.validate().isOk());
+}
+
+// A whole sequence through scanFrame, as the server runs it: figures against the truth and the advice per frame.
+struct RollRun {
+    eval::ScenarioFigures figures;
+    std::vector<std::string> advice;
+    std::vector<int> roll_deg;  // the roll each frame's head was found at (-1: no head)
+};
+
+RollRun runScan(synth::SequenceParams sp, int roll_deg) {
+    sp.roll_deg = static_cast<float>(roll_deg);
+    const synth::KinectSimulator sim(synth::builtinHead(), sp);
+    Reconstructor rec(sim.intrinsics(), ReconParams::faceDefaults());
+    EXPECT_TRUE(rec.initStatus().isOk()) << rec.initStatus().toString();
+    StatusOr<FacePipeline> pipeline =
+        FacePipeline::create({}, sim.intrinsics(), ColourCamera::registeredTo(sim.intrinsics()));
+    EXPECT_TRUE(pipeline.isOk()) << pipeline.status().toString();
+    RollRun run;
+    std::vector<std::optional<Pose>> estimate, truth_poses;
+    std::vector<int> head_pixels;
+    const Pose T_c0_head = sim.poseAt(0);
+    RgbdFrame frame;
+    synth::FrameTruth truth;
+    ScanStep step;
+    for (int i = 0; i < sp.frames; ++i) {
+        sim.render(i, frame, &truth);
+        scanFrame(*pipeline, rec, frame, step);
+        truth_poses.emplace_back(T_c0_head * truth.T_camera_head.inverse());
+        estimate.push_back(step.frame.tracked ? std::optional<Pose>(step.frame.tracking.T_world_camera) : std::nullopt);
+        head_pixels.push_back(truth.head_pixels);
+        run.advice.emplace_back(step.advice);
+        run.roll_deg.push_back(step.head.found ? step.head.roll_deg : -1);
+    }
+    run.figures = eval::scenarioFigures(sim, head_pixels, truth_poses, estimate, rec.extractMesh());
+    eval::printScenario(run.figures);
+    return run;
+}
+
+// The head leaves the view of a camera held in portrait and comes back turned: it is re-acquired (the hypotheses
+// turn about the person's vertical axis, the image's x here), no wrong pose is fused, nothing but the head is in
+// the model, and the advice is the upright camera's, frame by frame (it names no image direction).
+TEST(ScanRoll, ReacquiresInPortraitAndAdvisesAsUpright) {
+    synth::SequenceParams sp;
+    ASSERT_TRUE(synth::applyScenario("gap", sp).isOk());
+    sp.gap_start_frame = 25;
+    // Back 46 deg from the last pose before the gap: only the hypotheses about the person's vertical axis reach it
+    // (about the image's vertical axis instead, the head is never re-acquired).
+    sp.gap_turn_deg = -55.0f;
+    sp.frames = 25 + 2 * sp.gap_walk_frames + sp.gap_frames + 20;
+    sp.seed = 20;
+    const RollRun upright = runScan(sp, 0);
+    for (const int roll : {90, 270}) {
+        const RollRun rolled = runScan(sp, roll);
+        EXPECT_EQ(rolled.figures.losses, 1) << roll;
+        EXPECT_EQ(rolled.figures.reacquired, 1) << roll;
+        EXPECT_LE(rolled.figures.worst_reacquire_frames, 10) << roll;
+        EXPECT_EQ(rolled.figures.wrong_poses, 0) << roll << ": max error " << rolled.figures.max_pose_err_mm << " mm";
+        EXPECT_EQ(rolled.figures.foreign_vertices, 0) << roll << ": torso fused";
+        EXPECT_GE(rolled.figures.trackedShare(), upright.figures.trackedShare() - 0.03) << roll;
+        int same_advice = 0;
+        for (size_t i = 0; i < rolled.advice.size(); ++i) {
+            same_advice += rolled.advice[i] == upright.advice[i];
+            if (rolled.roll_deg[i] >= 0) {
+                EXPECT_EQ(rolled.roll_deg[i], roll) << "frame " << i;
+            }
+        }
+        EXPECT_GE(same_advice, static_cast<int>(rolled.advice.size()) - 3) << roll;
+        const size_t out_of_view = static_cast<size_t>(sp.gap_start_frame + sp.gap_walk_frames + 5);
+        EXPECT_EQ(rolled.advice[out_of_view], "face lost: come back in front of the camera") << roll;
+    }
+}
+
+// Upside down, with the wide turns: tracked as upright, the roll found from the first frame on.
+TEST(ScanRoll, UpsideDownWideTurnsTrackLikeUpright) {
+    synth::SequenceParams sp;
+    ASSERT_TRUE(synth::applyScenario("wide", sp).isOk());
+    sp.frames = 80;
+    const RollRun rolled = runScan(sp, 180);
+    EXPECT_GE(rolled.figures.trackedShare(), 0.98);
+    EXPECT_EQ(rolled.figures.wrong_poses, 0);
+    EXPECT_EQ(rolled.figures.foreign_vertices, 0) << "torso fused";
+    EXPECT_EQ(rolled.roll_deg.front(), 180);
 }
 
 }  // namespace
