@@ -73,6 +73,16 @@ Status FacePipelineParams::validate() const {
     return Status::ok();
 }
 
+StatusOr<int> parseRoll(const std::string& text) {
+    if (text == "auto") return FacePipelineParams::kRollAuto;
+    for (const int deg : {0, 90, 180, 270}) {
+        if (text == std::to_string(deg)) return deg;
+    }
+    return invalidArgument("roll '" + text +
+                           "' must be auto, 0, 90, 180 or 270: how far the person appears turned clockwise in the "
+                           "image (a phone held in portrait: 90 or 270, upside down: 180)");
+}
+
 StatusOr<FacePipeline> FacePipeline::create(const FacePipelineParams& params, const Intrinsics& depth,
                                             const ColourCamera& colour) {
     RETURN_IF_ERROR(params.validate());

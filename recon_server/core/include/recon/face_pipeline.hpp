@@ -49,6 +49,9 @@ struct FacePipelineParams {
     Status validate() const;
 };
 
+// "auto", "0", "90", "180" or "270" (a --roll flag or config value) to FacePipelineParams::roll_deg.
+StatusOr<int> parseRoll(const std::string& text);
+
 struct HeadObservation {
     bool found = false;
     cv::Mat mask;         // CV_8UC1, 255 on the head (depth pixel grid)
