@@ -222,5 +222,20 @@ TEST(ScanRoll, UpsideDownWideTurnsTrackLikeUpright) {
     EXPECT_EQ(rolled.roll_deg.front(), 180);
 }
 
+// The camera turns from upright to portrait during the scan (0.6 deg a frame): tracking follows it, and the roll of
+// each frame comes from the tracked model's down axis seen through the pose, so the pipeline knows the camera is
+// in portrait by the end without a detection.
+TEST(ScanRoll, ACameraTurnedDuringTheScanIsFollowed) {
+    synth::SequenceParams sp;
+    sp.frames = 150;
+    sp.roll_turn_deg = 90.0f;
+    const RollRun run = runScan(sp, 0);
+    EXPECT_GE(run.figures.trackedShare(), 0.98);
+    EXPECT_EQ(run.figures.wrong_poses, 0);
+    EXPECT_EQ(run.figures.foreign_vertices, 0) << "torso fused";
+    EXPECT_EQ(run.roll_deg.front(), 0);
+    EXPECT_EQ(run.roll_deg.back(), 90) << "the roll follows the camera";
+}
+
 }  // namespace
 }  // namespace facescan::recon

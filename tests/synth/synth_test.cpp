@@ -307,6 +307,13 @@ TEST(SyntheticOptions, RollIsParsedAndChecked) {
     EXPECT_EQ(spec->sequence.roll_deg, 90.0f);
     EXPECT_FALSE(parseSyntheticOptions("roll=400").isOk());
     EXPECT_FALSE(parseSyntheticOptions("roll=portrait").isOk());
+    // A camera turned during the scan: the roll goes from roll to roll + roll_turn over the frames.
+    spec = parseSyntheticOptions("roll=90,roll_turn=-90,frames=11");
+    ASSERT_TRUE(spec.isOk()) << spec.status().toString();
+    const KinectSimulator sim(builtinHead(), spec->sequence);
+    EXPECT_FLOAT_EQ(sim.rollDegAt(0), 90.0f);
+    EXPECT_FLOAT_EQ(sim.rollDegAt(5), 45.0f);
+    EXPECT_FLOAT_EQ(sim.rollDegAt(10), 0.0f);
 }
 
 TEST(SequenceParams, RejectsNonsense) {

@@ -71,8 +71,9 @@ Status SequenceParams::validate() const {
     if (wall && !(wall_distance_m > distance_m + 0.25f && wall_distance_m < 10)) {
         return invalidArgument("synthetic: the wall must be at least 0.25 m behind the head and within 10 m");
     }
-    if (!(std::isfinite(roll_deg) && std::abs(roll_deg) <= 360.0f))
-        return invalidArgument("synthetic: |roll| <= 360 deg");
+    if (!(std::isfinite(roll_deg) && std::abs(roll_deg) <= 360.0f && std::isfinite(roll_turn_deg) &&
+          std::abs(roll_turn_deg) <= 360.0f))
+        return invalidArgument("synthetic: |roll| and |roll_turn| <= 360 deg");
     if (gap_start_frame >= 0 && !(gap_frames >= 0 && gap_walk_frames >= 0 && std::abs(gap_turn_deg) <= 90 &&
                                   gap_side_m >= 0 && gap_side_m <= 5)) {
         return invalidArgument("synthetic: gap frames >= 0, walk frames >= 0, |turn| <= 90 deg, side 0-5 m");
@@ -287,8 +288,14 @@ recon::Pose KinectSimulator::bodyPoseAt(int index) const {
     T.translation() = Vec3(side * p.gap_side_m, 0, p.distance_m) + sway;
     // Head frame (y up, face along +z) to camera (y down, looking along +z): 180 deg about x.
     T.linear() = Eigen::Vector3f(1, -1, -1).asDiagonal();
-    if (p.roll_deg != 0.0f) T = rollOf(p.roll_deg) * T;
+    if (const float roll = rollDegAt(index); roll != 0.0f) T = rollOf(roll) * T;
     return turn != 0.0f ? T * aboutNeck(Vec3::UnitY(), turn * p.gap_turn_deg) : T;
+}
+
+float KinectSimulator::rollDegAt(int index) const {
+    if (params_.roll_turn_deg == 0.0f) return params_.roll_deg;
+    const float t = params_.frames > 1 ? static_cast<float>(index) / static_cast<float>(params_.frames - 1) : 0.0f;
+    return params_.roll_deg + params_.roll_turn_deg * t;
 }
 
 float KinectSimulator::yawDegAt(int index) const {
@@ -318,7 +325,7 @@ bool KinectSimulator::occluderActiveAt(int index) const {
 
 Eigen::Vector3f KinectSimulator::occluderCentreAt(int index) const {
     // Across the face at the nose's height, from the person's right (upright camera -x) to their left.
-    const recon::Pose roll = rollOf(params_.roll_deg);
+    const recon::Pose roll = rollOf(rollDegAt(index));
     const Vec3 nose = roll.inverse() * (poseAt(index) * head_.nose_tip_head);
     const float t = params_.occluder_frames > 1 ? static_cast<float>(index - params_.occluder_start_frame) /
                                                       static_cast<float>(params_.occluder_frames - 1)
@@ -368,7 +375,7 @@ void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth
         pc[i] = T_camera_body * s.points[i];
         nc[i] = T_camera_body.linear() * s.normals[i];
     }
-    const recon::Pose roll = rollOf(params_.roll_deg);  // the wall and the lamp are the room's: they roll too
+    const recon::Pose roll = rollOf(rollDegAt(index));  // the wall and the lamp are the room's: they roll too
     for (int i = s.torso_end; i < s.wall_end; ++i) pc[i] = roll * s.points[i], nc[i] = roll.linear() * s.normals[i];
     // The occluder when it is in the scene; otherwise behind the camera, where the rasteriser skips it.
     const Vec3 occluder_at = occluderActiveAt(index) ? occluderCentreAt(index) : Vec3(0, 0, -10);

@@ -148,6 +148,8 @@ StatusOr<SyntheticSpec> parseSyntheticOptions(const std::string& text) {
             p.gap_leave = number != 0;
         } else if (key == "roll") {
             p.roll_deg = f;
+        } else if (key == "roll_turn") {
+            p.roll_turn_deg = f;
         } else if (key == "occluder_start") {
             p.occluder_start_frame = i;
         } else if (key == "occluder_frames") {
@@ -184,7 +186,7 @@ const char* syntheticOptionsHelp() {
            "  occluder_frames=N, occluder_front=M (metres in front of the nose), sensor=kinect-v1|truedepth (the\n"
            "  camera: its resolution, noise and range, and its distance unless distance= is given), roll=DEG (the\n"
            "  camera turned about its optical axis: 90 or 270 portrait, 180 upside down; the image shows the scene\n"
-           "  turned clockwise by DEG)";
+           "  turned clockwise by DEG), roll_turn=DEG (the camera turns by DEG more over the sequence)";
 }
 
 }  // namespace facescan::synth

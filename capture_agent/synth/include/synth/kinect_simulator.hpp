@@ -66,6 +66,8 @@ struct SequenceParams {
     // this much (roll 90 renders what cv::rotate(ROTATE_90_CLOCKWISE) makes of the upright frame, where both
     // frames see the scene). The projector stays at the camera's +x, as it is fixed to the camera.
     float roll_deg = 0.0f;
+    // A camera turned during the scan: the roll grows by this much from the first frame to the last (degrees).
+    float roll_turn_deg = 0.0f;
 
     // A nod instead of a symmetric pitch: pitch goes 0 -> pitch_amplitude_deg -> 0 over each pitch period (a
     // positive amplitude lowers the chin onto the chest).
@@ -122,6 +124,8 @@ class KinectSimulator {
     // Head yaw and pitch of frame `index` relative to the body (degrees), and whether the occluder is in the scene.
     float yawDegAt(int index) const;
     float pitchDegAt(int index) const;
+    // The camera's roll of frame `index` (degrees; SequenceParams::roll_deg, roll_turn_deg).
+    float rollDegAt(int index) const;
     bool occluderActiveAt(int index) const;
     // Where the occluder's centre is (camera frame, metres) at `index`; meaningful when occluderActiveAt(index).
     Eigen::Vector3f occluderCentreAt(int index) const;
