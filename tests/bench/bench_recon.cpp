@@ -73,6 +73,8 @@ struct Options {
     // server's sessions do: the per-stage times are then the serial CPU cost of a frame, without the pool's
     // hand-offs (which on one core, e.g. under taskset, cost more than the small loops they share).
     bool serial = false;
+    // --roll: FacePipelineParams::roll_deg (how the camera is held; auto finds it from the frames).
+    int roll_deg = recon::FacePipelineParams::kRollAuto;
 };
 
 double peakRssMb() {
@@ -274,6 +276,7 @@ StatusOr<double> twinMean(const Options& o, const recon::ReconParams& params, co
         recon::FacePipelineParams face_params;
         recon::AdviceParams advice;
         recon::adaptToSensor(seq.sensor, seq.k, unused, face_params, advice);
+        face_params.roll_deg = o.roll_deg;
         ASSIGN_OR_RETURN(recon::FacePipeline created,
                          recon::FacePipeline::create(face_params, seq.k, recon::ColourCamera::registeredTo(seq.k)));
         pipeline.emplace(std::move(created));
@@ -340,6 +343,8 @@ int runRecon(const std::vector<std::string>& args) {
             o.json = true;
         else if (a == "--verbose")
             o.verbose = true;
+        else if (a == "--roll" && i + 1 < args.size() && recon::parseRoll(args[i + 1]).isOk())
+            o.roll_deg = *recon::parseRoll(next());
         else if (a == "--twin")
             o.twin = o.gt_accuracy = true;
         else if (a == "--serial")
@@ -362,6 +367,7 @@ int runRecon(const std::vector<std::string>& args) {
                 "       [--trajectory OUT.txt] [--gt-accuracy] [--gt-misses OUT.ply] [--observed-tol-m M]\n"
                 "       [--volume-m M] [--trunc-m M] [--mask input|pipeline|none] [--twin] [--serial] [--verbose]\n"
                 "       [--model-level L] [--cast-every N] [--fuse-every N] [--unfused-level L] [--json]\n"
+                "       [--roll auto|0|90|180|270]\n"
                 "SRC: synthetic[:OPTIONS] | tum:DIR | 7scenes:DIR | mkv:FILE (Azure Kinect, Femto) | bag:FILE "
                 "(RealSense)\n"
                 "Synthetic input also reports robustness figures (tracked share, re-acquisition,\n"
@@ -371,6 +377,8 @@ int runRecon(const std::vector<std::string>& args) {
                 "     instead of the input's mask (synthetic: the renderer's head label; tum/7scenes: none).\n"
                 "--mask none: fuse whole frames (the core's empty mask); refused when the first frame is much deeper\n"
                 "     than the volume (a head in front of a wall).\n"
+                "--roll: how the camera is held for --mask pipeline (degrees the person appears turned clockwise;\n"
+                "     auto, the default, finds it from the frames). synthetic:roll=DEG rolls the synthetic camera.\n"
                 "--serial: run the recon core's parallel loops on the loop's thread alone (as a loaded server's\n"
                 "     sessions do): the stage times are the serial CPU cost of a frame.\n"
                 "--model-level L: ray cast the model at pyramid level L (0 = full resolution, the default; 1 = half).\n"
@@ -403,6 +411,7 @@ int runRecon(const std::vector<std::string>& args) {
     recon::FacePipelineParams face_params;
     recon::AdviceParams advice;
     recon::adaptToSensor(seq.sensor, seq.k, params, face_params, advice);
+    face_params.roll_deg = o.roll_deg;
     if (o.volume_m > 0) params.tsdf.volume_size_m = o.volume_m;
     if (o.trunc_m > 0) params.tsdf.trunc_dist_m = o.trunc_m;
     if (o.model_level >= 0) params.model_level = o.model_level;

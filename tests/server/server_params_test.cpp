@@ -148,6 +148,22 @@ TEST(ServerParams, FinishingOptionsAreFlagsAndConfigKeys) {
     EXPECT_FALSE(parseServerArgs({"--set", "finish.max_hole_m=-1"}).isOk());
 }
 
+TEST(ServerParams, RollIsAFlagAndAConfigKey) {
+    auto defaults = parseServerArgs({});
+    ASSERT_TRUE(defaults.isOk());
+    EXPECT_EQ(defaults->params.face.roll_deg, recon::FacePipelineParams::kRollAuto);
+    auto portrait = parseServerArgs({"--roll", "90"});
+    ASSERT_TRUE(portrait.isOk()) << portrait.status().toString();
+    EXPECT_EQ(portrait->params.face.roll_deg, 90);
+    auto set = parseServerArgs({"--set", "face.roll=180"});
+    ASSERT_TRUE(set.isOk()) << set.status().toString();
+    EXPECT_EQ(set->params.face.roll_deg, 180);
+    auto bad = parseServerArgs({"--roll", "45"});
+    ASSERT_FALSE(bad.isOk());
+    EXPECT_NE(bad.status().message().find("auto, 0, 90, 180 or 270"), std::string::npos) << bad.status().message();
+    EXPECT_NE(bad.status().message().find("--roll"), std::string::npos) << bad.status().message();
+}
+
 TEST(SessionStore, WritesAtomicallyAndLeavesNoTemporaryFiles) {
     const auto dir = tempDir("store");
     const auto path = dir / "summary.json";

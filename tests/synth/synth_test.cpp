@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "synth/kinect_simulator.hpp"
+#include "synth/sequence_options.hpp"
 #include "test_data.hpp"
 
 namespace facescan::synth {
@@ -253,6 +254,66 @@ TEST(TumWriter, RoundTrip) {
     EXPECT_TRUE(std::filesystem::exists(dir / "head_gt.ply"));
     EXPECT_TRUE(std::filesystem::exists(dir / "T_camera0_head.txt"));
     std::filesystem::remove_all(dir);
+}
+
+// A rolled camera sees the upright camera's image turned about the principal point: roll 180 is cv::rotate's
+// ROTATE_180 of the upright frame, roll 90 its ROTATE_90_CLOCKWISE where both frames see the scene (the central
+// 480 x 480 pixels of a 640 x 480 camera whose principal point is the image centre). Noise-free, torso and wall in.
+double rolledAgreement(float roll_deg, cv::RotateFlags flag) {
+    SequenceParams p;
+    p.frames = 1;
+    p.noise = false;
+    p.sway_amplitude_m = 0;
+    const KinectSimulator upright(builtinHead(), p);
+    p.roll_deg = roll_deg;
+    const KinectSimulator rolled(builtinHead(), p);
+    recon::RgbdFrame a, b;
+    FrameTruth ta, tb;
+    upright.render(0, a, &ta);
+    rolled.render(0, b, &tb);
+    cv::Mat turned, turned_label;
+    cv::rotate(a.depth_m, turned, flag);
+    cv::rotate(ta.label, turned_label, flag);
+    // The common region, centred on both principal points.
+    const int side_w = std::min(turned.cols, b.depth_m.cols), side_h = std::min(turned.rows, b.depth_m.rows);
+    const cv::Rect in_turned((turned.cols - side_w) / 2, (turned.rows - side_h) / 2, side_w, side_h);
+    const cv::Rect in_rolled((b.depth_m.cols - side_w) / 2, (b.depth_m.rows - side_h) / 2, side_w, side_h);
+    const cv::Mat za = turned(in_turned), zb = b.depth_m(in_rolled);
+    const cv::Mat la = turned_label(in_turned), lb = tb.label(in_rolled);
+    int same = 0, head = 0;
+    for (int v = 0; v < side_h; ++v) {
+        for (int u = 0; u < side_w; ++u) {
+            same += std::abs(za.at<float>(v, u) - zb.at<float>(v, u)) < 1e-4f &&
+                    la.at<uint8_t>(v, u) == lb.at<uint8_t>(v, u);
+            head += lb.at<uint8_t>(v, u) == static_cast<uint8_t>(PixelLabel::kHead);
+        }
+    }
+    EXPECT_GT(head, 15000) << "the head is in the common region";
+    return static_cast<double>(same) / (side_w * side_h);
+}
+
+TEST(KinectSimulator, RolledCameraRendersTheTurnedImage) {
+    EXPECT_GT(rolledAgreement(180.0f, cv::ROTATE_180), 0.995);
+    EXPECT_GT(rolledAgreement(90.0f, cv::ROTATE_90_CLOCKWISE), 0.995);
+    EXPECT_GT(rolledAgreement(-90.0f, cv::ROTATE_90_COUNTERCLOCKWISE), 0.995);
+    EXPECT_GT(rolledAgreement(270.0f, cv::ROTATE_90_COUNTERCLOCKWISE), 0.995);
+    // Not the same image turned the other way: the test can tell the direction.
+    EXPECT_LT(rolledAgreement(90.0f, cv::ROTATE_90_COUNTERCLOCKWISE), 0.9);
+}
+
+TEST(SyntheticOptions, RollIsParsedAndChecked) {
+    StatusOr<SyntheticSpec> spec = parseSyntheticOptions("roll=90,sensor=truedepth");
+    ASSERT_TRUE(spec.isOk()) << spec.status().toString();
+    EXPECT_EQ(spec->sequence.roll_deg, 90.0f);
+    EXPECT_FALSE(parseSyntheticOptions("roll=400").isOk());
+    EXPECT_FALSE(parseSyntheticOptions("roll=portrait").isOk());
+    // A camera turned during the scan: the roll goes from roll to roll + roll_turn over the frames.
+    spec = parseSyntheticOptions("roll=90,roll_turn=-90,frames=11");
+    ASSERT_TRUE(spec.isOk()) << spec.status().toString();
+    const KinectSimulator sim(builtinHead(), spec->sequence);
+    EXPECT_FLOAT_EQ(sim.rollDegAt(0), 90.0f);
+    EXPECT_FLOAT_EQ(sim.rollDegAt(5), 45.0f);
+    EXPECT_FLOAT_EQ(sim.rollDegAt(10), 0.0f);
 }
 
 TEST(SequenceParams, RejectsNonsense) {

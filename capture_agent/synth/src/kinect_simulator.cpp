@@ -123,6 +123,9 @@ Status SequenceParams::validate() const {
     if (wall && !(wall_distance_m > distance_m + 0.25f && wall_distance_m < 10)) {
         return invalidArgument("synthetic: the wall must be at least 0.25 m behind the head and within 10 m");
     }
+    if (!(std::isfinite(roll_deg) && std::abs(roll_deg) <= 360.0f && std::isfinite(roll_turn_deg) &&
+          std::abs(roll_turn_deg) <= 360.0f))
+        return invalidArgument("synthetic: |roll| and |roll_turn| <= 360 deg");
     if (gap_start_frame >= 0 && !(gap_frames >= 0 && gap_walk_frames >= 0 && std::abs(gap_turn_deg) <= 90 &&
                                   gap_side_m >= 0 && gap_side_m <= 5)) {
         return invalidArgument("synthetic: gap frames >= 0, walk frames >= 0, |turn| <= 90 deg, side 0-5 m");
@@ -310,6 +313,14 @@ static recon::Pose aboutNeck(const Vec3& axis, float deg) {
     return m;
 }
 
+// The rolled camera from the upright one: a rotation about the optical axis (z). With y down in the image, a positive
+// angle turns the scene clockwise on screen.
+static recon::Pose rollOf(float roll_deg) {
+    recon::Pose r = recon::Pose::Identity();
+    r.linear() = Eigen::AngleAxisf(roll_deg * kDegToRad, Vec3::UnitZ()).toRotationMatrix();
+    return r;
+}
+
 // 0 -> 1 smoothly (zero slope at both ends) as t goes 0 -> 1.
 static float smoothStep(float t) {
     t = std::clamp(t, 0.0f, 1.0f);
@@ -345,7 +356,16 @@ recon::Pose KinectSimulator::bodyPoseAt(int index) const {
     // Head frame (y up, face along +z) to camera (y down, looking along +z): 180 deg about x.
     T.linear() = Eigen::Vector3f(1, -1, -1).asDiagonal();
     if (turn != 0.0f) T = T * aboutNeck(Vec3::UnitY(), turn * p.gap_turn_deg);
-    return p.orbit ? cameraFromWorldAt(index) * T : T;
+    if (p.orbit) T = cameraFromWorldAt(index) * T;
+    // The roll turns the camera about its own optical axis, after everything else.
+    if (const float roll = rollDegAt(index); roll != 0.0f) T = rollOf(roll) * T;
+    return T;
+}
+
+float KinectSimulator::rollDegAt(int index) const {
+    if (params_.roll_turn_deg == 0.0f) return params_.roll_deg;
+    const float t = params_.frames > 1 ? static_cast<float>(index) / static_cast<float>(params_.frames - 1) : 0.0f;
+    return params_.roll_deg + params_.roll_turn_deg * t;
 }
 
 // The yaw and pitch sweeps (degrees) of frame `index`: the head's turn, or the camera's orbit.
@@ -393,12 +413,13 @@ bool KinectSimulator::occluderActiveAt(int index) const {
 }
 
 Eigen::Vector3f KinectSimulator::occluderCentreAt(int index) const {
-    // Across the face at the nose's height, from the person's right (camera -x) to their left.
-    const Vec3 nose = poseAt(index) * head_.nose_tip_head;
+    // Across the face at the nose's height, from the person's right (upright camera -x) to their left.
+    const recon::Pose roll = rollOf(rollDegAt(index));
+    const Vec3 nose = roll.inverse() * (poseAt(index) * head_.nose_tip_head);
     const float t = params_.occluder_frames > 1 ? static_cast<float>(index - params_.occluder_start_frame) /
                                                       static_cast<float>(params_.occluder_frames - 1)
                                                 : 0.5f;
-    return {nose.x() + kOccluderSweepM * (2.0f * t - 1.0f), nose.y(), nose.z() - params_.occluder_front_m};
+    return roll * Vec3(nose.x() + kOccluderSweepM * (2.0f * t - 1.0f), nose.y(), nose.z() - params_.occluder_front_m);
 }
 
 recon::Mesh KinectSimulator::headInFirstCamera() const {
@@ -443,14 +464,11 @@ void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth
         pc[i] = T_camera_body * s.points[i];
         nc[i] = T_camera_body.linear() * s.normals[i];
     }
-    if (params_.orbit) {
-        const recon::Pose T_camera_world = cameraFromWorldAt(index);
-        for (int i = s.torso_end; i < s.wall_end; ++i) {
-            pc[i] = T_camera_world * s.points[i];
-            nc[i] = T_camera_world.linear() * s.normals[i];
-        }
-    } else {
-        for (int i = s.torso_end; i < s.wall_end; ++i) pc[i] = s.points[i], nc[i] = s.normals[i];
+    // The wall and the lamp are the room's: they move with the orbiting camera and roll with it too.
+    const recon::Pose T_camera_world = rollOf(rollDegAt(index)) * cameraFromWorldAt(index);
+    for (int i = s.torso_end; i < s.wall_end; ++i) {
+        pc[i] = T_camera_world * s.points[i];
+        nc[i] = T_camera_world.linear() * s.normals[i];
     }
     // The occluder when it is in the scene; otherwise behind the camera, where the rasteriser skips it.
     const Vec3 occluder_at = occluderActiveAt(index) ? occluderCentreAt(index) : Vec3(0, 0, -10);
@@ -468,7 +486,7 @@ void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth
     const cv::Mat& tex = head_.texture_bgr;
     const bool textured = !s.uvs.empty();
     // A lamp above and left of the camera; Lambert shading with ambient light.
-    const Vec3 lamp(-0.25f, -0.35f, 0.0f);
+    const Vec3 lamp = roll * Vec3(-0.25f, -0.35f, 0.0f);
     cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
         for (int v = rows.start; v < rows.end; ++v) {
             const int* trow = g.tri.ptr<int>(v);

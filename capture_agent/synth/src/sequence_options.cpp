@@ -178,6 +178,10 @@ StatusOr<SyntheticSpec> parseSyntheticOptions(const std::string& text) {
             p.gap_turn_deg = f;
         } else if (key == "gap_leave") {
             p.gap_leave = number != 0;
+        } else if (key == "roll") {
+            p.roll_deg = f;
+        } else if (key == "roll_turn") {
+            p.roll_turn_deg = f;
         } else if (key == "occluder_start") {
             p.occluder_start_frame = i;
         } else if (key == "occluder_frames") {
@@ -214,7 +218,9 @@ const char* syntheticOptionsHelp() {
            "  gap_leave=0|1 (0: turn in view instead of leaving), occluder_start=FRAME (-1 none),\n"
            "  occluder_frames=N, occluder_front=M (metres in front of the nose),\n"
            "  sensor=kinect-v1|truedepth|d415|azure-kinect (the camera: its resolution, noise and range, and its\n"
-           "  distance unless distance= is given)";
+           "  distance unless distance= is given), roll=DEG (the camera turned about its optical axis: 90 or 270\n"
+           "  portrait, 180 upside down; the image shows the scene turned clockwise by DEG), roll_turn=DEG (the\n"
+           "  camera turns by DEG more over the sequence)";
 }
 
 }  // namespace facescan::synth

@@ -1,7 +1,9 @@
 #include "recon/face_pipeline.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <vector>
 
 namespace facescan::recon {
 namespace {
@@ -20,6 +22,42 @@ void adopt(const HeadSegmentation& seg, HeadObservation& obs) {
     if (!seg.found) obs.reason = seg.reason;
 }
 
+// The roll that puts the body below the head, from depth alone: a person seen from the front leaves the image
+// through the side their torso is on (the head is the part that ends inside it). The near surface (within
+// body_depth_m of the nearest depth) is counted along each image border; the border with the most is "down".
+// Upright when no border holds enough of it (no torso in view).
+ImageRoll rollFromBody(const cv::Mat& depth_m, float min_m, float max_m, ImageRoll fallback) {
+    constexpr int kStep = 4;              // every 4th pixel
+    constexpr float kBodyDepthM = 0.5f;   // metres behind the nearest surface that still belong to the person
+    constexpr int kMinBorderSamples = 8;  // border samples needed to call a side "down"
+    std::vector<float> near;
+    for (int v = 0; v < depth_m.rows; v += kStep) {
+        const float* row = depth_m.ptr<float>(v);
+        for (int u = 0; u < depth_m.cols; u += kStep) {
+            if (row[u] >= min_m && row[u] <= max_m) near.push_back(row[u]);
+        }
+    }
+    if (near.size() < 20) return fallback;
+    auto pct = near.begin() + static_cast<std::ptrdiff_t>(near.size() / 50);  // 2nd percentile: not a stray pixel
+    std::nth_element(near.begin(), pct, near.end());
+    const float limit = *pct + kBodyDepthM;
+    const auto body = [&](int u, int v) {
+        const float z = depth_m.ptr<float>(v)[u];
+        return z >= min_m && z <= limit;
+    };
+    int bottom = 0, top = 0, left = 0, right = 0;
+    const int last_row = depth_m.rows - 1, last_col = depth_m.cols - 1;
+    for (int u = 0; u < depth_m.cols; u += kStep) bottom += body(u, last_row), top += body(u, 0);
+    for (int v = 0; v < depth_m.rows; v += kStep) left += body(0, v), right += body(last_col, v);
+    const int most = std::max({bottom, top, left, right});
+    if (most < kMinBorderSamples) return fallback;
+    // Upright down is +y (the bottom border); rolled by 90 the person's down points to the image's left.
+    if (most == bottom) return ImageRoll::fromDegrees(0);
+    if (most == left) return ImageRoll::fromDegrees(90);
+    if (most == top) return ImageRoll::fromDegrees(180);
+    return ImageRoll::fromDegrees(270);
+}
+
 }  // namespace
 
 Status FacePipelineParams::validate() const {
@@ -28,7 +66,21 @@ Status FacePipelineParams::validate() const {
     RETURN_IF_ERROR(finder.validate());
     RETURN_IF_ERROR(model.validate());
     if (redetect_every_frames < 0) return invalidArgument("redetect_every_frames must be >= 0");
+    if (roll_deg != kRollAuto && roll_deg != 0 && roll_deg != 90 && roll_deg != 180 && roll_deg != 270) {
+        return invalidArgument("roll_deg must be auto, 0, 90, 180 or 270");
+    }
+    if (roll_recheck_misses < 0) return invalidArgument("roll_recheck_misses must be >= 0");
     return Status::ok();
+}
+
+StatusOr<int> parseRoll(const std::string& text) {
+    if (text == "auto") return FacePipelineParams::kRollAuto;
+    for (const int deg : {0, 90, 180, 270}) {
+        if (text == std::to_string(deg)) return deg;
+    }
+    return invalidArgument("roll '" + text +
+                           "' must be auto, 0, 90, 180 or 270: how far the person appears turned clockwise in the "
+                           "image (a phone held in portrait: 90 or 270, upside down: 180)");
 }
 
 StatusOr<FacePipeline> FacePipeline::create(const FacePipelineParams& params, const Intrinsics& depth,
@@ -40,6 +92,69 @@ StatusOr<FacePipeline> FacePipeline::create(const FacePipelineParams& params, co
     return FacePipeline(params, depth, colour, std::move(detector));
 }
 
+const FacePipeline::UprightFrame& FacePipeline::upright(ImageRoll roll, const cv::Mat& depth, const cv::Mat* colour) {
+    UprightFrame& f = upright_[static_cast<size_t>(roll.quarterTurns())];
+    f.roll = roll;
+    if (!f.have_depth) {
+        roll.toUpright(depth, f.depth_m);
+        f.k = roll.toUpright(depth_);
+        f.colour_camera = roll.toUpright(colour_);
+        if (colour_.registered) f.colour_camera.intrinsics = f.k;
+        f.have_depth = true;
+    }
+    if (colour && !f.have_colour) {
+        roll.toUpright(*colour, f.colour);
+        f.have_colour = true;
+    }
+    return f;
+}
+
+void FacePipeline::turnBack(ImageRoll roll, const HeadSegmentation& up, const cv::Size& size,
+                            HeadSegmentation& out) const {
+    out.found = up.found;
+    out.reason = up.reason;
+    roll.fromUpright(up.mask, out.mask);
+    roll.fromUpright(up.depth_m, out.depth_m);
+    out.head_box_px = roll.rectFromUpright(up.head_box_px, size);
+    // What the upright pass wrote, turned back; the whole frame when that is unknown (cv::rotate wrote it all).
+    out.written_px = up.written_px.empty() ? cv::Rect() : roll.rectFromUpright(up.written_px, size);
+    out.centroid_m = roll.fromUpright(up.centroid_m);
+    out.extent_m = up.extent_m;  // width and height as the person stands
+    out.depth_median_m = up.depth_median_m;
+    out.pixels = up.pixels;
+    out.split_row = -1;  // a row of the upright image, not of this one
+}
+
+void FacePipeline::segmentAt(ImageRoll roll, const cv::Mat& depth, const cv::Rect& seed_box_px, HeadSegmentation& out) {
+    if (roll.upright()) return segmenter_.segment(depth, depth_, seed_box_px, out);
+    const UprightFrame& f = upright(roll, depth, nullptr);
+    // The seed box turned upright: the inverse roll's box mapping on the upright image.
+    const ImageRoll inverse = ImageRoll::fromDegrees(-roll.degrees());
+    const cv::Rect seed_up = inverse.rectFromUpright(seed_box_px, f.depth_m.size());
+    segmenter_.segment(f.depth_m, f.k, seed_up, upright_segmentation_);
+    turnBack(roll, upright_segmentation_, depth.size(), out);
+}
+
+StatusOr<FaceDetections> FacePipeline::detectAt(ImageRoll roll, const cv::Mat& depth, const cv::Mat& colour) {
+    if (roll.upright()) return detector_.detect(depth, colour, depth_, colour_);
+    const UprightFrame& f = upright(roll, depth, &colour);
+    StatusOr<FaceDetections> faces = detector_.detect(f.depth_m, f.colour, f.k, f.colour_camera);
+    if (!faces.isOk()) return faces;
+    const cv::Size colour_size = colour.size();
+    for (FaceDetection& face : faces->faces) {
+        face.box_depth_px = roll.rectFromUpright(face.box_depth_px, depth.size());
+        face.box_colour_px = roll.rectFromUpright(face.box_colour_px, colour_size);
+    }
+    return faces;
+}
+
+void FacePipeline::findAt(ImageRoll roll, const cv::Mat& depth, HeadSegmentation& out) {
+    if (roll.upright()) return finder_.find(depth, depth_, out);
+    const UprightFrame& f = upright(roll, depth, nullptr);
+    finder_.find(f.depth_m, f.k, upright_segmentation_);
+    turnBack(roll, upright_segmentation_, depth.size(), out);
+}
+
 HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* predicted_head_box) {
     HeadObservation obs;
     const cv::Mat& depth = frame.depth_m;
@@ -48,13 +163,15 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
     if (depth.cols != depth_.width_px || depth.rows != depth_.height_px) {
         return obs.reason = "depth size differs from the camera's intrinsics", obs;
     }
+    for (UprightFrame& f : upright_) f.have_depth = f.have_colour = false;  // a new frame
+    obs.roll_deg = roll_.degrees();
 
     // 1. Tracking: the predicted head box seeds the segmenter; no detection.
     const bool redetect_due =
         params_.redetect_every_frames > 0 && frames_since_detection_ >= params_.redetect_every_frames;
     if (predicted_head_box && !redetect_due) {
         const auto t0 = Clock::now();
-        segmenter_.segment(depth, depth_, *predicted_head_box, segmentation_);
+        segmentAt(roll_, depth, *predicted_head_box, segmentation_);
         obs.segment_ms = msSince(t0);
         ++frames_since_detection_;
         if (segmentation_.found) {
@@ -65,7 +182,9 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
         // The prediction no longer holds a head: fall through to detection.
     }
 
-    // 2. Detection with colour: the nearest accepted face is scanned, the others counted.
+    // 2. Detection with colour: the nearest accepted face is scanned, the others counted. The roll in use first;
+    // the other quarter turns while the roll is unknown, or once the cascade has missed at it for a while (the
+    // camera was turned), unless the roll is fixed.
     obs.detection_ran = true;
     frames_since_detection_ = 0;
     std::string detect_reason = "no colour image";
@@ -73,36 +192,60 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
     const cv::Mat& colour = frameColour(frame, cv::Rect(0, 0, depth.cols, depth.rows));  // decoded now, if on demand
     obs.detect_ms += msSince(t_colour);
     if (!colour.empty()) {
-        const auto t0 = Clock::now();
-        StatusOr<FaceDetections> faces = detector_.detect(depth, colour, depth_, colour_);
-        obs.detect_ms += msSince(t0);
-        if (!faces.isOk()) {
-            detect_reason = faces.status().message();
-        } else if (faces->faces.empty()) {
-            detect_reason = "no face found by the cascade";
-        } else {
+        const bool search_rolls = params_.roll_deg == FacePipelineParams::kRollAuto &&
+                                  (!roll_known_ || misses_at_roll_ >= params_.roll_recheck_misses);
+        const int tries = search_rolls ? 4 : 1;
+        bool cascade_found = false;
+        for (int t = 0; t < tries && !cascade_found; ++t) {
+            // The current roll, then a quarter turn either way, then upside down.
+            static constexpr int kOrder[4] = {0, 90, 270, 180};
+            const ImageRoll roll = ImageRoll::fromDegrees(roll_.degrees() + kOrder[t]);
+            const auto t0 = Clock::now();
+            StatusOr<FaceDetections> faces = detectAt(roll, depth, colour);
+            obs.detect_ms += msSince(t0);
+            if (!faces.isOk()) {
+                detect_reason = faces.status().message();
+                break;
+            }
+            if (faces->faces.empty()) {
+                detect_reason = "no face found by the cascade";
+                continue;
+            }
+            cascade_found = true;
             const FaceDetection& face = faces->faces.front();
             obs.other_faces = static_cast<int>(faces->faces.size()) - 1;
             obs.face_box = face.box_depth_px;
             const auto t1 = Clock::now();
-            segmenter_.segment(depth, depth_, face.box_depth_px, segmentation_);
+            segmentAt(roll, depth, face.box_depth_px, segmentation_);
             obs.segment_ms += msSince(t1);
             adopt(segmentation_, obs);
-            if (obs.found) return obs;
+            if (obs.found) {
+                roll_ = roll;
+                roll_known_ = true;
+                misses_at_roll_ = 0;
+                obs.roll_deg = roll.degrees();
+                return obs;
+            }
             detect_reason = "face found but " + segmentation_.reason;
         }
+        if (!cascade_found) ++misses_at_roll_;
     }
 
-    // 3. Depth only: the nearest head-sized blob.
+    // 3. Depth only: the nearest head-sized blob, at the roll in use (from the body's direction while unknown).
     if (params_.depth_only_fallback) {
+        const ImageRoll roll =
+            roll_known_ ? roll_
+                        : rollFromBody(depth, params_.segmenter.min_depth_m, params_.segmenter.max_depth_m, roll_);
         const auto t0 = Clock::now();
-        finder_.find(depth, depth_, segmentation_);
+        findAt(roll, depth, segmentation_);
         obs.detect_ms += msSince(t0);
         if (segmentation_.found) {
             adopt(segmentation_, obs);
             obs.depth_only = true;
             obs.face_box = segmentation_.head_box_px;
             obs.reason.clear();
+            obs.roll_deg = roll.degrees();
+            roll_ = roll;
             return obs;
         }
         obs.found = false;
@@ -119,6 +262,12 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
 HeadObservation FacePipeline::process(const RgbdFrame& frame, const HeadPrediction& prediction) {
     const bool redetect_due =
         params_.redetect_every_frames > 0 && frames_since_detection_ >= params_.redetect_every_frames;
+    if (prediction.model != nullptr && prediction.region.valid && params_.roll_deg == FacePipelineParams::kRollAuto) {
+        // The model's down axis seen from the predicted camera: the roll of this frame (follows a turning camera).
+        roll_ = ImageRoll::fromDownDirection(
+            prediction.T_world_camera.linear().transpose() * prediction.region.down_world, roll_);
+        roll_known_ = true;
+    }
     if (redetect_due || prediction.model == nullptr) return process(frame, nullptr);
     const auto t0 = Clock::now();
     model_segmenter_.segment(frame.depth_m, depth_, prediction, params_.segmenter, model_segmentation_);
@@ -133,6 +282,7 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const HeadPredicti
     HeadObservation obs;
     adopt(model_segmentation_, obs);
     obs.from_model = true;
+    obs.roll_deg = roll_.degrees();
     obs.segment_ms = ms;
     obs.face_box = model_segmentation_.head_box_px;
     return obs;

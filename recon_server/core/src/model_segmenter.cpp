@@ -14,16 +14,20 @@ Status HeadRegionParams::validate() const {
     return Status::ok();
 }
 
-bool HeadRegion::fromFirstFrame(const SurfaceLevel& lv, const HeadRegionParams& p, HeadRegion& out) {
+bool HeadRegion::fromFirstFrame(const SurfaceLevel& lv, const HeadRegionParams& p, HeadRegion& out,
+                                const Eigen::Vector3f& down_camera) {
     Eigen::Vector3f centroid;
     if (validCentroid(lv, centroid) == 0) return false;
     out.centre_world = centroid + centroid.normalized() * p.centre_behind_m;
-    out.down_world = Eigen::Vector3f::UnitY();
+    out.down_world = down_camera;
     float lowest = -1e9f;
     for (int v = lv.roi.y; v < lv.roi.y + lv.roi.height; ++v) {
         const auto* row = lv.vertex.ptr<cv::Vec3f>(v);
         for (int u = lv.roi.x; u < lv.roi.x + lv.roi.width; ++u) {
-            if (!std::isnan(row[u][0])) lowest = std::max(lowest, row[u][1] - out.centre_world.y());
+            if (std::isnan(row[u][0])) continue;
+            const Eigen::Vector3f d(row[u][0] - out.centre_world.x(), row[u][1] - out.centre_world.y(),
+                                    row[u][2] - out.centre_world.z());
+            lowest = std::max(lowest, d.dot(out.down_world));
         }
     }
     out.below_centre_m = std::min(lowest + p.below_lowest_m, p.max_below_centre_m);

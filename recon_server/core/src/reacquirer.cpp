@@ -121,15 +121,18 @@ ReacquireResult Reacquirer::search(const VoxelBlockGrid& grid, const SurfacePyra
     candidates_.clear();
     src_view_.count = model_view_.count = 1;
     src_view_.levels[0] = coarse;
+    // The head's vertical axis is the person's down (the first camera's y when it was upright, its x when held in
+    // portrait); the nodding axis is across the face, perpendicular to it and to the first view.
+    const Eigen::Vector3f yaw_axis = region.down_world;
+    const Eigen::Vector3f pitch_axis = region.down_world.cross(Eigen::Vector3f::UnitZ()).normalized();
     for (int ip = -params_.pitch_steps; ip <= params_.pitch_steps; ++ip) {
         for (int iy = -params_.yaw_steps; iy <= params_.yaw_steps; ++iy) {
             Pose hypothesis = Pose::Identity();
-            hypothesis.linear() = (Eigen::AngleAxisf(static_cast<float>(iy) * params_.yaw_step_deg * kDegToRad,
-                                                     Eigen::Vector3f::UnitY()) *
-                                   Eigen::AngleAxisf(static_cast<float>(ip) * params_.pitch_step_deg * kDegToRad,
-                                                     Eigen::Vector3f::UnitX()))
-                                      .toRotationMatrix() *
-                                  last_good.linear();
+            hypothesis.linear() =
+                (Eigen::AngleAxisf(static_cast<float>(iy) * params_.yaw_step_deg * kDegToRad, yaw_axis) *
+                 Eigen::AngleAxisf(static_cast<float>(ip) * params_.pitch_step_deg * kDegToRad, pitch_axis))
+                    .toRotationMatrix() *
+                last_good.linear();
             hypothesis.translation() = region.centre_world - hypothesis.linear() * centre_cam;
             ++result.hypotheses;
             SurfaceLevel& model = cast_.levels[kCoarseLevel];

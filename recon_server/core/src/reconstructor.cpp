@@ -161,7 +161,7 @@ void Reconstructor::restartOneFrameModelIfLost(FrameResult& result) {
 
 bool Reconstructor::startModel(int valid_px, FrameResult& result) {
     if (!volume_.placed() && !volume_.place(frame_.levels[0])) return false;
-    HeadRegion::fromFirstFrame(frame_.levels[0], params_.head_region, region_);
+    HeadRegion::fromFirstFrame(frame_.levels[0], params_.head_region, region_, person_down_camera_);
     visible_ref_px_ = static_cast<float>(countValid(frame_.levels[std::min(kVisibilityLevel, frame_.count - 1)]));
     T_world_camera_ = Pose::Identity();
     result.tracking.status = TrackingStatus::kFirstFrame;

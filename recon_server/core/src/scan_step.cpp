@@ -22,6 +22,8 @@ void scanFrame(FacePipeline& pipeline, Reconstructor& reconstructor, const RgbdF
     out.tracked_before = reconstructor.predictHead(prediction);
     out.head = out.tracked_before ? pipeline.process(frame, prediction) : pipeline.process(frame);
     if (out.head.found) {
+        // A scan that starts now takes the person's down from the roll the head was found at.
+        reconstructor.setPersonDown(ImageRoll::fromDegrees(out.head.roll_deg).downCamera());
         out.frame = reconstructor.processFrame(frame, out.head.mask, out.head.mask_box);
     } else {
         out.frame = reconstructor.noHead("no head found in the frame");

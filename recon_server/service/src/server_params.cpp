@@ -118,6 +118,11 @@ const std::map<std::string, Setter>& setters() {
         // Detection and segmentation (recon::FacePipelineParams).
         BOOL("face.depth_only_fallback", p.face.depth_only_fallback),
         INT("face.redetect_every_frames", p.face.redetect_every_frames),
+        {"face.roll",
+         [](ServerParams& p, const std::string&, const std::string& value) -> Status {
+             ASSIGN_OR_RETURN(p.face.roll_deg, recon::parseRoll(value));
+             return Status::ok();
+         }},
         FLOAT("face.detector.face_width_min_m", p.face.detector.face_width_min_m),
         FLOAT("face.detector.face_width_max_m", p.face.detector.face_width_max_m),
         FLOAT("face.segmenter.grow_jump_m", p.face.segmenter.grow_jump_m),
@@ -330,6 +335,7 @@ StatusOr<ParsedArgs> parseServerArgs(const std::vector<std::string>& args) {
                                                               {"--keep", "finish.keep"},
                                                               {"--close", "finish.close"},
                                                               {"--crop", "finish.crop"},
+                                                              {"--roll", "face.roll"},
                                                               {"--config", ""},
                                                               {"--set", ""}};
     std::vector<std::pair<std::string, std::string>> pairs;
@@ -420,6 +426,10 @@ std::string serverUsage() {
            "                          or floating fragments) or all the volume holds\n"
            "  --close none|holes      holes: fill holes up to finish.max_hole_m (default 0.02 m) in the final model\n"
            "  --crop X0,Y0,Z0,X1,Y1,Z1  keep only the final model inside this box (metres, the first camera's frame)\n"
+           "  --roll auto|0|90|180|270\n"
+           "                          how the cameras are held: how far the person appears turned clockwise in the\n"
+           "                          image (a phone in portrait: 90 or 270, upside down: 180); auto (the default)\n"
+           "                          finds it from the frames and follows a camera that turns during the scan\n"
            "  --check                 check the configuration (file, flags, DDS profile, data dir) and exit\n" +
            wire::ddsOptionsHelp(26) +
            "  --version               print the version and the git commit it was built from\n"

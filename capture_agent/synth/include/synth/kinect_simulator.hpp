@@ -106,6 +106,13 @@ struct SequenceParams {
     bool orbit = false;
     float wall_distance_m = 1.6f;  // metres, camera to wall
     NoiseParams noise_model;       // used when noise == true
+    // The camera's roll about its optical axis (degrees, any angle): a camera held in portrait (90, 270), upside
+    // down (180) or tilted. The scene (head, torso, wall, lamp) stays put; the image shows it turned clockwise by
+    // this much (roll 90 renders what cv::rotate(ROTATE_90_CLOCKWISE) makes of the upright frame, where both
+    // frames see the scene). The projector stays at the camera's +x, as it is fixed to the camera.
+    float roll_deg = 0.0f;
+    // A camera turned during the scan: the roll grows by this much from the first frame to the last (degrees).
+    float roll_turn_deg = 0.0f;
 
     // A nod instead of a symmetric pitch: pitch goes 0 -> pitch_amplitude_deg -> 0 over each pitch period (a
     // positive amplitude lowers the chin onto the chest).
@@ -165,6 +172,8 @@ class KinectSimulator {
     // whether the occluder is in the scene.
     float yawDegAt(int index) const;
     float pitchDegAt(int index) const;
+    // The camera's roll of frame `index` (degrees; SequenceParams::roll_deg, roll_turn_deg).
+    float rollDegAt(int index) const;
     bool occluderActiveAt(int index) const;
     // Where the occluder's centre is (camera frame, metres) at `index`; meaningful when occluderActiveAt(index).
     Eigen::Vector3f occluderCentreAt(int index) const;

@@ -13,6 +13,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <opencv2/core.hpp>
 #include <string>
 
@@ -21,6 +22,7 @@
 #include "recon/frame.hpp"
 #include "recon/head_finder.hpp"
 #include "recon/head_segmenter.hpp"
+#include "recon/image_roll.hpp"
 #include "recon/model_segmenter.hpp"
 #include "recon/status.hpp"
 
@@ -34,9 +36,21 @@ struct FacePipelineParams {
     bool depth_only_fallback = true;  // find the head by depth when there is no colour or the cascade misses
     // Re-detect at least this often even while tracking, to notice a second, nearer person (frames; 0 = never).
     int redetect_every_frames = 0;
+    // The camera's roll about its optical axis (degrees): how far the person appears turned clockwise in the image
+    // (a phone held in portrait: 90 or 270; upside down: 180). Detection and the head/torso split run on the
+    // frame turned upright. kRollAuto finds it from the frames: the cascade tries the other quarter turns when it
+    // misses at the current one (at once while the roll is unknown, else after roll_recheck_misses misses in a
+    // row), the depth-only finder takes the side of the image the body leaves through as "down", and while
+    // tracking the model's own down axis, seen through the pose, gives each frame's roll (a turning camera).
+    static constexpr int kRollAuto = -1;
+    int roll_deg = kRollAuto;      // kRollAuto, 0, 90, 180 or 270 (degrees)
+    int roll_recheck_misses = 10;  // detection frames (count)
 
     Status validate() const;
 };
+
+// "auto", "0", "90", "180" or "270" (a --roll flag or config value) to FacePipelineParams::roll_deg.
+StatusOr<int> parseRoll(const std::string& text);
 
 struct HeadObservation {
     bool found = false;
@@ -52,7 +66,8 @@ struct HeadObservation {
     bool depth_only = false;                               // found without colour (depth-only finder)
     bool from_model = false;                               // segmented from the tracked model's prediction
     Eigen::Vector3f centroid_m = Eigen::Vector3f::Zero();  // head centroid, depth camera frame (metres)
-    Eigen::Vector3f extent_m = Eigen::Vector3f::Zero();    // head width, height, depth (metres)
+    Eigen::Vector3f extent_m = Eigen::Vector3f::Zero();    // head width, height, depth (metres), as the person stands
+    int roll_deg = 0;  // the camera's roll the head was found at (ImageRoll degrees: 0, 90, 180, 270)
 };
 
 class FacePipeline {
@@ -65,8 +80,10 @@ class FacePipeline {
     // While tracking: the head from the model's prediction; when the frame does not confirm it (the head left,
     // turned away or is hidden, or the result is not head-sized), detection and the width criterion as above.
     HeadObservation process(const RgbdFrame& frame, const HeadPrediction& prediction);
-    // Forget the tracking state (new scan).
+    // Forget the tracking state (new scan). The roll found so far is kept: the camera is held the same way.
     void reset() { frames_since_detection_ = 0; }
+    // The roll in use now (found or fixed).
+    ImageRoll roll() const { return roll_; }
 
  private:
     FacePipeline(const FacePipelineParams& params, const Intrinsics& depth, const ColourCamera& colour,
@@ -76,7 +93,25 @@ class FacePipeline {
           colour_(colour),
           detector_(std::move(detector)),
           segmenter_(params.segmenter),
-          finder_(params.finder, params.segmenter) {}
+          finder_(params.finder, params.segmenter),
+          roll_(ImageRoll::fromDegrees(params.roll_deg == FacePipelineParams::kRollAuto ? 0 : params.roll_deg)),
+          roll_known_(params.roll_deg != FacePipelineParams::kRollAuto) {}
+
+    // The frame turned upright for one roll, made on first use in a frame.
+    struct UprightFrame {
+        ImageRoll roll;
+        bool have_depth = false, have_colour = false;
+        cv::Mat depth_m, colour;
+        Intrinsics k;
+        ColourCamera colour_camera;
+    };
+    const UprightFrame& upright(ImageRoll roll, const cv::Mat& depth, const cv::Mat* colour);
+    // The segmenter / cascade / finder at `roll`; results in this camera's pixels and frame.
+    void segmentAt(ImageRoll roll, const cv::Mat& depth, const cv::Rect& seed_box_px, HeadSegmentation& out);
+    StatusOr<FaceDetections> detectAt(ImageRoll roll, const cv::Mat& depth, const cv::Mat& colour);
+    void findAt(ImageRoll roll, const cv::Mat& depth, HeadSegmentation& out);
+    // An upright segmentation turned back into this camera's pixels.
+    void turnBack(ImageRoll roll, const HeadSegmentation& up, const cv::Size& size, HeadSegmentation& out) const;
 
     FacePipelineParams params_;
     Intrinsics depth_;
@@ -88,6 +123,11 @@ class FacePipeline {
     HeadSegmentation segmentation_;
     HeadSegmentation model_segmentation_;  // separate buffers: ModelSegmenter clears only what it wrote
     int frames_since_detection_ = 0;
+    ImageRoll roll_;                       // the roll in use
+    bool roll_known_ = false;              // fixed, or confirmed by a detection or the tracked model
+    int misses_at_roll_ = 0;               // detection frames in a row without a face at roll_
+    std::array<UprightFrame, 4> upright_;  // per quarter turn; reused between frames
+    HeadSegmentation upright_segmentation_;
 };
 
 }  // namespace facescan::recon

@@ -36,7 +36,7 @@ struct HeadRegionParams {
 struct HeadRegion {
     bool valid = false;
     Eigen::Vector3f centre_world = Eigen::Vector3f::Zero();  // metres
-    Eigen::Vector3f down_world = Eigen::Vector3f::UnitY();   // unit; the first camera's image-down direction
+    Eigen::Vector3f down_world = Eigen::Vector3f::UnitY();   // unit; the person's down in the first camera
     float below_centre_m = 0.0f;                             // metres; the chin plane's distance below the centre
     float radius_m = 0.0f;                                   // metres
     float centre_behind_m = 0.0f;  // metres; the centre is this far behind the visible head's centroid (as found)
@@ -45,9 +45,11 @@ struct HeadRegion {
         const Eigen::Vector3f d = p_world - centre_world;
         return d.squaredNorm() <= radius_m * radius_m && d.dot(down_world) <= below_centre_m;
     }
-    // From the first frame's head (level 0 of the filtered pyramid, camera frame = world frame). False when the
-    // level holds no valid point.
-    static bool fromFirstFrame(const SurfaceLevel& level0, const HeadRegionParams& p, HeadRegion& out);
+    // From the first frame's head (level 0 of the filtered pyramid, camera frame = world frame) and the person's
+    // down direction in that camera (unit; +y upright, ImageRoll::downCamera when the camera is rolled). False
+    // when the level holds no valid point.
+    static bool fromFirstFrame(const SurfaceLevel& level0, const HeadRegionParams& p, HeadRegion& out,
+                               const Eigen::Vector3f& down_camera = Eigen::Vector3f::UnitY());
 };
 
 // What the tracked model predicts about the head in the next frame (Reconstructor::predictHead).

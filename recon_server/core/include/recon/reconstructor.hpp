@@ -157,6 +157,10 @@ class Reconstructor {
 
     void reset();  // starts a new scan (clears the model and trajectory)
 
+    // The person's down direction in the camera frame (unit; +y for an upright camera, ImageRoll::downCamera for a
+    // rolled one): the head region's chin plane of the next scan's first frame lies along it. Kept across reset().
+    void setPersonDown(const Eigen::Vector3f& down_camera) { person_down_camera_ = down_camera; }
+
     int framesIntegrated() const { return frames_integrated_; }
     Pose lastPose() const { return T_world_camera_; }  // T_world_camera of the last tracked frame
     // Timestamp (ns) and T_world_camera of every tracked frame (fused or not: ReconParams::fuse_every); world =
@@ -287,6 +291,7 @@ class Reconstructor {
     int frames_since_fuse_ = 0;  // tracked frames since the last fused one
     int frames_integrated_ = 0;
     int consecutive_failures_ = 0;
+    Eigen::Vector3f person_down_camera_ = Eigen::Vector3f::UnitY();  // setPersonDown
     HeadRegion region_;            // fixed at the first frame (part of the scan's state, like the volume and the pose)
     float visible_ref_px_ = 0.0f;  // running mean of the head's pixels (pyramid level 2) over fused frames
     bool verify_next_ = false;     // a mostly hidden frame was not fused: verify the next fit before fusing

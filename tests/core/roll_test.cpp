@@ -1,0 +1,241 @@
+// A camera held in portrait, upside down or tilted: the person lies on their side (or on their head) in the image.
+// Detection and the head/torso split run on the frame turned upright (recon/image_roll.hpp); these tests check the
+// turning itself against the pinhole model, and that a rolled synthetic frame is detected and segmented like the
+// upright one, with the roll found from the frames (colour, and depth alone) or fixed by the caller.
+#include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "eval/scenario_figures.hpp"
+#include "recon/face_pipeline.hpp"
+#include "recon/image_roll.hpp"
+#include "recon/scan_step.hpp"
+#include "synth/kinect_simulator.hpp"
+#include "synth/sequence_options.hpp"
+
+namespace facescan::recon {
+namespace {
+
+// Thesis eq. 4.8 on both sides: a point's pixel in this camera, turned upright as cv::rotate turns images, is the
+// pixel of the turned point in the upright intrinsics.
+TEST(ImageRoll, IntrinsicsAndPointsTurnWithTheImage) {
+    Intrinsics k;
+    k.width_px = 320, k.height_px = 240, k.fx_px = 217.5f, k.fy_px = 219.0f, k.cx_px = 161.2f, k.cy_px = 118.7f;
+    for (const int deg : {0, 90, 180, 270}) {
+        const ImageRoll roll = ImageRoll::fromDegrees(deg);
+        const Intrinsics ku = roll.toUpright(k);
+        // A marker pixel turned with the image lands where the upright intrinsics project the turned point.
+        cv::Mat marker = cv::Mat::zeros(k.height_px, k.width_px, CV_8U);
+        const Eigen::Vector3f p(0.031f, -0.052f, 0.4f);
+        const Eigen::Vector2f px = k.project(p);
+        marker.at<uint8_t>(static_cast<int>(std::lround(px.y())), static_cast<int>(std::lround(px.x()))) = 255;
+        cv::Mat up;
+        roll.toUpright(marker, up);
+        ASSERT_EQ(up.cols, ku.width_px) << deg;
+        ASSERT_EQ(up.rows, ku.height_px) << deg;
+        cv::Point at;
+        cv::minMaxLoc(up, nullptr, nullptr, nullptr, &at);
+        const Eigen::Vector2f pu = ku.project(roll.toUpright(p));
+        EXPECT_NEAR(pu.x(), at.x, 0.51f) << deg;
+        EXPECT_NEAR(pu.y(), at.y, 0.51f) << deg;
+        EXPECT_TRUE(roll.fromUpright(roll.toUpright(p)).isApprox(p)) << deg;
+        // A box turned upright and back is the same box.
+        const cv::Rect box(40, 30, 70, 50);
+        const ImageRoll inverse = ImageRoll::fromDegrees(-deg);
+        const cv::Rect box_up = inverse.rectFromUpright(box, up.size());
+        EXPECT_EQ(roll.rectFromUpright(box_up, marker.size()), box) << deg;
+        cv::Mat box_img = cv::Mat::zeros(marker.size(), CV_8U), box_img_up;
+        box_img(box).setTo(255);
+        roll.toUpright(box_img, box_img_up);
+        EXPECT_EQ(cv::boundingRect(box_img_up), box_up) << deg;
+        // The person's down, seen in this camera, gives the roll back.
+        EXPECT_EQ(ImageRoll::fromDownDirection(roll.downCamera(), ImageRoll()), roll) << deg;
+    }
+    EXPECT_EQ(ImageRoll::fromDegrees(-90).degrees(), 270);
+    EXPECT_EQ(ImageRoll::fromDegrees(450).degrees(), 90);
+}
+
+struct Found {
+    HeadObservation obs;
+    double iou = 0;  // of the mask with the renderer's head label
+};
+
+// One frame of the built-in head (torso and wall in, Kinect noise) with the camera rolled by roll_deg, through a
+// fresh pipeline.
+Found findHead(int roll_deg, const FacePipelineParams& params, bool colour, int frame_index = 0) {
+    synth::SequenceParams p;
+    p.roll_deg = static_cast<float>(roll_deg);
+    const synth::KinectSimulator sim(synth::builtinHead(), p);
+    RgbdFrame frame;
+    synth::FrameTruth truth;
+    sim.render(frame_index, frame, &truth);
+    if (!colour) frame.colour_bgr.release();
+    StatusOr<FacePipeline> pipeline =
+        FacePipeline::create(params, sim.intrinsics(), ColourCamera::registeredTo(sim.intrinsics()));
+    EXPECT_TRUE(pipeline.isOk()) << pipeline.status().toString();
+    Found f;
+    f.obs = pipeline->process(frame);
+    if (f.obs.found) {
+        const cv::Mat head = truth.label == static_cast<uint8_t>(synth::PixelLabel::kHead);
+        const double inter = cv::countNonZero(head & f.obs.mask), uni = cv::countNonZero(head | f.obs.mask);
+        f.iou = uni > 0 ? inter / uni : 0;
+    }
+    return f;
+}
+
+TEST(FacePipelineRoll, RolledFrameIsDetectedAndSegmentedLikeTheUprightOne) {
+    const Found upright = findHead(0, {}, true);
+    ASSERT_TRUE(upright.obs.found) << upright.obs.reason;
+    EXPECT_FALSE(upright.obs.depth_only);
+    EXPECT_GT(upright.iou, 0.8);
+    for (const int roll : {90, 180, 270}) {
+        const Found f = findHead(roll, {}, true);
+        ASSERT_TRUE(f.obs.found) << roll << ": " << f.obs.reason;
+        EXPECT_FALSE(f.obs.depth_only) << roll << ": the cascade finds the face on the turned frame";
+        EXPECT_EQ(f.obs.roll_deg, roll) << "found from the frame";
+        EXPECT_GT(f.iou, 0.8) << roll;
+        EXPECT_NEAR(f.iou, upright.iou, 0.05) << roll;
+        // Width and height as the person stands; the centroid where the rolled camera sees the head.
+        EXPECT_NEAR(f.obs.extent_m.x(), upright.obs.extent_m.x(), 0.01f) << roll;
+        EXPECT_NEAR(f.obs.extent_m.y(), upright.obs.extent_m.y(), 0.01f) << roll;
+        const Eigen::Vector3f expected = ImageRoll::fromDegrees(roll).fromUpright(upright.obs.centroid_m);
+        EXPECT_LT((f.obs.centroid_m - expected).norm(), 0.01f) << roll;
+        EXPECT_EQ(cv::countNonZero(f.obs.depth_m > 0), cv::countNonZero(f.obs.mask)) << "outside the head is invalid";
+        EXPECT_TRUE((f.obs.mask_box & cv::boundingRect(f.obs.mask)) == cv::boundingRect(f.obs.mask))
+            << roll << ": the mask lies in its box";
+    }
+}
+
+TEST(FacePipelineRoll, DepthAloneFindsTheRollFromTheBody) {
+    FacePipelineParams params;
+    const Found upright = findHead(0, params, false);
+    ASSERT_TRUE(upright.obs.found) << upright.obs.reason;
+    EXPECT_TRUE(upright.obs.depth_only);
+    for (const int roll : {90, 180, 270}) {
+        const Found f = findHead(roll, params, false);
+        ASSERT_TRUE(f.obs.found) << roll << ": " << f.obs.reason;
+        EXPECT_TRUE(f.obs.depth_only);
+        EXPECT_EQ(f.obs.roll_deg, roll) << "the torso leaves the image on the person's down side";
+        EXPECT_GT(f.iou, 0.75) << roll;
+    }
+}
+
+TEST(FacePipelineRoll, AFixedRollIsUsedAsGiven) {
+    FacePipelineParams params;
+    params.roll_deg = 90;
+    const Found f = findHead(90, params, true);
+    ASSERT_TRUE(f.obs.found) << f.obs.reason;
+    EXPECT_EQ(f.obs.roll_deg, 90);
+    EXPECT_GT(f.iou, 0.8);
+    // Fixed at the wrong roll, the cascade is not tried at the others: no face, whatever the depth-only path does.
+    params.roll_deg = 0;
+    params.depth_only_fallback = false;
+    const Found wrong = findHead(90, params, true);
+    EXPECT_FALSE(wrong.obs.found);
+    EXPECT_EQ(wrong.obs.roll_deg, 0);
+    params.roll_deg = 45;
+    EXPECT_FALSE(params.validate().isOk());
+}
+
+// A whole sequence through scanFrame, as the server runs it: figures against the truth and the advice per frame.
+struct RollRun {
+    eval::ScenarioFigures figures;
+    std::vector<std::string> advice;
+    std::vector<int> roll_deg;  // the roll each frame's head was found at (-1: no head)
+};
+
+RollRun runScan(synth::SequenceParams sp, int roll_deg) {
+    sp.roll_deg = static_cast<float>(roll_deg);
+    const synth::KinectSimulator sim(synth::builtinHead(), sp);
+    Reconstructor rec(sim.intrinsics(), ReconParams::faceDefaults());
+    EXPECT_TRUE(rec.initStatus().isOk()) << rec.initStatus().toString();
+    StatusOr<FacePipeline> pipeline =
+        FacePipeline::create({}, sim.intrinsics(), ColourCamera::registeredTo(sim.intrinsics()));
+    EXPECT_TRUE(pipeline.isOk()) << pipeline.status().toString();
+    RollRun run;
+    std::vector<std::optional<Pose>> estimate, truth_poses;
+    std::vector<int> head_pixels;
+    const Pose T_c0_head = sim.poseAt(0);
+    RgbdFrame frame;
+    synth::FrameTruth truth;
+    ScanStep step;
+    for (int i = 0; i < sp.frames; ++i) {
+        sim.render(i, frame, &truth);
+        scanFrame(*pipeline, rec, frame, step);
+        truth_poses.emplace_back(T_c0_head * truth.T_camera_head.inverse());
+        estimate.push_back(step.frame.tracked ? std::optional<Pose>(step.frame.tracking.T_world_camera) : std::nullopt);
+        head_pixels.push_back(truth.head_pixels);
+        run.advice.emplace_back(step.advice);
+        run.roll_deg.push_back(step.head.found ? step.head.roll_deg : -1);
+    }
+    run.figures = eval::scenarioFigures(sim, head_pixels, truth_poses, estimate, rec.extractMesh());
+    eval::printScenario(run.figures);
+    return run;
+}
+
+// The head leaves the view of a camera held in portrait and comes back turned: it is re-acquired (the hypotheses
+// turn about the person's vertical axis, the image's x here), no wrong pose is fused, nothing but the head is in
+// the model, and the advice is the upright camera's, frame by frame (it names no image direction).
+TEST(ScanRoll, ReacquiresInPortraitAndAdvisesAsUpright) {
+    synth::SequenceParams sp;
+    ASSERT_TRUE(synth::applyScenario("gap", sp).isOk());
+    sp.gap_start_frame = 25;
+    // Back 46 deg from the last pose before the gap: only the hypotheses about the person's vertical axis reach it
+    // (about the image's vertical axis instead, the head is never re-acquired).
+    sp.gap_turn_deg = -55.0f;
+    sp.frames = 25 + 2 * sp.gap_walk_frames + sp.gap_frames + 20;
+    sp.seed = 20;
+    const RollRun upright = runScan(sp, 0);
+    for (const int roll : {90, 270}) {
+        const RollRun rolled = runScan(sp, roll);
+        EXPECT_EQ(rolled.figures.losses, 1) << roll;
+        EXPECT_EQ(rolled.figures.reacquired, 1) << roll;
+        EXPECT_LE(rolled.figures.worst_reacquire_frames, 10) << roll;
+        EXPECT_EQ(rolled.figures.wrong_poses, 0) << roll << ": max error " << rolled.figures.max_pose_err_mm << " mm";
+        EXPECT_EQ(rolled.figures.foreign_vertices, 0) << roll << ": torso fused";
+        EXPECT_GE(rolled.figures.trackedShare(), upright.figures.trackedShare() - 0.03) << roll;
+        int same_advice = 0;
+        for (size_t i = 0; i < rolled.advice.size(); ++i) {
+            same_advice += rolled.advice[i] == upright.advice[i];
+            if (rolled.roll_deg[i] >= 0) {
+                EXPECT_EQ(rolled.roll_deg[i], roll) << "frame " << i;
+            }
+        }
+        EXPECT_GE(same_advice, static_cast<int>(rolled.advice.size()) - 3) << roll;
+        const size_t out_of_view = static_cast<size_t>(sp.gap_start_frame + sp.gap_walk_frames + 5);
+        EXPECT_EQ(rolled.advice[out_of_view], "face lost: come back in front of the camera") << roll;
+    }
+}
+
+// Upside down, with the wide turns: tracked as upright, the roll found from the first frame on.
+TEST(ScanRoll, UpsideDownWideTurnsTrackLikeUpright) {
+    synth::SequenceParams sp;
+    ASSERT_TRUE(synth::applyScenario("wide", sp).isOk());
+    sp.frames = 80;
+    const RollRun rolled = runScan(sp, 180);
+    EXPECT_GE(rolled.figures.trackedShare(), 0.98);
+    EXPECT_EQ(rolled.figures.wrong_poses, 0);
+    EXPECT_EQ(rolled.figures.foreign_vertices, 0) << "torso fused";
+    EXPECT_EQ(rolled.roll_deg.front(), 180);
+}
+
+// The camera turns from upright to portrait during the scan (0.6 deg a frame): tracking follows it, and the roll of
+// each frame comes from the tracked model's down axis seen through the pose, so the pipeline knows the camera is
+// in portrait by the end without a detection.
+TEST(ScanRoll, ACameraTurnedDuringTheScanIsFollowed) {
+    synth::SequenceParams sp;
+    sp.frames = 150;
+    sp.roll_turn_deg = 90.0f;
+    const RollRun run = runScan(sp, 0);
+    EXPECT_GE(run.figures.trackedShare(), 0.98);
+    EXPECT_EQ(run.figures.wrong_poses, 0);
+    EXPECT_EQ(run.figures.foreign_vertices, 0) << "torso fused";
+    EXPECT_EQ(run.roll_deg.front(), 0);
+    EXPECT_EQ(run.roll_deg.back(), 90) << "the roll follows the camera";
+}
+
+}  // namespace
+}  // namespace facescan::recon
