@@ -486,7 +486,7 @@ void KinectSimulator::render(int index, recon::RgbdFrame& out, FrameTruth* truth
     const cv::Mat& tex = head_.texture_bgr;
     const bool textured = !s.uvs.empty();
     // A lamp above and left of the camera; Lambert shading with ambient light.
-    const Vec3 lamp = roll * Vec3(-0.25f, -0.35f, 0.0f);
+    const Vec3 lamp = rollOf(rollDegAt(index)) * Vec3(-0.25f, -0.35f, 0.0f);
     cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
         for (int v = rows.start; v < rows.end; ++v) {
             const int* trow = g.tri.ptr<int>(v);
