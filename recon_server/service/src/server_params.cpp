@@ -418,7 +418,11 @@ std::string serverUsage() {
            "                          the full mesh\n"
            "  --keep head|all         the final model holds the tracked head alone (default: no torso, background\n"
            "                          or floating fragments) or all the volume holds\n"
-           "  --close none|holes      holes: fill holes up to finish.max_hole_m (default 0.02 m) in the final model\n"
+           "  --close none|holes|watertight\n"
+           "                          holes: fill holes up to finish.max_hole_m (default 0.02 m) in the final model;\n"
+           "                          watertight: close the head into a solid cut flat below the chin (closed,\n"
+           "                          manifold, one piece: for a 3D printer); the seen surface stays where it was.\n"
+           "                          A scan that saw too little of the head stays open (the log says why)\n"
            "  --crop X0,Y0,Z0,X1,Y1,Z1  keep only the final model inside this box (metres, the first camera's frame)\n"
            "  --check                 check the configuration (file, flags, DDS profile, data dir) and exit\n" +
            wire::ddsOptionsHelp(26) +
