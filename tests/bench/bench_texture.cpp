@@ -34,15 +34,17 @@ constexpr float kPi = 3.14159265f;
 int usage(std::FILE* out) {
     std::fprintf(
         out,
-        "usage: facescan-bench texture [--frames N] [--colour WxH] [--texels-per-pixel R] [--lit] [--save DIR] "
-        "[--json]\n"
+        "usage: facescan-bench texture [--frames N] [--colour WxH] [--texels-per-pixel R] [--weight-power P]\n"
+        "                              [--bilinear] [--lit] [--save DIR] [--json]\n"
         "  Scans the synthetic Lee Perry-Smith head (N frames, default 300), textures the finished model from\n"
         "  colour keyframes of a WxH colour camera (default: both 1280x720 and 640x480; 2.5 cm beside the\n"
         "  depth camera, the same horizontal field of view) and compares renders of the model with the\n"
         "  ground truth from six views over the face: PSNR (dB) and SSIM of vertex colours, the texture at\n"
         "  full resolution and the texture at 20,000 triangles. --save DIR writes the renders (truth, vertex\n"
         "  colours, texture) side by side per view, and the atlases. --texels-per-pixel R: atlas texels per colour\n"
-        "  pixel (the server's texture.texels_per_pixel, default 2).\n"
+        "  pixel (the server's texture.texels_per_pixel, default 2). --weight-power P: the views' weights raised\n"
+        "  to P before blending (default 4: the best view dominates). --bilinear: resample the colour images\n"
+        "  bilinearly instead of by cubic convolution.\n"
         "  Colour is the head's own, unlit, in the sensor's frames (vertex colours) and the colour camera's\n"
         "  alike, so that both compare with the texture of the truth; --lit lights both as the synthetic Kinect\n"
         "  does (a lamp above-left of the camera), which the unlit truth then differs from everywhere.\n");
@@ -186,6 +188,10 @@ int runTexture(const std::vector<std::string>& args) {
             json = true;
         } else if (a == "--texels-per-pixel" && has_value) {
             texture_params.texels_per_pixel = static_cast<float>(std::atof(args[++i].c_str()));
+        } else if (a == "--weight-power" && has_value) {
+            texture_params.weight_power = static_cast<float>(std::atof(args[++i].c_str()));
+        } else if (a == "--bilinear") {
+            texture_params.bicubic = false;
         } else if (a == "--lit") {
             lit = true;
         } else if (a == "--frames" && has_value) {
