@@ -198,6 +198,29 @@ TEST_F(WatertightScan, FromTheMeshAloneIsASolid) {
     EXPECT_LT(report->distance.mean_mm, 0.2);
 }
 
+// A crop box through the middle of the head: the solid is cut flat there too, and stays closed.
+TEST_F(WatertightScan, ACropBoxCutsTheSolidFlat) {
+    IndexedMesh m = *open_;
+    Eigen::AlignedBox3f box;
+    for (const Eigen::Vector3f& p : m.positions_m) box.extend(p);
+    Eigen::AlignedBox3f crop = box;
+    crop.max().z() = box.center().z();  // the front half (z away from the camera)
+    FinishParams p;
+    p.close = ClosingMode::kWatertight;
+    p.crop_m = crop;
+    auto report = finishMesh(m, p, region_, grid_);
+    ASSERT_TRUE(report.isOk()) << report.status().toString();
+    std::printf("cropped: %s\n", report->summary().c_str());
+    ASSERT_TRUE(report->watertight) << report->summary();
+    expectSolid(m, "cropped");
+    size_t on_cut = 0;
+    for (const Eigen::Vector3f& v : m.positions_m) {
+        ASSERT_LE(v.z(), crop.max().z() + 1e-6f);
+        on_cut += v.z() > crop.max().z() - grid_->voxel_size_m;
+    }
+    EXPECT_GT(on_cut, 100u) << "the cut is a flat face of the solid";
+}
+
 TEST(Watertight, TooLittleOfAHeadStaysOpenWithANote) {
     // A 4 x 4 cm bumpy patch: no head.
     IndexedMesh m;

@@ -398,6 +398,23 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
     // Exact zeros would put a crossing on a corner, shared by several cube edges: kept off it (the crossings
     // keep off corners anyway: MeshParams::min_crossing below).
     constexpr float kNudge = 1e-4f;
+    // Signed distance to the region that stays (negative inside): the head region's sphere and chin plane, and
+    // the crop box.
+    const float trunc_m = std::max(observed.trunc_dist_m, h);
+    auto cutDistance = [&](const Eigen::Vector3f& p) {
+        float d = -std::numeric_limits<float>::infinity();
+        if (head && head->valid) {
+            const Eigen::Vector3f r = p - head->centre_world;
+            d = std::max(r.norm() - head->radius_m, r.dot(head->down_world) - head->below_centre_m);
+        }
+        if (params.crop_m) {
+            const Eigen::Vector3f below = params.crop_m->min() - p, above = p - params.crop_m->max();
+            const Eigen::Vector3f outside = below.cwiseMax(above);
+            const float to_box = outside.maxCoeff() <= 0 ? outside.maxCoeff() : outside.cwiseMax(0.0f).norm();
+            d = std::max(d, to_box);
+        }
+        return d;
+    };
     // Voxels beside the band behind the seen surface (its rim, where the band ends) are inside, so that the solid
     // there is never a sheet one voxel thin (marching cubes would pinch it): the observed negative voxels, dilated
     // by one voxel (a 3x3x3 box, as three passes of one axis each).
@@ -439,23 +456,25 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
                     out->weight = 1.0f;
                     out->b = static_cast<uint8_t>(fill[0]), out->g = static_cast<uint8_t>(fill[1]),
                     out->r = static_cast<uint8_t>(fill[2]);
-                    const bool border =
-                        x == 0 || y == 0 || z == 0 || x == dims.x() - 1 || y == dims.y() - 1 || z == dims.z() - 1;
-                    if (border || (head && head->valid && !head->contains(p)) ||
-                        (params.crop_m && !params.crop_m->contains(p))) {
-                        out->tsdf = 1.0f;
+                    if (x == 0 || y == 0 || z == 0 || x == dims.x() - 1 || y == dims.y() - 1 || z == dims.z() - 1) {
+                        out->tsdf = 1.0f;  // the lattice's border: outside, so that the field is closed
                         continue;
                     }
+                    float value = 0;
                     const Voxel* in = observed.voxel(x + offset.x(), y + offset.y(), z + offset.z());
                     if (in && in->weight > 0) {
-                        out->tsdf = std::abs(in->tsdf) < kNudge ? (in->tsdf < 0 ? -kNudge : kNudge) : in->tsdf;
+                        value = in->tsdf;
                         out->b = in->b, out->g = in->g, out->r = in->r;
-                        continue;
+                    } else {
+                        const bool free =
+                            !behind[at(x, y, z)] &&
+                            std::any_of(views.begin(), views.end(), [&](const DepthView& v) { return v.freeAt(p, h); });
+                        value = free ? 1.0f : -1.0f;
                     }
-                    const bool free =
-                        !behind[at(x, y, z)] &&
-                        std::any_of(views.begin(), views.end(), [&](const DepthView& v) { return v.freeAt(p, h); });
-                    out->tsdf = free ? 1.0f : -1.0f;
+                    // The cuts (chin plane, head sphere, crop box) as the intersection of two solids: the larger
+                    // of the two signed distances, so that a cut lies on its plane, not a voxel beyond it.
+                    value = std::min(std::max(value, cutDistance(p) / trunc_m), 1.0f);
+                    out->tsdf = std::abs(value) < kNudge ? (value < 0 ? -kNudge : kNudge) : value;
                 }
             }
         }
