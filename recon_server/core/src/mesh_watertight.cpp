@@ -3,13 +3,15 @@
 // The solid is a signed field on a voxel lattice, meshed by marching cubes (thesis section 4.2.2), whose crack-free
 // table gives a closed, oriented surface wherever every cube has all eight corners (each cube face is split the
 // same way by both of its cubes). The field:
-//  - where the volume observed a voxel (weight > 0) it keeps D(x) as integrated (thesis eq. 4.22-4.26): marching
-//    cubes then gives the very triangles of the open model there, so the surface that was seen stays in place;
+//  - where the volume observed a voxel (weight > 0) within two voxels of the head's surface (meshVolume: the
+//    volume's other parts, torso or fragments, do not count) it keeps D(x) as integrated (thesis eq. 4.22-4.26):
+//    marching cubes then gives the very triangles of the open model there, so the seen surface stays in place;
 //  - a voxel that was never observed is outside when some view sees it as free space (in front of the surface,
 //    or beside it), inside when every view has it behind the surface (space carving with the model's own depth
 //    maps). The views are orthographic, from the directions in which the model shows its outside: the front
 //    faces fill nearly all of what a view sees. A face scan thus closes behind itself, as far as its sides reach;
-//  - below the chin plane, outside the head region and the crop box, and on the lattice's outer layer, outside.
+//  - below the chin plane, outside the head region and the crop box (intersected with their signed distance, so
+//    a cut is flat on its plane), and on the lattice's outer layer, outside.
 // Only the largest closed piece is kept (the head; an unseen bubble inside it would be a second piece).
 #include <Eigen/Geometry>
 #include <algorithm>
