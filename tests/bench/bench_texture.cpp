@@ -34,15 +34,17 @@ constexpr float kPi = 3.14159265f;
 int usage(std::FILE* out) {
     std::fprintf(
         out,
-        "usage: facescan-bench texture [--frames N] [--colour WxH] [--texels-per-pixel R] [--lit] [--save DIR] "
-        "[--json]\n"
+        "usage: facescan-bench texture [--frames N] [--colour WxH] [--texels-per-pixel R] [--weight-power P]\n"
+        "                              [--bilinear] [--lit] [--save DIR] [--json]\n"
         "  Scans the synthetic Lee Perry-Smith head (N frames, default 300), textures the finished model from\n"
         "  colour keyframes of a WxH colour camera (default: both 1280x720 and 640x480; 2.5 cm beside the\n"
         "  depth camera, the same horizontal field of view) and compares renders of the model with the\n"
         "  ground truth from six views over the face: PSNR (dB) and SSIM of vertex colours, the texture at\n"
         "  full resolution and the texture at 20,000 triangles. --save DIR writes the renders (truth, vertex\n"
         "  colours, texture) side by side per view, and the atlases. --texels-per-pixel R: atlas texels per colour\n"
-        "  pixel (the server's texture.texels_per_pixel, default 2).\n"
+        "  pixel (the server's texture.texels_per_pixel, default 2). --weight-power P: the views' weights raised\n"
+        "  to P before blending (default 4: the best view dominates). --bilinear: resample the colour images\n"
+        "  bilinearly instead of by cubic convolution.\n"
         "  Colour is the head's own, unlit, in the sensor's frames (vertex colours) and the colour camera's\n"
         "  alike, so that both compare with the texture of the truth; --lit lights both as the synthetic Kinect\n"
         "  does (a lamp above-left of the camera), which the unlit truth then differs from everywhere.\n");
@@ -137,6 +139,7 @@ struct Scan {
     recon::IndexedMesh raw;                          // as extracted
     recon::IndexedMesh full, web;                    // finished: the head alone; and at 20,000 triangles
     recon::HeadRegion region;                        // where the tracked head was
+    recon::TsdfSnapshot volume;                      // the model's volume (what the server's finish closes)
     std::vector<std::pair<int, recon::Pose>> poses;  // frame index, T_world_depth as tracked
     recon::Pose T_head_model;
 };
@@ -158,6 +161,7 @@ StatusOr<Scan> scan(bench::Sequence& seq) {
     s.full = recon::fromOpenMesh(mesh);
     s.raw = s.full;
     s.region = rec.headRegion();
+    rec.copyVolume(s.volume);
     const recon::HeadRegion& region = s.region;
     recon::FinishParams finish;
     finish.measure_distance = false;
@@ -184,6 +188,10 @@ int runTexture(const std::vector<std::string>& args) {
             json = true;
         } else if (a == "--texels-per-pixel" && has_value) {
             texture_params.texels_per_pixel = static_cast<float>(std::atof(args[++i].c_str()));
+        } else if (a == "--weight-power" && has_value) {
+            texture_params.weight_power = static_cast<float>(std::atof(args[++i].c_str()));
+        } else if (a == "--bilinear") {
+            texture_params.bicubic = false;
         } else if (a == "--lit") {
             lit = true;
         } else if (a == "--frames" && has_value) {
@@ -280,17 +288,23 @@ int runTexture(const std::vector<std::string>& args) {
                          (full_report.isOk() ? web_report.status() : full_report.status()).toString().c_str());
             return 1;
         }
-        // The server's whole finish of a textured model (head alone, holes closed, 20,000 triangles, texture),
-        // in CPU time of this process (all its threads).
-        const std::clock_t cpu0 = std::clock();
-        recon::IndexedMesh finished = scanned->raw;
-        recon::FinishParams finish;
-        finish.close = recon::ClosingMode::kHoles;
-        finish.max_triangles = 20'000;
-        recon::TexturedMesh finished_textured;
-        const bool finished_ok = recon::finishMesh(finished, finish, &scanned->region).isOk() &&
-                                 recon::bakeTexture(finished, views, texture_params, finished_textured).isOk();
-        const double finish_cpu_s = double(std::clock() - cpu0) / CLOCKS_PER_SEC;
+        // The server's whole finish of a textured model (head alone, holes closed or closed into a solid,
+        // 20,000 triangles, texture), in CPU time of this process (all its threads).
+        auto finishCpuS = [&](recon::ClosingMode close, bool& ok) {
+            const std::clock_t cpu0 = std::clock();
+            recon::IndexedMesh finished = scanned->raw;
+            recon::FinishParams finish;
+            finish.close = close;
+            finish.max_triangles = 20'000;
+            recon::TexturedMesh finished_textured;
+            auto report = recon::finishMesh(finished, finish, &scanned->region, &scanned->volume);
+            ok = report.isOk() && (close != recon::ClosingMode::kWatertight || report->watertight) &&
+                 recon::bakeTexture(finished, views, texture_params, finished_textured).isOk();
+            return double(std::clock() - cpu0) / CLOCKS_PER_SEC;
+        };
+        bool finished_ok = false, solid_ok = false;
+        const double finish_cpu_s = finishCpuS(recon::ClosingMode::kHoles, finished_ok);
+        const double solid_cpu_s = finishCpuS(recon::ClosingMode::kWatertight, solid_ok);
         const std::string tag = std::to_string(w) + "x" + std::to_string(h);
         auto figures = [&](const recon::TexturedMesh& t, const std::string& name) {
             eval::ColourMesh m;
@@ -307,6 +321,8 @@ int runTexture(const std::vector<std::string>& args) {
                     keyframes.bytes() >> 10, full_report->summary().c_str(), full_ms);
         std::printf("    finish (head, close holes, 20,000 triangles, texture): %.2f s CPU%s\n", finish_cpu_s,
                     finished_ok ? "" : " (FAILED)");
+        std::printf("    finish (head, watertight, 20,000 triangles, texture): %.2f s CPU%s\n", solid_cpu_s,
+                    solid_ok ? "" : " (FAILED)");
         std::printf("    texture (full):               PSNR %6.2f dB  SSIM %.4f  (%+.2f dB over vertex colours)\n",
                     f_full.psnr_db, f_full.ssim, f_full.psnr_db - vertex_figures.psnr_db);
         std::printf("    texture (20,000 triangles):   PSNR %6.2f dB  SSIM %.4f  (%+.2f dB over vertex colours)\n",
@@ -314,6 +330,8 @@ int runTexture(const std::vector<std::string>& args) {
         json_out += std::string(si ? ", " : "") + "{\"size\": \"" + tag +
                     "\", \"keyframes\": " + std::to_string(keyframes.count()) +
                     ", \"bake_ms\": " + std::to_string(full_ms) +
+                    ", \"finish_cpu_s\": " + std::to_string(finish_cpu_s) +
+                    ", \"watertight_finish_cpu_s\": " + std::to_string(solid_cpu_s) +
                     ", \"full\": {\"psnr_db\": " + std::to_string(f_full.psnr_db) +
                     ", \"ssim\": " + std::to_string(f_full.ssim) +
                     "}, \"web\": {\"psnr_db\": " + std::to_string(f_web.psnr_db) +

@@ -44,7 +44,9 @@ TEST(CliArgs, MeshFinishingOptionsAndTheirBadValues) {
     EXPECT_EQ(parse({"mesh", "s", "-o", "f.ply", "--max-triangles", "20000"})->finish_params.max_triangles, 20000);
     expectUsageError({"mesh", "s", "-o", "f.ply", "--max-triangles", "499"}, "at least 500");
     expectUsageError({"mesh", "s", "-o", "f.ply", "--max-triangles", "tiny"}, "web (20000)");
-    expectUsageError({"mesh", "s", "-o", "f.ply", "--close", "watertight"}, "not available yet");
+    EXPECT_EQ(parse({"mesh", "s", "-o", "f.ply", "--close", "watertight"})->finish_params.close,
+              recon::ClosingMode::kWatertight);
+    expectUsageError({"mesh", "s", "-o", "f.ply", "--close", "sealed"}, "none, holes or watertight");
     expectUsageError({"mesh", "s", "-o", "f.ply", "--keep", "torso"}, "head");
     expectUsageError({"mesh", "s", "-o", "f.ply", "--crop", "1,2,3"}, "six numbers");
     expectUsageError({"preview", "s", "-o", "f.png", "--max-triangles", "web"}, "unknown option --max-triangles");

@@ -161,7 +161,7 @@ TEST(Finishing, ABudgetBelowAHeadIsRefusedWithTheMinimum) {
     EXPECT_EQ(*parseTriangleBudget("web"), 20000);
     EXPECT_EQ(*parseTriangleBudget("full"), 0);
     EXPECT_EQ(*parseTriangleBudget("500"), 500);
-    EXPECT_FALSE(parseClosingMode("watertight").isOk());
+    EXPECT_FALSE(parseClosingMode("solid").isOk());
     EXPECT_FALSE(parseKeepParts("torso").isOk());
     EXPECT_FALSE(parseCropBox("0,0,0,1,1").isOk());
     EXPECT_FALSE(parseCropBox("0,0,0,-1,1,1").isOk());

@@ -143,7 +143,7 @@ TEST(ServerParams, FinishingOptionsAreFlagsAndConfigKeys) {
     EXPECT_NE(too_few.status().message().find("--max-triangles"), std::string::npos) << too_few.status().message();
     auto bad_close = parseServerArgs({"--close", "sometimes"});
     ASSERT_FALSE(bad_close.isOk());
-    EXPECT_NE(bad_close.status().message().find("none or holes"), std::string::npos);
+    EXPECT_NE(bad_close.status().message().find("none, holes or watertight"), std::string::npos);
     EXPECT_FALSE(parseServerArgs({"--crop", "1,2,3"}).isOk());
     EXPECT_FALSE(parseServerArgs({"--set", "finish.max_hole_m=-1"}).isOk());
 }

@@ -44,6 +44,9 @@ Status FinishParams::validate() const {
     if (!(min_part_share >= 0 && min_part_share <= 1)) {
         return invalidArgument("min_part_share must be a share in [0, 1], got " + num(min_part_share));
     }
+    if (!(watertight_voxel_m >= 0.0005f && watertight_voxel_m <= 0.01f)) {
+        return invalidArgument("watertight_voxel_m must be metres in [0.0005, 0.01], got " + num(watertight_voxel_m));
+    }
     if (!(max_hole_m > 0 && max_hole_m <= 1)) {
         return invalidArgument("max_hole_m must be metres in (0, 1], got " + num(max_hole_m));
     }
@@ -87,10 +90,8 @@ StatusOr<KeepParts> parseKeepParts(const std::string& text) {
 StatusOr<ClosingMode> parseClosingMode(const std::string& text) {
     if (text == "none") return ClosingMode::kNone;
     if (text == "holes") return ClosingMode::kHoles;
-    if (text == "watertight") {
-        return invalidArgument("--close watertight is not available yet: use holes (fills holes up to a size) or none");
-    }
-    return invalidArgument("--close must be none or holes, got '" + text + "'");
+    if (text == "watertight") return ClosingMode::kWatertight;
+    return invalidArgument("--close must be none, holes or watertight, got '" + text + "'");
 }
 
 StatusOr<Eigen::AlignedBox3f> parseCropBox(const std::string& text) {
@@ -117,7 +118,14 @@ StatusOr<Eigen::AlignedBox3f> parseCropBox(const std::string& text) {
 }
 
 const char* keepPartsName(KeepParts keep) { return keep == KeepParts::kHead ? "head" : "all"; }
-const char* closingModeName(ClosingMode close) { return close == ClosingMode::kHoles ? "holes" : "none"; }
+const char* closingModeName(ClosingMode close) {
+    switch (close) {
+        case ClosingMode::kHoles: return "holes";
+        case ClosingMode::kWatertight: return "watertight";
+        case ClosingMode::kNone: break;
+    }
+    return "none";
+}
 
 std::string FinishReport::summary() const {
     std::string s = std::to_string(triangles_in) + " -> " + std::to_string(triangles_out) + " triangles";
@@ -127,6 +135,7 @@ std::string FinishReport::summary() const {
              std::to_string(parts_triangles) + " triangles) dropped";
     }
     if (holes_filled > 0) s += ", " + std::to_string(holes_filled) + " holes filled";
+    if (watertight) s += ", closed into a solid (" + std::to_string(views_used) + " views carved)";
     if (distance.samples > 0) {
         s += "; distance to the full mesh mean " + num(distance.mean_mm) + " mm, p99 " + num(distance.p99_mm) +
              " mm, max " + num(distance.max_mm) + " mm";
@@ -143,6 +152,7 @@ std::string FinishReport::json() const {
         ", \"parts_dropped\": " + std::to_string(parts_dropped) +
         ", \"holes_filled\": " + std::to_string(holes_filled) + ", \"holes_left\": " + std::to_string(holes_left) +
         ", \"budget_reached\": " + (budget_reached ? "true" : "false") +
+        ", \"watertight\": " + (watertight ? "true" : "false") +
         ", \"distance_mm\": {\"mean\": " + num(distance.mean_mm) + ", \"p99\": " + num(distance.p99_mm) +
         ", \"max\": " + num(distance.max_mm) + "}, \"ms\": {\"parts\": " + num(ms_parts) +
         ", \"close\": " + num(ms_close) + ", \"decimate\": " + num(ms_decimate) +
@@ -151,7 +161,8 @@ std::string FinishReport::json() const {
     return j + "]}";
 }
 
-StatusOr<FinishReport> finishMesh(IndexedMesh& mesh, const FinishParams& params, const HeadRegion* head) {
+StatusOr<FinishReport> finishMesh(IndexedMesh& mesh, const FinishParams& params, const HeadRegion* head,
+                                  const VoxelBlockGrid* volume) {
     RETURN_IF_ERROR(params.validate());
     FinishReport report;
     report.triangles_in = mesh.triangleCount();
@@ -173,6 +184,10 @@ StatusOr<FinishReport> finishMesh(IndexedMesh& mesh, const FinishParams& params,
     if (params.close == ClosingMode::kHoles) {
         t0 = std::chrono::steady_clock::now();
         fillHoles(mesh, params.max_hole_m, report);
+        report.ms_close = msSince(t0);
+    } else if (params.close == ClosingMode::kWatertight) {
+        t0 = std::chrono::steady_clock::now();
+        closeWatertight(mesh, meshVolume(mesh, params.watertight_voxel_m, volume), head, params, report);
         report.ms_close = msSince(t0);
     }
     if (params.max_triangles > 0) {

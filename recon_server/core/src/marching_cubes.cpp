@@ -128,6 +128,8 @@ int findRoot(std::vector<int>& parent, int i) {
 Status MeshParams::validate() const {
     if (stride_vox < 1 || stride_vox > 8) return invalidArgument("mesh stride_vox must be in [1, 8]");
     if (!(min_weight >= 0.0f)) return invalidArgument("mesh min_weight must be >= 0");
+    if (!(min_crossing >= 0.0f && min_crossing < 0.25f))
+        return invalidArgument("mesh min_crossing must be in [0, 0.25)");
     if (!(min_fragment_share >= 0.0f && min_fragment_share <= 1.0f))
         return invalidArgument("mesh min_fragment_share must be in [0, 1]");
     return Status::ok();
@@ -171,7 +173,8 @@ void meshBlock(const VoxelBlockGrid& grid, int block, const MeshParams& p, Block
                     auto [it, inserted] = local.try_emplace(key, static_cast<uint32_t>(out.keys.size()));
                     if (inserted) {
                         // The zero crossing along the edge, linear in D (the marching cubes refinement).
-                        const float tt = std::clamp(val[c0] / (val[c0] - val[c1]), 0.0f, 1.0f);
+                        const float tt =
+                            std::clamp(val[c0] / (val[c0] - val[c1]), p.min_crossing, 1.0f - p.min_crossing);
                         Eigen::Vector3f pv(static_cast<float>(x0), static_cast<float>(y0), static_cast<float>(z0));
                         pv[tab.axis[edge]] += tt * static_cast<float>(stride);
                         out.keys.push_back(key);

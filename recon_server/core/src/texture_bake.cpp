@@ -135,6 +135,34 @@ Eigen::Vector3f bilinear(const cv::Mat& img, float x, float y) {
     return out;
 }
 
+// Keys' cubic convolution (a = -0.5, Catmull-Rom) over the 4 x 4 pixels around (x, y): it keeps more of a
+// pixel's detail than bilinear interpolation when the atlas resamples the colour image finer than its pixels.
+Eigen::Vector3f bicubic(const cv::Mat& img, float x, float y) {
+    const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+    const float fx = x - static_cast<float>(x0), fy = y - static_cast<float>(y0);
+    auto weights = [](float t, float w[4]) {
+        const float t2 = t * t, t3 = t2 * t;
+        w[0] = -0.5f * t3 + t2 - 0.5f * t;
+        w[1] = 1.5f * t3 - 2.5f * t2 + 1.0f;
+        w[2] = -1.5f * t3 + 2.0f * t2 + 0.5f * t;
+        w[3] = 0.5f * t3 - 0.5f * t2;
+    };
+    float wx[4], wy[4];
+    weights(fx, wx);
+    weights(fy, wy);
+    Eigen::Vector3f out = Eigen::Vector3f::Zero();
+    for (int j = 0; j < 4; ++j) {
+        const cv::Vec3b* row = img.ptr<cv::Vec3b>(std::clamp(y0 - 1 + j, 0, img.rows - 1));
+        Eigen::Vector3f acc = Eigen::Vector3f::Zero();
+        for (int i = 0; i < 4; ++i) {
+            const cv::Vec3b& p = row[std::clamp(x0 - 1 + i, 0, img.cols - 1)];
+            acc += wx[i] * Eigen::Vector3f(p[0], p[1], p[2]);
+        }
+        out += wy[j] * acc;
+    }
+    return out.cwiseMax(0.0f).cwiseMin(255.0f);
+}
+
 // The blend of a texel's samples under per-view gains; false when no view saw it.
 bool blend(const TopSamples& s, const std::vector<Eigen::Vector3f>& gains, Eigen::Vector3f& out) {
     float w = 0;
@@ -324,7 +352,9 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
                 if (slot >= kTopViews) continue;
                 for (int s = kTopViews - 1; s > slot; --s)
                     top[static_cast<size_t>(s)] = top[static_cast<size_t>(s - 1)];
-                top[static_cast<size_t>(slot)] = Sample{v, weight, bilinear(view.colour_bgr, px.x(), px.y())};
+                top[static_cast<size_t>(slot)] = Sample{v, weight,
+                                                        params.bicubic ? bicubic(view.colour_bgr, px.x(), px.y())
+                                                                       : bilinear(view.colour_bgr, px.x(), px.y())};
             }
         }
     });

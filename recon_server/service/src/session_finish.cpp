@@ -92,7 +92,7 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         // notes (a budget not reached, holes left) go to the log and summary.json.
         const recon::HeadRegion region = rec->headRegion();
         nextWatchedStep();
-        auto finished = recon::finishMesh(extracted, params_.finish, &region);
+        auto finished = recon::finishMesh(extracted, params_.finish, &region, &grid);
         nextWatchedStep();
         if (finished.isOk()) {
             finish_report = *finished;

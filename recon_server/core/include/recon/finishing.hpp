@@ -5,7 +5,8 @@
 //     outside an optional crop box go, then every connected part much smaller than the largest (floating
 //     fragments), unless keep = kAll;
 //  2. closing: holes up to a size filled with new triangles; the surface that was seen keeps every vertex where it
-//     was (closing only adds);
+//     was (closing only adds); or the head closed into a solid with a flat cut below the chin (watertight: a
+//     closed manifold for a 3D printer), re-meshed from the volume with its unseen inside filled;
 //  3. a triangle budget: quadric error decimation (Garland and Heckbert 1997) through OpenMesh's Decimater,
 //     half-edge collapses only (a kept vertex keeps its measured position and colour), with the paper's boundary
 //     constraint planes, so the rim of the scan and the holes that were left stay where they were.
@@ -21,11 +22,12 @@
 #include "recon/mesh_distance.hpp"
 #include "recon/model_segmenter.hpp"
 #include "recon/status.hpp"
+#include "recon/tsdf_volume.hpp"
 
 namespace facescan::recon {
 
 enum class KeepParts { kHead, kAll };
-enum class ClosingMode { kNone, kHoles };
+enum class ClosingMode { kNone, kHoles, kWatertight };
 
 // Fewer triangles than this cannot hold a face (eyes, nose and mouth need a few hundred on their own).
 inline constexpr int kMinTriangleBudget = 500;
@@ -41,6 +43,9 @@ struct FinishParams {
     // metres; closing fills a hole whose boundary loop fits in a ball of this diameter (nostrils, eye corners, pits
     // the sensor did not see); the scan's outer rim is never filled by kHoles
     float max_hole_m = 0.02f;
+    // metres; watertight without the scan's volume (`facescan mesh` on a fetched model): the lattice the mesh is
+    // turned into a signed distance on (1.5 mm: the server's voxels)
+    float watertight_voxel_m = 0.0015f;
     bool measure_distance = true;  // report the distance from the full mesh's vertices to the result's surface
 
     Status validate() const;
@@ -53,7 +58,7 @@ StatusOr<int> triangleBudgetPreset(const std::string& name);
 // "web", "avatar", "print", "full" or a count of triangles: the value of a --max-triangles option.
 StatusOr<int> parseTriangleBudget(const std::string& text);
 StatusOr<KeepParts> parseKeepParts(const std::string& text);          // head | all
-StatusOr<ClosingMode> parseClosingMode(const std::string& text);      // none | holes
+StatusOr<ClosingMode> parseClosingMode(const std::string& text);      // none | holes | watertight
 StatusOr<Eigen::AlignedBox3f> parseCropBox(const std::string& text);  // "x0,y0,z0,x1,y1,z1" in metres
 const char* keepPartsName(KeepParts keep);
 const char* closingModeName(ClosingMode close);
@@ -66,9 +71,12 @@ struct FinishReport {
     size_t parts_dropped = 0;      // floating fragments dropped
     size_t parts_triangles = 0;    // their triangles
     size_t holes_filled = 0;
-    size_t holes_left = 0;       // boundary loops left open (the rim, and holes larger than max_hole_m)
-    size_t triangles_added = 0;  // by closing
-    bool budget_reached = true;  // false when no legal collapse was left before the budget
+    size_t holes_left = 0;        // boundary loops left open (the rim, and holes larger than max_hole_m)
+    size_t triangles_added = 0;   // by closing
+    bool watertight = false;      // closed into a solid (closed, manifold, one piece)
+    size_t views_used = 0;        // watertight: the directions whose depth maps carved the free space
+    size_t pinches_repaired = 0;  // watertight: rounds of thickening where the surface touched itself
+    bool budget_reached = true;   // false when no legal collapse was left before the budget
     // full mesh (after step 1) vertices, at most 30,000 of them evenly spread, -> result surface; zero when not
     // measured
     DistanceFigures distance;
@@ -83,7 +91,11 @@ struct FinishReport {
 // `head`: where the tracked head can be (the server's Reconstructor::headRegion()); null where it is not known
 // (`facescan mesh` on a fetched model): the head is then the largest part. InvalidArgument for bad params; an
 // empty mesh stays empty. Every other problem is a note: the user always gets a model.
-StatusOr<FinishReport> finishMesh(IndexedMesh& mesh, const FinishParams& params, const HeadRegion* head = nullptr);
+// `volume`: the scan's TSDF (the server's finish), which watertight closing re-meshes so that the seen surface
+// keeps its very triangles; null: watertight turns the mesh itself into a signed distance first (meshVolume), and
+// the seen surface moves by what re-meshing at watertight_voxel_m costs (the report's distance says how far).
+StatusOr<FinishReport> finishMesh(IndexedMesh& mesh, const FinishParams& params, const HeadRegion* head = nullptr,
+                                  const VoxelBlockGrid* volume = nullptr);
 
 // The steps on their own (finishMesh calls them in order).
 // Drops triangles outside the region and the crop box, then, with keep = kHead, parts smaller than
@@ -93,6 +105,18 @@ void keepHead(IndexedMesh& mesh, const FinishParams& params, const HeadRegion* h
 // (coloured as the loop's mean). Existing vertices and triangles are unchanged; only simple loops (no vertex twice)
 // are filled.
 void fillHoles(IndexedMesh& mesh, float max_hole_m, FinishReport& report);
+// Closes `mesh` (the head alone, after keepHead) into a solid (mesh_watertight.cpp): `observed` keeps its values
+// where its weight is above zero, the rest of the lattice around the mesh is inside where every view of the mesh
+// has it behind the surface; cut by the head region's chin plane and the crop box; re-meshed by marching cubes.
+// False, with a note and `mesh` unchanged, when the mesh saw too little of a head or the result is not a closed
+// manifold.
+bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const HeadRegion* head,
+                     const FinishParams& params, FinishReport& report);
+// A signed distance volume of a mesh's band: voxels within two voxels of a triangle, on its normal's line (not
+// beside the rim, where the side is not known), get weight 1 and their signed distance in units of the band, the
+// rest weight 0. With `values` (the scan's volume), on its lattice, and the band's voxels take its D(x) and colour
+// where it observed them (weight 0 where it did not): the seen head alone, without the volume's other parts.
+VoxelBlockGrid meshVolume(const IndexedMesh& mesh, float voxel_m, const VoxelBlockGrid* values = nullptr);
 // Quadric decimation down to max_triangles (boundary constraint planes; no collapse that flips a normal).
 void decimate(IndexedMesh& mesh, int max_triangles, FinishReport& report);
 

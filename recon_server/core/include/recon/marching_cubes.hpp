@@ -22,8 +22,12 @@ struct MeshParams {
     float min_fragment_share = 0.05f;  // ratio; connected pieces with fewer triangles than this share of the
                                        // largest piece are removed (0 keeps everything)
     bool colours = true;               // interpolate vertex colours from the voxels
-    bool gradient_normals = false;     // vertex normals from the gradient of D (eq. 4.30); off: no normals (the
-                                       // wire and the files recompute them from the triangles)
+    // ratio of a cube edge; a zero crossing is kept at least this far from the edge's corners (0: where D says).
+    // A closed solid needs it: crossings at a corner's micrometres give triangles that a mesh's cleaning or the
+    // wire's 0.05 mm grid collapse, which opens the surface there.
+    float min_crossing = 0.0f;
+    bool gradient_normals = false;  // vertex normals from the gradient of D (eq. 4.30); off: no normals (the
+                                    // wire and the files recompute them from the triangles)
     Status validate() const;
 };
 

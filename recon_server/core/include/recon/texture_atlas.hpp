@@ -58,6 +58,10 @@ struct TextureParams {
     float weight_power = 4.0f;    // the views' weights raised to this: the best view dominates
     bool even_exposure = true;    // per-view gains matched to the blend (false: colours as captured)
     float min_mean_luma = 10.0f;  // 8-bit luma; a darker view is taken as missing colour (lens cap, no light)
+    // resampling of the colour images: Keys' cubic convolution (sharper where the atlas is finer than the
+    // pixels; facescan-bench texture at 640x480: +1.02 dB over vertex colours against +0.86 bilinear) or, false,
+    // bilinear
+    bool bicubic = true;
 
     Status validate() const;
 };
