@@ -40,11 +40,12 @@ void startRecording(ClusterRig& rig, std::string& owner, std::string& other) {
     ASSERT_TRUE(waitUntil([&] { return rig.published("rec") >= 20; }, 60s));
 }
 
-void expectFinishedOnceWhole(const ClusterRig& rig, const std::string& session, const std::string& where) {
+void expectFinishedOnceWhole(const ClusterRig& rig, const std::string& session, const std::string& where,
+                             int frames = kFrames) {
     const fs::path summary = rig.dataDir(where) / session / "summary.json";
     ASSERT_TRUE(waitUntil([&] { return fs::exists(summary); }, 30s)) << summary;
     const std::string text = readText(summary);
-    EXPECT_EQ(summaryNumber(text, "integrated") + summaryNumber(text, "rejected"), kFrames) << text;
+    EXPECT_EQ(summaryNumber(text, "integrated") + summaryNumber(text, "rejected"), frames) << text;
     EXPECT_EQ(lastMatch(readText(summary), "\"frames_digest\": \"([0-9a-f]+)\""),
               lastMatch(readText(rig.agentLog(session)), "frames digest ([0-9a-f]{16})"));
 }
@@ -162,10 +163,20 @@ TEST(StuckServer, AnOwnerCutOffFromTheOtherServersOnlyFinishesTooAndRemovesItsRe
     const std::vector<std::string> ids = {"srv-a", "srv-b", "srv-c"};
     for (const std::string& id : ids) rig.startServer(id);
     ASSERT_TRUE(rig.waitForServers(3, 30s));
-    rig.startAgent("rec", kFrames, "max", ",period=900");
+    // Long enough that the agent still streams when the others take over (a recording the owner finished before
+    // they noticed, with its agent gone, is not taken over: nothing to split), and cut only once the standby holds
+    // a copy (the agent has dropped confirmed frames): without one the others have nothing to continue from.
+    constexpr int kLongFrames = 400;
+    rig.startAgent("rec", kLongFrames, "max", ",period=900");
     const std::string owner = rig.waitForOwner("rec", 30s);
     ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("rec"));
-    ASSERT_TRUE(waitUntil([&] { return rig.published("rec") >= 20; }, 60s));
+    ASSERT_TRUE(waitUntil(
+        [&] {
+            const std::string kept = lastMatch(readText(rig.agentLog("rec")), "\\| kept ([0-9]+)");
+            return !kept.empty() && std::stoi(kept) < rig.published("rec");
+        },
+        60s))
+        << readText(rig.agentLog("rec"));
     std::vector<pid_t> others;
     for (const std::string& id : ids) {
         if (id != owner) others.push_back(rig.server(id).pid());
@@ -193,7 +204,7 @@ TEST(StuckServer, AnOwnerCutOffFromTheOtherServersOnlyFinishesTooAndRemovesItsRe
     EXPECT_NE(readText(rig.serverLog(owner)).find("session rec: server '" + winner + "' finished it too"),
               std::string::npos)
         << readText(rig.serverLog(owner));
-    expectFinishedOnceWhole(rig, "rec", winner);
+    expectFinishedOnceWhole(rig, "rec", winner, kLongFrames);
 }
 
 }  // namespace
