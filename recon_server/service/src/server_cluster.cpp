@@ -317,7 +317,8 @@ void Server::yield(const std::string& session_id, const std::string& why, const 
     const std::filesystem::path written = o->session ? o->session->filesDir() : std::filesystem::path();
     const bool agent_lives = agentLives(session_id);
     const bool superseded = resultSuperseded(winner, o->epoch, next_seq);
-    if (o->session) o->session->abandon();
+    // A finish still writing decides as written files do below, once its files are there (Session::abandon).
+    if (o->session) o->session->abandon(/*discard_written=*/agent_lives || superseded);
     retireOwned(o, /*dispose_claim=*/false);
     unlist(session_id);
     if (!written.empty() && (agent_lives || superseded)) {

@@ -134,11 +134,12 @@ void Session::setWatch(std::shared_ptr<Watchdog::Beat> beat, std::function<bool(
     hold_ = std::move(hold);
 }
 
-void Session::abandon() {
+void Session::abandon(bool discard_written) {
     std::deque<Control> dropped;
     {
         std::lock_guard lk(mutex_);
         stop_ = true;
+        discard_written_ = discard_written;
         queue_.clear();
         dropped.swap(control_);  // unanswered: the new owner answers these commands
     }

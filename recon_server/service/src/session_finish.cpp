@@ -157,6 +157,20 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         }
     }
     if (!status.isOk()) s.detail += " (not written: " + status.message() + ")";
+    if (!written.empty()) {
+        // Given up while the files were being written (the server was frozen after mayWrite): the server that gave
+        // it up saw no files yet, so the decision it made for written files is carried out here.
+        std::lock_guard lk(mutex_);
+        if (stop_ && discard_written_) {
+            std::error_code ec;
+            std::filesystem::remove_all(written, ec);
+            std::fprintf(stderr,
+                         "facescan-server: session %s: given up while its files were being written: the files in %s "
+                         "are removed (the new owner writes the scan)\n",
+                         id_.c_str(), written.c_str());
+            written.clear();
+        }
+    }
 
     std::deque<Control> pending;
     {

@@ -195,8 +195,9 @@ class Session {
     void setWatch(std::shared_ptr<Watchdog::Beat> beat, std::function<bool()> hold);
     // This server gave the session up (another one owns it): the worker stops without finishing, nothing more is
     // written, replicated or answered for it here, and waiting callers are dropped unanswered (the new owner
-    // answers). The destructor then only joins.
-    void abandon();
+    // answers). The destructor then only joins. A finish that was already writing when the session was given up
+    // removes what it wrote when discard_written (the caller's rule for files it found written: Server::yield).
+    void abandon(bool discard_written = true);
     // Who owns it (the summary and the data dir record it) and where its replicas go.
     void setOwnership(const std::string& owner_id, uint32_t epoch);
     void setStandby(const std::string& standby_id);
@@ -310,6 +311,7 @@ class Session {
     std::shared_ptr<recon::Reconstructor> recon_;  // null before the camera and after finishing
     MeshResult final_mesh_;
     std::filesystem::path files_dir_;
+    bool discard_written_ = true;  // abandon(): what a finish that was writing does with its files
     std::vector<uint8_t> final_preview_png_;
     bool final_snapshot_sent_ = false;
     std::atomic<int64_t> last_activity_ns_{0};
