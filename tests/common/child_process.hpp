@@ -33,6 +33,10 @@ class ChildProcess {
                 ::dup2(fd, 1);
                 ::dup2(fd, 2);
             }
+            // Nothing else of the test process: its DDS sockets (Cyclone does not open them close-on-exec) would
+            // count as the child's own, and a partition of the child (tests/cluster/partition.hpp) would cut the
+            // test's own client off too.
+            ::close_range(3, ~0U, 0);
             ::execv(argv[0], argv.data());
             ::_exit(127);
         }
