@@ -99,6 +99,16 @@ ReplicaKeyframe keyframe(uint32_t seq, size_t bytes) {
     return k;
 }
 
+// The serialised body of an encoded replica (what follows its header, decompressed).
+void unpackBody(const std::vector<uint8_t>& bytes, std::vector<uint8_t>& body) {
+    uint32_t body_size = 0;
+    std::memcpy(&body_size, bytes.data() + 8, 4);
+    body.resize(body_size);
+    ASSERT_EQ(ZSTD_decompress(body.data(), body.size(), bytes.data() + kReplicaHeaderBytes,
+                              bytes.size() - kReplicaHeaderBytes),
+              body_size);
+}
+
 // The texture's keyframes travel with the replica: in full rounds, and in a delta only when they changed; a delta
 // without them keeps its base's, so that a takeover still textures the head from the old owner's views.
 TEST(ReplicaCodec, KeyframesRoundTripAndADeltaWithoutThemKeepsItsBases) {
@@ -150,12 +160,8 @@ TEST(ReplicaCodec, TheFormatBeforeReadsWithoutKeyframesAndOlderOnesAreRefused) {
     const ReplicaData r = sampleReplica(3, true);
     std::vector<uint8_t> bytes;
     ASSERT_TRUE(encodeReplica(r, bytes).isOk());
-    uint32_t body_size = 0;
-    std::memcpy(&body_size, bytes.data() + 8, 4);
-    std::vector<uint8_t> body(body_size);
-    ASSERT_EQ(ZSTD_decompress(body.data(), body.size(), bytes.data() + kReplicaHeaderBytes,
-                              bytes.size() - kReplicaHeaderBytes),
-              body_size);
+    std::vector<uint8_t> body;
+    ASSERT_NO_FATAL_FAILURE(unpackBody(bytes, body));
     ASSERT_EQ(body.back(), 0) << "no keyframes: the body ends with their flag";
     body.pop_back();
     std::vector<uint8_t> v3;
@@ -185,12 +191,8 @@ TEST(ReplicaCodec, LyingKeyframeCountsAndSizesAreRefusedBeforeAnythingIsAllocate
     r.keyframes = {keyframe(1, 64)};
     std::vector<uint8_t> bytes;
     ASSERT_TRUE(encodeReplica(r, bytes).isOk());
-    uint32_t body_size = 0;
-    std::memcpy(&body_size, bytes.data() + 8, 4);
-    std::vector<uint8_t> body(body_size);
-    ASSERT_EQ(ZSTD_decompress(body.data(), body.size(), bytes.data() + kReplicaHeaderBytes,
-                              bytes.size() - kReplicaHeaderBytes),
-              body_size);
+    std::vector<uint8_t> body;
+    ASSERT_NO_FATAL_FAILURE(unpackBody(bytes, body));
     // The tail: flag, count, seq, pose (48), size, 64 bytes.
     const size_t count_at = body.size() - (64 + 4 + 48 + 4 + 4);
     const size_t size_at = body.size() - (64 + 4);
