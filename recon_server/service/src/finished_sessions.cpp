@@ -43,6 +43,20 @@ std::optional<FinishedSession> FinishedSessions::remove(const std::string& sessi
     return std::nullopt;
 }
 
+std::vector<FinishedSession> FinishedSessions::removeIf(const std::function<bool(const SessionStats&)>& drop) {
+    std::lock_guard lk(mutex_);
+    std::vector<FinishedSession> out;
+    for (auto it = list_.begin(); it != list_.end();) {
+        if (!drop(it->stats)) {
+            ++it;
+            continue;
+        }
+        out.push_back(std::move(*it));
+        it = list_.erase(it);
+    }
+    return out;
+}
+
 std::vector<SessionStats> FinishedSessions::stats() const {
     std::lock_guard lk(mutex_);
     std::vector<SessionStats> out;

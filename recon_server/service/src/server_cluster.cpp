@@ -395,8 +395,11 @@ void Server::releaseStale() {
             retirer_->retire([reader = std::shared_ptr<wire::Reader<facescan_wire_RgbdFrame>>(
                                   std::move(o->frames))]() mutable { reader.reset(); });
             o->phase = OwnedSession::Phase::kFinished;
-            // How far the scan got: a server that finished it too, unseen (cut off), compares (resultSuperseded).
-            const uint32_t last = o->session->nextSeq();
+            // How far the scan got whole: a server that finished it too, unseen (cut off), compares
+            // (resultSuperseded). A scan that lost frames on the way (a takeover from a copy older than what the
+            // agent still held) says 0: it supersedes no other result, which may hold those frames.
+            const SessionStats done = o->session->stats();
+            const uint32_t last = done.frames_dropped == 0 ? done.next_seq : 0;
             o->claim->update([last](wire::SessionOwnerData& r) {
                 r.state = wire::OwnerState::kFinished;
                 r.resume_seq = last;

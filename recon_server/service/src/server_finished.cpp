@@ -79,18 +79,19 @@ bool Server::resultSuperseded(const OwnerView& view, uint32_t epoch, uint32_t ne
 }
 
 void Server::dropSupersededResults(const std::map<std::string, OwnerView>& owners) {
-    for (const SessionStats& s : finished_.stats()) {
+    // On the intake thread, every turn: the records are checked where they lie, not copied out first.
+    const std::vector<FinishedSession> superseded = finished_.removeIf([&](const SessionStats& s) {
         const auto it = owners.find(s.session_id);
-        if (it == owners.end() || !resultSuperseded(it->second, s.epoch, s.next_seq)) continue;
-        std::optional<FinishedSession> f = finished_.remove(s.session_id);
-        if (!f) continue;
-        forgetFinished(*f);
-        const OwnerView& winner = it->second;
-        removeResultFiles(s.session_id, f->dir,
-                          "server '" + winner.data.owner_id + "' finished it too (epoch " +
-                              std::to_string(winner.data.epoch) + ", " + std::to_string(winner.data.resume_seq) +
-                              " frames; this server's epoch " + std::to_string(s.epoch) + ", " +
-                              std::to_string(s.next_seq) + " frames)");
+        return it != owners.end() && resultSuperseded(it->second, s.epoch, s.next_seq);
+    });
+    for (const FinishedSession& f : superseded) {
+        const SessionStats& s = f.stats;
+        const wire::SessionOwnerData& winner = owners.at(s.session_id).data;
+        forgetFinished(f);
+        removeResultFiles(s.session_id, f.dir,
+                          "server '" + winner.owner_id + "' finished it too (epoch " + std::to_string(winner.epoch) +
+                              ", " + std::to_string(winner.resume_seq) + " frames; this server's epoch " +
+                              std::to_string(s.epoch) + ", " + std::to_string(s.next_seq) + " frames)");
         // The claim (FINISHED, this epoch) goes with the record without disposing: the winner's stays.
     }
 }

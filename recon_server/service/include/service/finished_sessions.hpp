@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <deque>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -44,6 +45,8 @@ class FinishedSessions {
     std::vector<FinishedSession> expire(int64_t now_ns);
     // Removes and returns the record of `session_id` (an erased scan), with its claim; nullopt when none.
     std::optional<FinishedSession> remove(const std::string& session_id);
+    // Removes and returns the records `drop` picks (it sees each final status, under the lock, without a copy).
+    std::vector<FinishedSession> removeIf(const std::function<bool(const SessionStats&)>& drop);
 
  private:
     const size_t keep_;
