@@ -57,6 +57,17 @@ std::vector<FinishedSession> FinishedSessions::removeIf(const std::function<bool
     return out;
 }
 
+bool FinishedSessions::replaceClaim(const std::string& session_id, std::shared_ptr<Claim> claim, uint32_t epoch) {
+    std::lock_guard lk(mutex_);
+    for (FinishedSession& f : list_) {
+        if (f.stats.session_id != session_id) continue;
+        f.claim = std::move(claim);
+        f.stats.epoch = epoch;
+        return true;
+    }
+    return false;
+}
+
 std::vector<SessionStats> FinishedSessions::stats() const {
     std::lock_guard lk(mutex_);
     std::vector<SessionStats> out;

@@ -13,6 +13,10 @@ namespace {
 
 constexpr int64_t kStatsEveryNs = 5'000'000'000;  // a log line about replication this often (when it did work)
 constexpr auto kCaptureTimeout = std::chrono::milliseconds(2000);
+// How long a server that lost every other server from view keeps its confirmations back (confirmable()): the
+// lease for the others to see it go, their witness wait (up to two leases), their claim, and the agent's view of it.
+constexpr double kAloneWaitLeases = 4.0;
+constexpr double kAloneWaitMinS = 10.0;  // seconds, for short leases on a loaded host
 
 double msSince(int64_t t0) { return static_cast<double>(steadyNowNs() - t0) * 1e-6; }
 
@@ -20,8 +24,9 @@ double msSince(int64_t t0) { return static_cast<double>(steadyNowNs() - t0) * 1e
 
 struct Replicator::Outgoing {
     uint32_t epoch = 0;
-    uint32_t round = 0;   // the last round made (1, 2, ...)
-    std::string standby;  // empty: none (the data dir alone confirms)
+    uint32_t round = 0;          // the last round made (1, 2, ...)
+    std::string standby;         // empty: none (the data dir alone confirms, see confirmable())
+    int64_t alone_since_ns = 0;  // steady clock since when it has had no standby (0: it has one)
     bool need_full = true;
     int rounds_since_full = 0;
     int64_t next_due_ns = 0;
@@ -123,6 +128,8 @@ void Replicator::replicate(OwnedSession& o, Outgoing& out) {
     std::string standby = out.standby;
     if (!standby.empty() && !cluster_.serverAlive(standby)) standby.clear();
     if (standby.empty()) standby = chooseStandby(o.id, params_.server_id, cluster_.liveLoads());
+    if (standby.empty() && out.alone_since_ns == 0) out.alone_since_ns = steadyNowNs();
+    if (!standby.empty()) out.alone_since_ns = 0;
     if (standby != out.standby) {
         out.standby = standby;
         out.need_full = true;
@@ -221,8 +228,23 @@ void Replicator::replicate(OwnedSession& o, Outgoing& out) {
         stats_.disk_ms += disk_ms;
     }
     // What the agent may drop: frames both on disk and at the standby (on disk alone without a standby).
-    const uint32_t confirmed = standby.empty() ? out.disk_next_seq : std::min(out.disk_next_seq, out.acked_next_seq);
+    const uint32_t confirmed = confirmable(out);
     o.claim->update([&](wire::SessionOwnerData& rec) { rec.confirmed_seq = std::max(rec.confirmed_seq, confirmed); });
+}
+
+uint32_t Replicator::confirmable(const Outgoing& out) const {
+    if (!out.standby.empty()) return std::min(out.disk_next_seq, out.acked_next_seq);
+    // No standby in view. A lone server's data dir is all there is, and it confirms. But a server that knows other
+    // servers and sees none may be the one cut off from them while its agent still reaches it: they then take the
+    // scan over from their last copy, and the frames this server confirmed on its disk alone would be gone from the
+    // agent, lost to the new owner's result. So it confirms nothing new until the others have had the time to take
+    // the session over and its agent to follow their claim (it then ignores this server's confirmations): a few
+    // leases. After that they are taken to be gone, and the disk confirms, so that a recording whose agent waits
+    // for room (it keeps a bounded number of frames) goes on.
+    const double lease_s = cluster_.leaseS();
+    const auto wait_ns = static_cast<int64_t>(std::max(kAloneWaitLeases * lease_s, kAloneWaitMinS) * 1e9);
+    if (cluster_.othersKnown() > 0 && steadyNowNs() - out.alone_since_ns < wait_ns) return out.acked_next_seq;
+    return out.disk_next_seq;
 }
 
 void Replicator::takeAcks() {
@@ -247,7 +269,7 @@ void Replicator::takeAcks() {
             out.acked_next_seq = std::max(out.acked_next_seq, sent->second);
             out.sent.erase(out.sent.begin(), std::next(sent));
             // The agent may drop what both the standby and the disk hold: now rather than at the next round.
-            const uint32_t confirmed = std::min(out.disk_next_seq, out.acked_next_seq);
+            const uint32_t confirmed = confirmable(out);
             for (const auto& o : owned_()) {
                 if (o->id != session || !o->claim) continue;
                 o->claim->update(

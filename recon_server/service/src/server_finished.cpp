@@ -80,9 +80,12 @@ bool Server::resultSuperseded(const OwnerView& view, uint32_t epoch, uint32_t ne
 
 void Server::dropSupersededResults(const std::map<std::string, OwnerView>& owners) {
     // On the intake thread, every turn: the records are checked where they lie, not copied out first.
+    std::vector<std::pair<std::string, wire::SessionOwnerData>> fuller;
     const std::vector<FinishedSession> superseded = finished_.removeIf([&](const SessionStats& s) {
         const auto it = owners.find(s.session_id);
-        return it != owners.end() && resultSuperseded(it->second, s.epoch, s.next_seq);
+        if (it == owners.end()) return false;
+        if (holdsFullerResult(it->second, s)) fuller.emplace_back(s.session_id, it->second.data);
+        return resultSuperseded(it->second, s.epoch, s.next_seq);
     });
     for (const FinishedSession& f : superseded) {
         const SessionStats& s = f.stats;
@@ -94,6 +97,44 @@ void Server::dropSupersededResults(const std::map<std::string, OwnerView>& owner
                               std::to_string(s.epoch) + ", " + std::to_string(s.next_seq) + " frames)");
         // The claim (FINISHED, this epoch) goes with the record without disposing: the winner's stays.
     }
+    for (const auto& [session_id, winner] : fuller) claimFullerResult(session_id, winner);
+}
+
+bool Server::holdsFullerResult(const OwnerView& view, const SessionStats& mine) const {
+    // Another server finished the scan at a later epoch with fewer frames than this one did whole: it took the scan
+    // over from a copy while this server, cut off from it, went on receiving every frame, and the agent left before
+    // it could resend the rest. Its claim is the strongest, so clients follow its partial result, and it never sees
+    // this server's FINISHED claim (EXCLUSIVE ownership hides the weaker one) to give way.
+    const wire::SessionOwnerData& d = view.data;
+    return d.owner_id != params_.server_id && d.state == wire::OwnerState::kFinished && d.epoch > mine.epoch &&
+           d.resume_seq < mine.next_seq && mine.frames_dropped == 0;
+}
+
+void Server::claimFullerResult(const std::string& session_id, const wire::SessionOwnerData& winner) {
+    const std::optional<FinishedSession> record = finished_.find(session_id);
+    if (!record || record->dir.empty() || !std::filesystem::exists(record->dir / "summary.json")) return;
+    // Claimed again, above the other server's epoch: that server sees a FINISHED claim with every frame it had and
+    // removes its partial result (resultSuperseded), and clients follow this one.
+    wire::SessionOwnerData data;
+    data.session_id = session_id;
+    data.owner_id = params_.server_id;
+    data.epoch = winner.epoch + 1;
+    data.state = wire::OwnerState::kFinished;
+    data.resume_seq = data.confirmed_seq = record->stats.next_seq;
+    data.failovers = winner.failovers;
+    auto claim = cluster_->claim(data);
+    if (!claim.isOk()) {
+        std::fprintf(stderr, "facescan-server: session %s: cannot claim its fuller result again: %s\n",
+                     session_id.c_str(), claim.status().toString().c_str());
+        return;
+    }
+    if (!finished_.replaceClaim(session_id, std::move(*claim), data.epoch)) return;
+    std::fprintf(stderr,
+                 "facescan-server: session %s: server '%s' finished it too at epoch %u with %u frames, fewer than the "
+                 "%u this server finished it with (%s): claiming it again at epoch %u, so that the whole result is "
+                 "the one kept\n",
+                 session_id.c_str(), winner.owner_id.c_str(), winner.epoch, winner.resume_seq, record->stats.next_seq,
+                 record->dir.c_str(), data.epoch);
 }
 
 void Server::removeResultFiles(const std::string& session_id, const std::filesystem::path& dir,

@@ -104,6 +104,7 @@ class Cluster {
     dds_entity_t ownerReader() const { return owner_reader_->handle(); }
 
     const std::string& serverId() const { return options_.server_id; }
+    double leaseS() const { return options_.lease_s; }
     int64_t startedNs() const { return self_.started_ns; }
 
     // The view (copies).

@@ -47,6 +47,8 @@ class FinishedSessions {
     std::optional<FinishedSession> remove(const std::string& session_id);
     // Removes and returns the records `drop` picks (it sees each final status, under the lock, without a copy).
     std::vector<FinishedSession> removeIf(const std::function<bool(const SessionStats&)>& drop);
+    // The record's claim is now `claim`, at `epoch` (a claim made again at a later epoch); false when not listed.
+    bool replaceClaim(const std::string& session_id, std::shared_ptr<Claim> claim, uint32_t epoch);
 
  private:
     const size_t keep_;

@@ -74,6 +74,8 @@ class Replicator {
     void takeReplicas();
     void takeAcks();
     void replicate(OwnedSession& owned, Outgoing& out);
+    // The frames the agent may drop now: what the data dir and the standby both hold, or the data dir alone.
+    uint32_t confirmable(const Outgoing& out) const;
     void ack(const std::string& session_id, const std::string& owner_id, uint32_t epoch, uint32_t round, bool need_full,
              const std::string& error);
     void forgetStaleCopies();

@@ -146,6 +146,10 @@ class Server {
     // next_seq). Then this one is a second result for one scan and goes (dropSupersededResults, yield).
     bool resultSuperseded(const OwnerView& view, uint32_t epoch, uint32_t next_seq) const;
     void dropSupersededResults(const std::map<std::string, OwnerView>& owners);
+    // This server's finished result holds more of the scan than the stronger claim's (another server's, FINISHED):
+    // it claims the scan again above that epoch, and the other server's partial result then goes.
+    bool holdsFullerResult(const OwnerView& view, const SessionStats& mine) const;
+    void claimFullerResult(const std::string& session_id, const wire::SessionOwnerData& winner);
     // The files of a copy in the data dir (a replica, and what an interrupted finish wrote beside it), not folders.
     void removeCopy(const std::filesystem::path& dir);
     void removeResultFiles(const std::string& session_id, const std::filesystem::path& dir, const std::string& why);
