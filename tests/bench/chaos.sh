@@ -5,7 +5,8 @@
 # as root), one at a time. Server s1 is never killed, so that its memory can be followed over the whole soak.
 # Reports the scans done, recording frames lost (target 0), takeover times (p50/p95/max; target: max within
 # lease + 5 s = 8 s), the live scans' time from a fault to progress again, and the servers' resident memory each
-# minute (target: s1 grows under 5 % after the first 5 minutes). The run is tests/cluster/chaos_test.cpp's
+# minute (target: s1 grows under 5 % after the first 5 minutes: the mean of the last third of its samples against
+# the first third, since its memory at an instant follows the sessions it holds then). The run is tests/cluster/chaos_test.cpp's
 # ChaosSoak; the seed is printed first (FACESCAN_CHAOS_SEED=N replays the schedule).
 #   usage: tests/bench/chaos.sh [MINUTES]
 #   env:   BUILD_DIR (default ./build), FACESCAN_CHAOS_SEED

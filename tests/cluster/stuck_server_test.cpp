@@ -26,6 +26,7 @@ using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 
 constexpr int kFrames = 90;
+constexpr int kLongFrames = 400;  // frames of the cut-off tests' recording
 
 // Alive and not a zombie (an exited child that nobody reaped yet still answers kill(pid, 0)).
 bool processRuns(pid_t pid) {
@@ -155,24 +156,19 @@ TEST(StuckServer, AServerWhoseIntakeStallsIsListedAsNotResponding) {
     EXPECT_NE(table.out.find("NOT RESPONDING"), std::string::npos) << table.out;
 }
 
-// A switch between the servers fails, not the agent's link: the owner keeps receiving every frame and finishes the
-// recording unseen, while the others, a majority, take it over and finish it as well (the agent follows the
-// stronger claim and waits for its result). Two results of one scan, each whole: the old owner's goes once it sees
-// the new owner's FINISHED claim with every frame it had.
-TEST(StuckServer, AnOwnerCutOffFromTheOtherServersOnlyFinishesTooAndRemovesItsResultOnceTheNetworkHeals) {
-    Partitioner net;
-    if (!net.available()) GTEST_SKIP() << "needs root and nft to cut the servers apart";
-    ClusterRig rig("cutoff", 64);
-    const std::vector<std::string> ids = {"srv-a", "srv-b", "srv-c"};
-    for (const std::string& id : ids) rig.startServer(id);
+// Three servers and a 400-frame recording whose owner is then cut off from the other two, but not from its agent,
+// once the standby holds a copy (the agent has dropped confirmed frames): without one the others would have nothing
+// to continue from. The recording is long enough that the agent still streams when the others take over.
+struct CutOwner {
+    std::vector<std::string> ids = {"srv-a", "srv-b", "srv-c"};
+    std::string owner;
+};
+void startAndCutTheOwner(ClusterRig& rig, Partitioner& net, CutOwner& cut, const std::vector<std::string>& flags) {
+    for (const std::string& id : cut.ids) rig.startServer(id, flags);
     ASSERT_TRUE(rig.waitForServers(3, 30s));
-    // Long enough that the agent still streams when the others take over (a recording the owner finished before
-    // they noticed, with its agent gone, is not taken over: nothing to split), and cut only once the standby holds
-    // a copy (the agent has dropped confirmed frames): without one the others have nothing to continue from.
-    constexpr int kLongFrames = 400;
     rig.startAgent("rec", kLongFrames, "max", ",period=900");
-    const std::string owner = rig.waitForOwner("rec", 30s);
-    ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("rec"));
+    cut.owner = rig.waitForOwner("rec", 30s);
+    ASSERT_FALSE(cut.owner.empty()) << readText(rig.agentLog("rec"));
     ASSERT_TRUE(waitUntil(
         [&] {
             const std::string kept = lastMatch(readText(rig.agentLog("rec")), "\\| kept ([0-9]+)");
@@ -181,22 +177,43 @@ TEST(StuckServer, AnOwnerCutOffFromTheOtherServersOnlyFinishesTooAndRemovesItsRe
         60s))
         << readText(rig.agentLog("rec"));
     std::vector<pid_t> others;
-    for (const std::string& id : ids) {
-        if (id != owner) others.push_back(rig.server(id).pid());
+    for (const std::string& id : cut.ids) {
+        if (id != cut.owner) others.push_back(rig.server(id).pid());
     }
-    ASSERT_TRUE(net.cutBetween(rig.server(owner).pid(), others, 120));
+    ASSERT_TRUE(net.cutBetween(rig.server(cut.owner).pid(), others, 120));
+}
+
+// The server that took the cut-off owner's session over (empty when none did within 30 s).
+std::string waitForTakeover(const ClusterRig& rig, const CutOwner& cut) {
     std::string winner;
-    ASSERT_TRUE(waitUntil(
+    waitUntil(
         [&] {
-            for (const std::string& id : ids) {
-                if (id != owner && readText(rig.serverLog(id)).find("session rec: owner '" + owner + "' is gone") !=
-                                       std::string::npos) {
+            for (const std::string& id : cut.ids) {
+                if (id != cut.owner &&
+                    readText(rig.serverLog(id)).find("session rec: owner '" + cut.owner + "' is gone") !=
+                        std::string::npos) {
                     winner = id;
                 }
             }
             return !winner.empty();
         },
-        30s));
+        30s);
+    return winner;
+}
+
+// A switch between the servers fails, not the agent's link: the owner keeps receiving every frame and finishes the
+// recording unseen, while the others, a majority, take it over and finish it as well (the agent follows the
+// stronger claim and waits for its result). Two results of one scan, each whole: the old owner's goes once it sees
+// the new owner's FINISHED claim with every frame it had.
+TEST(StuckServer, AnOwnerCutOffFromTheOtherServersOnlyFinishesTooAndRemovesItsResultOnceTheNetworkHeals) {
+    Partitioner net;
+    if (!net.available()) GTEST_SKIP() << "needs root and nft to cut the servers apart";
+    ClusterRig rig("cutoff", 64);
+    CutOwner cut;
+    ASSERT_NO_FATAL_FAILURE(startAndCutTheOwner(rig, net, cut, {}));
+    const std::string& owner = cut.owner;
+    const std::string winner = waitForTakeover(rig, cut);
+    ASSERT_FALSE(winner.empty()) << readText(rig.serverLog(owner));
     ASSERT_EQ(rig.agent("rec").wait(180s), 0) << readText(rig.agentLog("rec"));
     // The old owner finished it too, behind the cut (or the path under test was never taken).
     const fs::path old_result = rig.dataDir(owner) / "rec" / "summary.json";
@@ -235,41 +252,15 @@ TEST(StuckServer, AnOwnerCutOffWhoseAgentDiesKeepsTheFullerResultAndThePartialOn
     Partitioner net;
     if (!net.available()) GTEST_SKIP() << "needs root and nft to cut the servers apart";
     ClusterRig rig("cutagent", 64);
-    const std::vector<std::string> ids = {"srv-a", "srv-b", "srv-c"};
-    for (const std::string& id : ids) rig.startServer(id, {"--idle-timeout-s", "3"});
-    ASSERT_TRUE(rig.waitForServers(3, 30s));
-    rig.startAgent("rec", 400, "max", ",period=900");
-    const std::string owner = rig.waitForOwner("rec", 30s);
-    ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("rec"));
-    // The standby holds a copy once the agent drops confirmed frames.
-    ASSERT_TRUE(waitUntil(
-        [&] {
-            const std::string kept = lastMatch(readText(rig.agentLog("rec")), "\\| kept ([0-9]+)");
-            return !kept.empty() && std::stoi(kept) < rig.published("rec");
-        },
-        60s))
-        << readText(rig.agentLog("rec"));
-    std::vector<pid_t> others;
-    for (const std::string& id : ids) {
-        if (id != owner) others.push_back(rig.server(id).pid());
-    }
-    ASSERT_TRUE(net.cutBetween(rig.server(owner).pid(), others, 120));
+    CutOwner cut;
+    ASSERT_NO_FATAL_FAILURE(startAndCutTheOwner(rig, net, cut, {"--idle-timeout-s", "3"}));
+    const std::string& owner = cut.owner;
     // The owner goes on receiving for a moment, beyond the standby's copy; then the agent dies, before the others
     // see the owner's claim lapse (a lease).
     std::this_thread::sleep_for(1s);
     rig.agent("rec").kill9();
-    std::string winner;
-    ASSERT_TRUE(waitUntil(
-        [&] {
-            for (const std::string& id : ids) {
-                if (id != owner && readText(rig.serverLog(id)).find("session rec: owner '" + owner + "' is gone") !=
-                                       std::string::npos) {
-                    winner = id;
-                }
-            }
-            return !winner.empty();
-        },
-        30s));
+    const std::string winner = waitForTakeover(rig, cut);
+    ASSERT_FALSE(winner.empty()) << readText(rig.serverLog(owner));
     const fs::path old_summary = rig.dataDir(owner) / "rec" / "summary.json";
     const fs::path new_summary = rig.dataDir(winner) / "rec" / "summary.json";
     ASSERT_TRUE(waitUntil([&] { return fs::exists(old_summary); }, 30s)) << readText(rig.serverLog(owner));
