@@ -22,8 +22,12 @@ fi
 command -v clang++ >/dev/null || { echo "fuzz.sh: clang++ not found (apt-get install clang)" >&2; exit 2; }
 
 # BENCH=ON only so that tests/ (and with it tests/fuzz) is configured; nothing but the fuzzers is built.
+# Linked with lld when it is there (as deploy/test.sh does): the ASan programs are large, and GNU ld is slow on them.
+linker=()
+command -v ld.lld >/dev/null && linker=(-DCMAKE_EXE_LINKER_FLAGS=-fuse-ld=lld)
 CC=clang CXX=clang++ cmake -S "$repo" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-    -DFACESCAN_BUILD_FUZZERS=ON -DFACESCAN_BUILD_TESTS=OFF -DFACESCAN_BUILD_BENCH=ON -DFACESCAN_WERROR=ON >/dev/null
+    -DFACESCAN_BUILD_FUZZERS=ON -DFACESCAN_BUILD_TESTS=OFF -DFACESCAN_BUILD_BENCH=ON -DFACESCAN_WERROR=ON \
+    "${linker[@]}" >/dev/null
 
 fuzzers=(fuzz_depth_raw16 fuzz_depth_rvl fuzz_depth_zstd fuzz_depth_rvl_zstd fuzz_depth_delta_zstd fuzz_depth_png
          fuzz_depth_packed_delta_zstd
