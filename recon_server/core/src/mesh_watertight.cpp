@@ -361,6 +361,7 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
         }
     }
     const float h = observed.voxel_size_m;
+    double c0 = finishCpuNowMs();
 
     // The views that show the model's outside.
     std::vector<Eigen::Vector3f> face_normals(mesh.triangles.size());
@@ -491,8 +492,15 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
     // a pinch is rare (a few on a head), and this moves the surface there by at most a voxel.
     constexpr int kRepairRounds = 4;
     IndexedMesh closed;
+    report.cpu_ms.close_field += finishCpuNowMs() - c0;
+    c0 = finishCpuNowMs();
     for (int round = 0;; ++round) {
         closed = extractTriangles(solid, mp);
+        if (round == 0) {
+            const double c1 = finishCpuNowMs();
+            report.cpu_ms.close_march = c1 - c0;
+            c0 = c1;
+        }
         const std::vector<Eigen::Vector3f> spots = pinches(closed);
         if (spots.empty() || round == kRepairRounds) break;
         for (const Eigen::Vector3f& spot : spots) {
@@ -507,8 +515,11 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
         }
         ++report.pinches_repaired;
     }
+    report.cpu_ms.close_thicken = finishCpuNowMs() - c0;
+    c0 = finishCpuNowMs();
     removeDefects(closed);
     const MeshDefects defects = countDefects(closed);
+    report.cpu_ms.close_check = finishCpuNowMs() - c0;
     if (closed.triangles.empty() || defects.boundary_edges > 0 || defects.non_manifold_edges > 0 ||
         defects.non_manifold_vertices > 0) {
         report.notes.push_back("watertight: the closed model came out with " + std::to_string(defects.boundary_edges) +
