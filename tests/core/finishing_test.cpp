@@ -10,6 +10,7 @@
 #include <random>
 #include <set>
 
+#include "recon/decimation_mesh.hpp"
 #include "recon/marching_cubes.hpp"
 #include "recon/reconstructor.hpp"
 #include "synth/kinect_simulator.hpp"
@@ -143,6 +144,41 @@ TEST(Finishing, BudgetKeepsMeasuredVerticesColoursAndTheRim) {
     EXPECT_LT(report->distance.mean_mm, 0.05);
     EXPECT_LT(report->distance.p99_mm, 0.3);
     EXPECT_EQ(report->triangles_out, m.triangleCount());
+}
+
+// The decimation's own collapse test says what OpenMesh's says, on every halfedge, on a mesh with holes and a rim
+// and after collapses have deleted vertices and edges (so that the link condition and the boundary tests bite).
+TEST(Finishing, DecimationCollapseTestAgreesWithOpenMesh) {
+    std::set<std::pair<int, int>> holes = squareHole(5, 5, 3);
+    holes.insert({12, 3});  // a one-cell hole: its two triangles' edges are boundary on both sides
+    DecimationMesh om(toOpenMesh(heightField(24, holes)));
+    om.request_vertex_status();
+    om.request_edge_status();
+    om.request_face_status();
+    om.prepare();
+    std::mt19937 rng(7);
+    size_t compared = 0, refused = 0, collapsed = 0;
+    for (int round = 0; round < 400; ++round) {
+        for (const auto heh : om.halfedges()) {
+            const bool ours = om.is_collapse_ok(heh);
+            const bool theirs = om.Mesh::is_collapse_ok(heh);
+            ASSERT_EQ(ours, theirs) << "halfedge " << heh.idx() << " after " << collapsed << " collapses";
+            ++compared;
+            refused += !ours;
+        }
+        // Collapse a random legal halfedge.
+        std::uniform_int_distribution<int> pick(0, static_cast<int>(om.n_halfedges()) - 1);
+        for (int tries = 0; tries < 1000; ++tries) {
+            const OpenMesh::HalfedgeHandle heh(pick(rng));
+            if (om.is_collapse_ok(heh)) {
+                om.collapse(heh);
+                ++collapsed;
+                break;
+            }
+        }
+    }
+    EXPECT_GT(collapsed, 300u);
+    EXPECT_GT(refused, compared / 20) << "the test must meet refusals too";
 }
 
 TEST(Finishing, ABudgetBelowAHeadIsRefusedWithTheMinimum) {

@@ -14,6 +14,7 @@
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>  // QuadricT, with the traits it needs
 #include <string>
 
+#include "recon/decimation_mesh.hpp"
 #include "recon/finishing.hpp"
 
 namespace facescan::recon {
@@ -86,14 +87,15 @@ class ModRimQuadricT : public OpenMesh::Decimater::ModBaseT<MeshT> {
 void decimate(IndexedMesh& mesh, int max_triangles, FinishReport& report) {
     if (max_triangles <= 0 || mesh.triangleCount() <= static_cast<size_t>(max_triangles)) return;
     const bool colours = mesh.hasColours();
-    Mesh om = toOpenMesh(mesh);
+    DecimationMesh om(toOpenMesh(mesh));
     om.request_vertex_status();
     om.request_edge_status();
     om.request_face_status();
-    using Decimater = OpenMesh::Decimater::DecimaterT<Mesh>;
+    om.prepare();
+    using Decimater = OpenMesh::Decimater::DecimaterT<DecimationMesh>;
     Decimater decimater(om);
-    ModRimQuadricT<Mesh>::Handle quadric;
-    OpenMesh::Decimater::ModNormalFlippingT<Mesh>::Handle no_flips;  // a collapse must not turn a face over
+    ModRimQuadricT<DecimationMesh>::Handle quadric;
+    OpenMesh::Decimater::ModNormalFlippingT<DecimationMesh>::Handle no_flips;  // a collapse must not turn a face over
     decimater.add(quadric);
     decimater.add(no_flips);
     if (!decimater.initialize()) {
@@ -102,7 +104,7 @@ void decimate(IndexedMesh& mesh, int max_triangles, FinishReport& report) {
     }
     decimater.decimate_to_faces(0, static_cast<size_t>(max_triangles));
     om.garbage_collection();
-    IndexedMesh out = fromOpenMesh(om);
+    IndexedMesh out = fromOpenMesh(static_cast<const Mesh&>(om));
     if (!colours) out.colours_rgb.clear();
     computeVertexNormals(out);
     if (out.triangleCount() > static_cast<size_t>(max_triangles)) {
