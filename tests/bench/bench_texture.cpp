@@ -19,6 +19,7 @@
 #include "bench_command.hpp"
 #include "eval/accuracy.hpp"
 #include "eval/colour_render.hpp"
+#include "finish_stall.hpp"
 #include "recon/finishing.hpp"
 #include "recon/mesh_writer.hpp"
 #include "recon/reconstructor.hpp"
@@ -36,7 +37,7 @@ int usage(std::FILE* out) {
     std::fprintf(
         out,
         "usage: facescan-bench texture [--frames N] [--colour WxH] [--texels-per-pixel R] [--weight-power P]\n"
-        "                              [--bilinear] [--lit] [--save DIR] [--json]\n"
+        "                              [--bilinear] [--lit] [--stall] [--save DIR] [--json]\n"
         "  Scans the synthetic Lee Perry-Smith head (N frames, default 300), textures the finished model from\n"
         "  colour keyframes of a WxH colour camera (default: both 1280x720 and 640x480; 2.5 cm beside the\n"
         "  depth camera, the same horizontal field of view) and compares renders of the model with the\n"
@@ -48,7 +49,10 @@ int usage(std::FILE* out) {
         "  bilinearly instead of by cubic convolution.\n"
         "  Colour is the head's own, unlit, in the sensor's frames (vertex colours) and the colour camera's\n"
         "  alike, so that both compare with the texture of the truth; --lit lights both as the synthetic Kinect\n"
-        "  does (a lamp above-left of the camera), which the unlit truth then differs from everywhere.\n");
+        "  does (a lamp above-left of the camera), which the unlit truth then differs from everywhere.\n"
+        "  --stall: what the watertight finish costs a session still scanning: a thread reconstructing the scan\n"
+        "  frame after frame beside one that finishes, every thread on one core; its frames per second alone and\n"
+        "  beside the finish run at the worker's priority with the pool, and as the server runs it (nice 5, alone).\n");
     return out == stdout ? 0 : 2;
 }
 
@@ -177,7 +181,7 @@ StatusOr<Scan> scan(bench::Sequence& seq) {
 
 int runTexture(const std::vector<std::string>& args) {
     int frames = 300;
-    bool json = false, lit = false;
+    bool json = false, lit = false, stall = false;
     recon::TextureParams texture_params;
     std::string save;
     std::vector<std::pair<int, int>> sizes;
@@ -195,6 +199,8 @@ int runTexture(const std::vector<std::string>& args) {
             texture_params.bicubic = false;
         } else if (a == "--lit") {
             lit = true;
+        } else if (a == "--stall") {
+            stall = true;
         } else if (a == "--frames" && has_value) {
             frames = std::atoi(args[++i].c_str());
         } else if (a == "--save" && has_value) {
@@ -325,6 +331,22 @@ int runTexture(const std::vector<std::string>& args) {
             out.writers_ms = recon::finishCpuNowMs() - write0;
             return out;
         };
+        if (stall && si == 0) {
+            for (const bool as_server : {false, true}) {
+                auto figures = bench::measureFinishStall(
+                    seq, [&] { (void)finishCpuS(recon::ClosingMode::kWatertight); }, as_server);
+                if (!figures.isOk()) {
+                    std::fprintf(stderr, "texture: --stall: %s\n", figures.status().message().c_str());
+                    return 1;
+                }
+                std::printf(
+                    "  stall, one core, %s: scanning %.1f frames/s alone, %.1f beside the finish (%.0f %%); "
+                    "finish %.1f s wall\n",
+                    as_server ? "finish as the server runs it (nice 5, alone)"
+                              : "finish at the worker's priority with the pool",
+                    figures->alone_fps, figures->beside_fps, 100 * figures->share(), figures->finish_wall_s);
+            }
+        }
         const FinishCpu holes = finishCpuS(recon::ClosingMode::kHoles);
         const FinishCpu solid = finishCpuS(recon::ClosingMode::kWatertight);
         const double finish_cpu_s = holes.finish_s, solid_cpu_s = solid.finish_s;
