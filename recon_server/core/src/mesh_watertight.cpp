@@ -106,10 +106,12 @@ float renderView(const IndexedMesh& mesh, const std::vector<Eigen::Vector3f>& fa
         }
         const float area = (q[1] - q[0]).x() * (q[2] - q[0]).y() - (q[1] - q[0]).y() * (q[2] - q[0]).x();
         if (std::abs(area) < 1e-12f) continue;
-        const int x0 = static_cast<int>(std::floor(std::min({q[0].x(), q[1].x(), q[2].x()})));
-        const int x1 = static_cast<int>(std::ceil(std::max({q[0].x(), q[1].x(), q[2].x()})));
-        const int y0 = static_cast<int>(std::floor(std::min({q[0].y(), q[1].y(), q[2].y()})));
-        const int y1 = static_cast<int>(std::ceil(std::max({q[0].y(), q[1].y(), q[2].y()})));
+        // The pixels whose centres (px + 0.5) lie in the triangle's box: a triangle about a pixel wide has one or
+        // two, where the box of whole pixels it touches has up to nine.
+        const int x0 = static_cast<int>(std::ceil(std::min({q[0].x(), q[1].x(), q[2].x()}) - 0.5f));
+        const int x1 = static_cast<int>(std::floor(std::max({q[0].x(), q[1].x(), q[2].x()}) - 0.5f));
+        const int y0 = static_cast<int>(std::ceil(std::min({q[0].y(), q[1].y(), q[2].y()}) - 0.5f));
+        const int y1 = static_cast<int>(std::floor(std::max({q[0].y(), q[1].y(), q[2].y()}) - 0.5f));
         for (int py = y0; py <= y1; ++py) {
             for (int px = x0; px <= x1; ++px) {
                 const Eigen::Vector2f c(static_cast<float>(px) + 0.5f, static_cast<float>(py) + 0.5f);
