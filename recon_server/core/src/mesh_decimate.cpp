@@ -8,9 +8,7 @@
 // collapse order, the legality tests and the heap are OpenMesh's. Locking the boundary instead held the rim
 // exactly but starved small budgets: a 30-frame scan's 2,100 rim vertices left a 2,000-triangle budget nothing
 // but a fan across the face (6 mm from the full mesh).
-#include <OpenMesh/Tools/Decimater/DecimaterT.hh>
 #include <OpenMesh/Tools/Decimater/ModBaseT.hh>
-#include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>  // QuadricT, with the traits it needs
 #include <string>
 
@@ -92,17 +90,14 @@ void decimate(IndexedMesh& mesh, int max_triangles, FinishReport& report) {
     om.request_edge_status();
     om.request_face_status();
     om.prepare();
-    using Decimater = OpenMesh::Decimater::DecimaterT<DecimationMesh>;
-    Decimater decimater(om);
+    LazyFlipDecimater<DecimationMesh> decimater(om);  // no collapse turns a face over
     ModRimQuadricT<DecimationMesh>::Handle quadric;
-    OpenMesh::Decimater::ModNormalFlippingT<DecimationMesh>::Handle no_flips;  // a collapse must not turn a face over
     decimater.add(quadric);
-    decimater.add(no_flips);
     if (!decimater.initialize()) {
         report.notes.push_back("the decimater could not start: the full mesh is delivered");
         return;
     }
-    decimater.decimate_to_faces(0, static_cast<size_t>(max_triangles));
+    decimater.decimateToFaces(static_cast<size_t>(max_triangles));
     om.garbage_collection();
     IndexedMesh out = fromOpenMesh(static_cast<const Mesh&>(om));
     if (!colours) out.colours_rgb.clear();
