@@ -29,15 +29,16 @@ namespace {
 using namespace facescan;
 
 int usage(std::FILE* out) {
-    std::fprintf(
-        out,
-        "usage: facescan-bench finish --mesh M [--max-triangles N|web|avatar|print|full] [--close none|holes]\n"
-        "                             [--keep head|all] [--crop x0,y0,z0,x1,y1,z1] [--open3d] [--save OUT]\n"
-        "                             [--json]\n"
-        "  Finishes M (PLY, OBJ, OFF, STL) as the server's finish would, times it and reports the distance\n"
-        "  from the result to the full mesh (mean, p99, max mm, both ways). --open3d runs Open3D's quadric\n"
-        "  decimation of the same mesh to the same budget (python3-open3d) and measures it the same way.\n"
-        "  --save OUT writes the finished mesh (PLY).\n");
+    std::fprintf(out,
+                 "usage: facescan-bench finish --mesh M [--max-triangles N|web|avatar|print|full]\n"
+                 "                             [--close none|holes|watertight]\n"
+                 "                             [--keep head|all] [--crop x0,y0,z0,x1,y1,z1] [--open3d] [--save OUT]\n"
+                 "                             [--json]\n"
+                 "  Finishes M (PLY, OBJ, OFF, STL) as the server's finish would, times it and reports the distance\n"
+                 "  from the result to the full mesh (mean, p99, max mm, both ways). --open3d runs Open3D's quadric\n"
+                 "  decimation of the same mesh to the same budget (python3-open3d) and measures it the same way.\n"
+                 "  --save OUT writes the finished mesh (PLY). Prints the CPU time of each step (this thread and the\n"
+                 "  parallel pool's workers on its behalf; watertight: field, marching cubes, thickening, check).\n");
     return out == stdout ? 0 : 2;
 }
 
@@ -191,6 +192,7 @@ int runFinish(const std::vector<std::string>& args) {
         "  steps ms (wall): parts %.1f, close %.1f, decimate %.1f, distance %.1f; whole finish %.1f ms CPU "
         "(this thread), %.1f ms wall\n",
         parts->ms_parts, report->ms_close, report->ms_decimate, report->ms_distance, cpu_ms, wall_ms);
+    std::printf("  %s\n", report->cpuBreakdown().c_str());
     std::printf("  %-26s %9s %9s %9s %9s %9s %9s %9s\n", "", "triangles", "cpu ms", "full->res", "p99", "max",
                 "res->full", "p99");
     std::printf("  %-26s %9s %9s %9s %9s %9s %9s %9s\n", "", "", "", "mean mm", "mm", "mm", "mean mm", "mm");

@@ -19,7 +19,9 @@
 #include "bench_command.hpp"
 #include "eval/accuracy.hpp"
 #include "eval/colour_render.hpp"
+#include "finish_stall.hpp"
 #include "recon/finishing.hpp"
+#include "recon/mesh_writer.hpp"
 #include "recon/reconstructor.hpp"
 #include "recon/texture_atlas.hpp"
 #include "recon_input.hpp"
@@ -35,7 +37,7 @@ int usage(std::FILE* out) {
     std::fprintf(
         out,
         "usage: facescan-bench texture [--frames N] [--colour WxH] [--texels-per-pixel R] [--weight-power P]\n"
-        "                              [--bilinear] [--lit] [--save DIR] [--json]\n"
+        "                              [--bilinear] [--lit] [--stall] [--save DIR] [--json]\n"
         "  Scans the synthetic Lee Perry-Smith head (N frames, default 300), textures the finished model from\n"
         "  colour keyframes of a WxH colour camera (default: both 1280x720 and 640x480; 2.5 cm beside the\n"
         "  depth camera, the same horizontal field of view) and compares renders of the model with the\n"
@@ -47,7 +49,10 @@ int usage(std::FILE* out) {
         "  bilinearly instead of by cubic convolution.\n"
         "  Colour is the head's own, unlit, in the sensor's frames (vertex colours) and the colour camera's\n"
         "  alike, so that both compare with the texture of the truth; --lit lights both as the synthetic Kinect\n"
-        "  does (a lamp above-left of the camera), which the unlit truth then differs from everywhere.\n");
+        "  does (a lamp above-left of the camera), which the unlit truth then differs from everywhere.\n"
+        "  --stall: what the watertight finish costs a session still scanning: a thread reconstructing the scan\n"
+        "  frame after frame beside one that finishes, every thread on one core; its frames per second alone and\n"
+        "  beside the finish run at the worker's priority with the pool, and as the server runs it (nice 5, alone).\n");
     return out == stdout ? 0 : 2;
 }
 
@@ -176,7 +181,7 @@ StatusOr<Scan> scan(bench::Sequence& seq) {
 
 int runTexture(const std::vector<std::string>& args) {
     int frames = 300;
-    bool json = false, lit = false;
+    bool json = false, lit = false, stall = false;
     recon::TextureParams texture_params;
     std::string save;
     std::vector<std::pair<int, int>> sizes;
@@ -194,6 +199,8 @@ int runTexture(const std::vector<std::string>& args) {
             texture_params.bicubic = false;
         } else if (a == "--lit") {
             lit = true;
+        } else if (a == "--stall") {
+            stall = true;
         } else if (a == "--frames" && has_value) {
             frames = std::atoi(args[++i].c_str());
         } else if (a == "--save" && has_value) {
@@ -289,22 +296,61 @@ int runTexture(const std::vector<std::string>& args) {
             return 1;
         }
         // The server's whole finish of a textured model (head alone, holes closed or closed into a solid,
-        // 20,000 triangles, texture), in CPU time of this process (all its threads).
-        auto finishCpuS = [&](recon::ClosingMode close, bool& ok) {
+        // 20,000 triangles, texture), in CPU time of this process (all its threads); then what writing its files
+        // costs (mesh.ply, textured.obj/.mtl/.png, textured.ply), and the steps' own CPU (this thread and the
+        // pool's workers on its behalf).
+        struct FinishCpu {
+            bool ok = false;
+            double finish_s = 0, writers_ms = 0, bake_ms = 0;
+            std::string steps, bake_steps;
+            recon::TexturedMesh textured;
+        };
+        auto finishCpuS = [&](recon::ClosingMode close) {
+            FinishCpu out;
             const std::clock_t cpu0 = std::clock();
             recon::IndexedMesh finished = scanned->raw;
             recon::FinishParams finish;
             finish.close = close;
             finish.max_triangles = 20'000;
-            recon::TexturedMesh finished_textured;
             auto report = recon::finishMesh(finished, finish, &scanned->region, &scanned->volume);
-            ok = report.isOk() && (close != recon::ClosingMode::kWatertight || report->watertight) &&
-                 recon::bakeTexture(finished, views, texture_params, finished_textured).isOk();
-            return double(std::clock() - cpu0) / CLOCKS_PER_SEC;
+            const double bake0 = recon::finishCpuNowMs();
+            auto baked = recon::bakeTexture(finished, views, texture_params, out.textured);
+            out.bake_ms = recon::finishCpuNowMs() - bake0;
+            out.finish_s = double(std::clock() - cpu0) / CLOCKS_PER_SEC;
+            out.ok = report.isOk() && (close != recon::ClosingMode::kWatertight || report->watertight) && baked.isOk();
+            if (!out.ok) return out;
+            out.steps = report->cpuBreakdown();
+            char buf[160];
+            std::snprintf(buf, sizeof buf, "bake %.0f ms CPU (wall: charts %.0f, visibility %.0f, texels %.0f)",
+                          out.bake_ms, baked->ms_charts, baked->ms_visibility, baked->ms_bake);
+            out.bake_steps = buf;
+            const double write0 = recon::finishCpuNowMs();
+            out.ok = recon::meshFileBytes(finished, recon::MeshFileFormat::kPly).isOk() &&
+                     recon::texturedObjFiles(out.textured, "textured").isOk() &&
+                     recon::texturedPlyBytes(out.textured, "textured.png").isOk();
+            out.writers_ms = recon::finishCpuNowMs() - write0;
+            return out;
         };
-        bool finished_ok = false, solid_ok = false;
-        const double finish_cpu_s = finishCpuS(recon::ClosingMode::kHoles, finished_ok);
-        const double solid_cpu_s = finishCpuS(recon::ClosingMode::kWatertight, solid_ok);
+        if (stall && si == 0) {
+            for (const bool as_server : {false, true}) {
+                auto figures = bench::measureFinishStall(
+                    seq, [&] { (void)finishCpuS(recon::ClosingMode::kWatertight); }, as_server);
+                if (!figures.isOk()) {
+                    std::fprintf(stderr, "texture: --stall: %s\n", figures.status().message().c_str());
+                    return 1;
+                }
+                std::printf(
+                    "  stall, one core, %s: scanning %.1f frames/s alone, %.1f beside the finish (%.0f %%); "
+                    "finish %.1f s wall\n",
+                    as_server ? "finish as the server runs it (nice 5, alone)"
+                              : "finish at the worker's priority with the pool",
+                    figures->alone_fps, figures->beside_fps, 100 * figures->share(), figures->finish_wall_s);
+            }
+        }
+        const FinishCpu holes = finishCpuS(recon::ClosingMode::kHoles);
+        const FinishCpu solid = finishCpuS(recon::ClosingMode::kWatertight);
+        const double finish_cpu_s = holes.finish_s, solid_cpu_s = solid.finish_s;
+        const bool finished_ok = holes.ok, solid_ok = solid.ok;
         const std::string tag = std::to_string(w) + "x" + std::to_string(h);
         auto figures = [&](const recon::TexturedMesh& t, const std::string& name) {
             eval::ColourMesh m;
@@ -317,21 +363,34 @@ int runTexture(const std::vector<std::string>& args) {
         };
         const Figures f_full = figures(full, "texture_" + tag);
         const Figures f_web = figures(web, "texture_web_" + tag);
+        const Figures f_solid = solid_ok ? figures(solid.textured, "texture_solid_" + tag) : Figures{};
         std::printf("  colour %s: %zu keyframes (%zu KiB JPEG), %s; bake %.0f ms\n", tag.c_str(), keyframes.count(),
                     keyframes.bytes() >> 10, full_report->summary().c_str(), full_ms);
         std::printf("    finish (head, close holes, 20,000 triangles, texture): %.2f s CPU%s\n", finish_cpu_s,
                     finished_ok ? "" : " (FAILED)");
         std::printf("    finish (head, watertight, 20,000 triangles, texture): %.2f s CPU%s\n", solid_cpu_s,
                     solid_ok ? "" : " (FAILED)");
+        for (const auto* f : {&holes, &solid}) {
+            if (!f->ok) continue;
+            std::printf("      %s: %s; %s; writers %.0f ms CPU\n", f == &holes ? "holes" : "watertight",
+                        f->steps.c_str(), f->bake_steps.c_str(), f->writers_ms);
+        }
         std::printf("    texture (full):               PSNR %6.2f dB  SSIM %.4f  (%+.2f dB over vertex colours)\n",
                     f_full.psnr_db, f_full.ssim, f_full.psnr_db - vertex_figures.psnr_db);
         std::printf("    texture (20,000 triangles):   PSNR %6.2f dB  SSIM %.4f  (%+.2f dB over vertex colours)\n",
                     f_web.psnr_db, f_web.ssim, f_web.psnr_db - vertex_figures.psnr_db);
+        if (solid_ok) {
+            std::printf("    texture (solid, 20,000):      PSNR %6.2f dB  SSIM %.4f  (%+.2f dB over vertex colours)\n",
+                        f_solid.psnr_db, f_solid.ssim, f_solid.psnr_db - vertex_figures.psnr_db);
+        }
         json_out += std::string(si ? ", " : "") + "{\"size\": \"" + tag +
                     "\", \"keyframes\": " + std::to_string(keyframes.count()) +
                     ", \"bake_ms\": " + std::to_string(full_ms) +
                     ", \"finish_cpu_s\": " + std::to_string(finish_cpu_s) +
                     ", \"watertight_finish_cpu_s\": " + std::to_string(solid_cpu_s) +
+                    ", \"watertight_writers_cpu_ms\": " + std::to_string(solid.writers_ms) +
+                    ", \"solid\": {\"psnr_db\": " + std::to_string(f_solid.psnr_db) +
+                    ", \"ssim\": " + std::to_string(f_solid.ssim) + "}" +
                     ", \"full\": {\"psnr_db\": " + std::to_string(f_full.psnr_db) +
                     ", \"ssim\": " + std::to_string(f_full.ssim) +
                     "}, \"web\": {\"psnr_db\": " + std::to_string(f_web.psnr_db) +

@@ -63,6 +63,45 @@ TEST(FrameLoad, AFrameOverItsShareIsThrottledWhileOthersRunAndReleasedAlone) {
     }).join();
 }
 
+// A session's finish runs below the sessions still scanning (kFinishNice), on its own thread alone while one runs,
+// and with the whole pool when none does; a throttled worker does not add both nice values up.
+TEST(FrameLoad, AFinishRunsBelowTheScanningSessionsAndAloneBesideThem) {
+    std::thread([] {
+        const int base = myNice();
+        FrameLoad scanning(30.0f);
+        scanning.join();
+        std::thread([base] {
+            FrameLoad finishing(1000.0f);
+            finishing.join();
+            ASSERT_EQ(FrameLoad::runningWorkers(), 2);
+            frame(finishing, 5'000'000);  // far over its share: throttled (nice + kThrottledNice)
+            EXPECT_TRUE(finishing.throttled());
+            finishing.leaveToFinish();
+            EXPECT_EQ(FrameLoad::runningWorkers(), 1);  // no longer a scanning session
+            EXPECT_EQ(myNice(), base + FrameLoad::kFinishNice);
+            EXPECT_TRUE(recon::parallelSerial());
+            finishing.leave();  // the worker's own leave at its end: nothing more
+            EXPECT_EQ(FrameLoad::runningWorkers(), 1);
+        }).join();
+        scanning.leave();
+        std::thread([base] {
+            FrameLoad finishing(30.0f);
+            finishing.join();
+            finishing.leaveToFinish();  // nobody scans: the pool is its to use
+            EXPECT_EQ(myNice(), base + FrameLoad::kFinishNice);
+            EXPECT_FALSE(recon::parallelSerial());
+            EXPECT_EQ(FrameLoad::runningWorkers(), 0);
+        }).join();
+        // On a thread that did not join it (a session finished without a worker): nothing changes.
+        FrameLoad other(30.0f);
+        std::thread([&other] { other.join(); }).join();
+        other.leaveToFinish();
+        EXPECT_EQ(myNice(), base);
+        EXPECT_EQ(FrameLoad::runningWorkers(), 1);
+        std::thread([&other] { other.leave(); }).join();
+    }).join();
+}
+
 TEST(FrameLoad, AFrameWithinItsShareIsLeftAlone) {
     std::thread([] {
         const int base = myNice();

@@ -1,11 +1,15 @@
 // The finishing stage (finishing.hpp): parameters, their parsing, the report, and the steps in order.
 #include "recon/finishing.hpp"
 
+#include <time.h>
+
 #include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
+
+#include "recon/parallel.hpp"
 
 namespace facescan::recon {
 namespace {
@@ -34,6 +38,13 @@ std::string jsonEscape(const std::string& s) {
 }
 
 }  // namespace
+
+double finishCpuNowMs() {
+    if (!parallelAccounting()) setParallelAccounting(true);
+    timespec ts{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return double(ts.tv_sec) * 1e3 + double(ts.tv_nsec) * 1e-6 + double(parallelPoolCpuNs()) * 1e-6;
+}
 
 Status FinishParams::validate() const {
     if (max_triangles < 0 || (max_triangles > 0 && max_triangles < kMinTriangleBudget)) {
@@ -144,6 +155,17 @@ std::string FinishReport::summary() const {
     return s;
 }
 
+std::string FinishReport::cpuBreakdown() const {
+    std::string s = "CPU ms: parts " + num(cpu_ms.parts) + ", close " + num(cpu_ms.close);
+    if (watertight || cpu_ms.close_field > 0) {
+        s += " (field " + num(cpu_ms.close_field) + ", marching cubes and largest piece " + num(cpu_ms.close_march) +
+             ", pinch checks and thickening " + num(cpu_ms.close_thicken) + ", manifold check " +
+             num(cpu_ms.close_check) + ")";
+    }
+    return s + ", decimate " + num(cpu_ms.decimate) + ", distance " + num(cpu_ms.distance) + "; finish " +
+           num(cpu_ms.total());
+}
+
 std::string FinishReport::json() const {
     std::string j =
         "{\"triangles_in\": " + std::to_string(triangles_in) + ", \"triangles_out\": " + std::to_string(triangles_out) +
@@ -156,7 +178,11 @@ std::string FinishReport::json() const {
         ", \"distance_mm\": {\"mean\": " + num(distance.mean_mm) + ", \"p99\": " + num(distance.p99_mm) +
         ", \"max\": " + num(distance.max_mm) + "}, \"ms\": {\"parts\": " + num(ms_parts) +
         ", \"close\": " + num(ms_close) + ", \"decimate\": " + num(ms_decimate) +
-        ", \"distance\": " + num(ms_distance) + "}, \"notes\": [";
+        ", \"distance\": " + num(ms_distance) + "}, \"cpu_ms\": {\"parts\": " + num(cpu_ms.parts) +
+        ", \"close\": " + num(cpu_ms.close) + ", \"close_field\": " + num(cpu_ms.close_field) +
+        ", \"close_march\": " + num(cpu_ms.close_march) + ", \"close_thicken\": " + num(cpu_ms.close_thicken) +
+        ", \"close_check\": " + num(cpu_ms.close_check) + ", \"decimate\": " + num(cpu_ms.decimate) +
+        ", \"distance\": " + num(cpu_ms.distance) + "}, \"notes\": [";
     for (size_t i = 0; i < notes.size(); ++i) j += (i ? ", \"" : "\"") + jsonEscape(notes[i]) + "\"";
     return j + "]}";
 }
@@ -171,9 +197,11 @@ StatusOr<FinishReport> finishMesh(IndexedMesh& mesh, const FinishParams& params,
         return report;
     }
     auto t0 = std::chrono::steady_clock::now();
+    double c0 = finishCpuNowMs();
     removeDefects(mesh);  // welded by position: parts and holes are judged on shared vertices
     keepHead(mesh, params, head, report);
     report.ms_parts = msSince(t0);
+    report.cpu_ms.parts = finishCpuNowMs() - c0;
     if (mesh.triangles.empty()) {
         report.notes.emplace_back("nothing of the mesh lies inside the head region or the crop box");
         return report;
@@ -183,22 +211,32 @@ StatusOr<FinishReport> finishMesh(IndexedMesh& mesh, const FinishParams& params,
     if (params.measure_distance && changes) full = mesh;
     if (params.close == ClosingMode::kHoles) {
         t0 = std::chrono::steady_clock::now();
+        c0 = finishCpuNowMs();
         fillHoles(mesh, params.max_hole_m, report);
         report.ms_close = msSince(t0);
+        report.cpu_ms.close = finishCpuNowMs() - c0;
     } else if (params.close == ClosingMode::kWatertight) {
         t0 = std::chrono::steady_clock::now();
-        closeWatertight(mesh, meshVolume(mesh, params.watertight_voxel_m, volume), head, params, report);
+        c0 = finishCpuNowMs();
+        const VoxelBlockGrid band = meshVolume(mesh, params.watertight_voxel_m, volume);
+        report.cpu_ms.close_field = finishCpuNowMs() - c0;
+        closeWatertight(mesh, band, head, params, report);
         report.ms_close = msSince(t0);
+        report.cpu_ms.close = finishCpuNowMs() - c0;
     }
     if (params.max_triangles > 0) {
         t0 = std::chrono::steady_clock::now();
+        c0 = finishCpuNowMs();
         decimate(mesh, params.max_triangles, report);
         report.ms_decimate = msSince(t0);
+        report.cpu_ms.decimate = finishCpuNowMs() - c0;
     }
     if (!full.triangles.empty()) {
         t0 = std::chrono::steady_clock::now();
+        c0 = finishCpuNowMs();
         report.distance = vertexToSurfaceDistance(full, mesh, kDistanceSamples);
         report.ms_distance = msSince(t0);
+        report.cpu_ms.distance = finishCpuNowMs() - c0;
     }
     report.triangles_out = mesh.triangleCount();
     report.vertices_out = mesh.vertexCount();

@@ -8,12 +8,11 @@
 // collapse order, the legality tests and the heap are OpenMesh's. Locking the boundary instead held the rim
 // exactly but starved small budgets: a 30-frame scan's 2,100 rim vertices left a 2,000-triangle budget nothing
 // but a fan across the face (6 mm from the full mesh).
-#include <OpenMesh/Tools/Decimater/DecimaterT.hh>
 #include <OpenMesh/Tools/Decimater/ModBaseT.hh>
-#include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>  // QuadricT, with the traits it needs
 #include <string>
 
+#include "recon/decimation_mesh.hpp"
 #include "recon/finishing.hpp"
 
 namespace facescan::recon {
@@ -86,23 +85,21 @@ class ModRimQuadricT : public OpenMesh::Decimater::ModBaseT<MeshT> {
 void decimate(IndexedMesh& mesh, int max_triangles, FinishReport& report) {
     if (max_triangles <= 0 || mesh.triangleCount() <= static_cast<size_t>(max_triangles)) return;
     const bool colours = mesh.hasColours();
-    Mesh om = toOpenMesh(mesh);
+    DecimationMesh om(toOpenMesh(mesh));
     om.request_vertex_status();
     om.request_edge_status();
     om.request_face_status();
-    using Decimater = OpenMesh::Decimater::DecimaterT<Mesh>;
-    Decimater decimater(om);
-    ModRimQuadricT<Mesh>::Handle quadric;
-    OpenMesh::Decimater::ModNormalFlippingT<Mesh>::Handle no_flips;  // a collapse must not turn a face over
+    om.prepare();
+    LazyFlipDecimater<DecimationMesh> decimater(om);  // no collapse turns a face over
+    ModRimQuadricT<DecimationMesh>::Handle quadric;
     decimater.add(quadric);
-    decimater.add(no_flips);
     if (!decimater.initialize()) {
         report.notes.push_back("the decimater could not start: the full mesh is delivered");
         return;
     }
-    decimater.decimate_to_faces(0, static_cast<size_t>(max_triangles));
+    decimater.decimateToFaces(static_cast<size_t>(max_triangles));
     om.garbage_collection();
-    IndexedMesh out = fromOpenMesh(om);
+    IndexedMesh out = fromOpenMesh(static_cast<const Mesh&>(om));
     if (!colours) out.colours_rgb.clear();
     computeVertexNormals(out);
     if (out.triangleCount() > static_cast<size_t>(max_triangles)) {

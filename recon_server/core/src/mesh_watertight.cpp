@@ -18,7 +18,6 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <map>
 #include <numeric>
 
 #include "recon/finishing.hpp"
@@ -72,10 +71,14 @@ float renderView(const IndexedMesh& mesh, const std::vector<Eigen::Vector3f>& fa
     view.dir = dir.normalized();
     view.u = view.dir.unitOrthogonal();
     view.v = view.dir.cross(view.u);
+    // Each vertex projected once (u, v, depth along dir), not once per triangle that holds it.
+    std::vector<Eigen::Vector3f> projected(mesh.positions_m.size());
     float u_min = std::numeric_limits<float>::max(), v_min = u_min, u_max = -u_min, v_max = -u_min;
-    for (const Eigen::Vector3f& p : mesh.positions_m) {
-        u_min = std::min(u_min, p.dot(view.u)), u_max = std::max(u_max, p.dot(view.u));
-        v_min = std::min(v_min, p.dot(view.v)), v_max = std::max(v_max, p.dot(view.v));
+    for (size_t i = 0; i < mesh.positions_m.size(); ++i) {
+        const Eigen::Vector3f& p = mesh.positions_m[i];
+        projected[i] = {p.dot(view.u), p.dot(view.v), p.dot(view.dir)};
+        u_min = std::min(u_min, projected[i].x()), u_max = std::max(u_max, projected[i].x());
+        v_min = std::min(v_min, projected[i].y()), v_max = std::max(v_max, projected[i].y());
     }
     view.pixel_m = pixel_m;
     view.u0 = u_min - 2 * pixel_m;
@@ -96,17 +99,19 @@ float renderView(const IndexedMesh& mesh, const std::vector<Eigen::Vector3f>& fa
         Eigen::Vector2f q[3];
         float d[3];
         for (int k = 0; k < 3; ++k) {
-            const Eigen::Vector3f& p = mesh.positions_m[t[k]];
-            q[k] = {(p.dot(view.u) - view.u0) / pixel_m, (p.dot(view.v) - view.v0) / pixel_m};
-            d[k] = p.dot(view.dir);
+            const Eigen::Vector3f& p = projected[t[k]];
+            q[k] = {(p.x() - view.u0) / pixel_m, (p.y() - view.v0) / pixel_m};
+            d[k] = p.z();
             put(static_cast<int>(q[k].x()), static_cast<int>(q[k].y()), d[k], front);
         }
         const float area = (q[1] - q[0]).x() * (q[2] - q[0]).y() - (q[1] - q[0]).y() * (q[2] - q[0]).x();
         if (std::abs(area) < 1e-12f) continue;
-        const int x0 = static_cast<int>(std::floor(std::min({q[0].x(), q[1].x(), q[2].x()})));
-        const int x1 = static_cast<int>(std::ceil(std::max({q[0].x(), q[1].x(), q[2].x()})));
-        const int y0 = static_cast<int>(std::floor(std::min({q[0].y(), q[1].y(), q[2].y()})));
-        const int y1 = static_cast<int>(std::ceil(std::max({q[0].y(), q[1].y(), q[2].y()})));
+        // The pixels whose centres (px + 0.5) lie in the triangle's box: a triangle about a pixel wide has one or
+        // two, where the box of whole pixels it touches has up to nine.
+        const int x0 = static_cast<int>(std::ceil(std::min({q[0].x(), q[1].x(), q[2].x()}) - 0.5f));
+        const int x1 = static_cast<int>(std::floor(std::max({q[0].x(), q[1].x(), q[2].x()}) - 0.5f));
+        const int y0 = static_cast<int>(std::ceil(std::min({q[0].y(), q[1].y(), q[2].y()}) - 0.5f));
+        const int y1 = static_cast<int>(std::floor(std::max({q[0].y(), q[1].y(), q[2].y()}) - 0.5f));
         for (int py = y0; py <= y1; ++py) {
             for (int px = x0; px <= x1; ++px) {
                 const Eigen::Vector2f c(static_cast<float>(px) + 0.5f, static_cast<float>(py) + 0.5f);
@@ -202,13 +207,22 @@ Voxel* voxelAt(VoxelBlockGrid& g, int x, int y, int z) {
 // in a vertex. The positions of such vertices (on an edge not shared by exactly two triangles, or whose
 // triangles form more than one fan); empty for a closed manifold.
 std::vector<Eigen::Vector3f> pinches(const IndexedMesh& mesh) {
-    std::map<std::pair<uint32_t, uint32_t>, int> edges;
+    // Edges as sorted keys (lower vertex in the high half): a run of equal keys is one edge and its triangles.
+    std::vector<uint64_t> edges;
+    edges.reserve(mesh.triangleCount() * 3);
     for (const Triangle& t : mesh.triangles) {
-        for (int k = 0; k < 3; ++k) ++edges[{std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])}];
+        for (int k = 0; k < 3; ++k) {
+            const uint32_t a = std::min(t[k], t[(k + 1) % 3]), b = std::max(t[k], t[(k + 1) % 3]);
+            edges.push_back(static_cast<uint64_t>(a) << 32 | b);
+        }
     }
+    std::sort(edges.begin(), edges.end());
     std::vector<uint8_t> bad(mesh.vertexCount(), 0);
-    for (const auto& [e, n] : edges) {
-        if (n != 2) bad[e.first] = bad[e.second] = 1;
+    for (size_t i = 0; i < edges.size();) {
+        size_t j = i + 1;
+        while (j < edges.size() && edges[j] == edges[i]) ++j;
+        if (j - i != 2) bad[edges[i] >> 32] = bad[edges[i] & 0xffffffffu] = 1;
+        i = j;
     }
     // Fans: per vertex, its triangles joined where two share a second vertex.
     std::vector<uint32_t> start(mesh.vertexCount() + 1, 0), incident(mesh.triangleCount() * 3);
@@ -284,12 +298,17 @@ VoxelBlockGrid meshVolume(const IndexedMesh& mesh, float voxel_m, const VoxelBlo
                      x <= std::min(dims.x() - 1, static_cast<int>(hi.x())); ++x) {
                     const Eigen::Vector3f p =
                         g.toWorld(Eigen::Vector3f(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z)));
-                    const Eigen::Vector3f q = closestPointOnTriangle(p, a, b, c);
-                    const float dist = (p - q).norm();
-                    if (dist >= band_m) continue;
+                    // The distance to the triangle's plane bounds the distance to the triangle from below: most
+                    // of the box lies beyond the band or beyond a nearer triangle, and is done without the
+                    // closest point.
+                    const float to_plane = std::abs((p - a).dot(n));
+                    if (to_plane >= band_m) continue;
                     Voxel* v = voxelAt(g, x, y, z);
                     const size_t i = static_cast<size_t>(v - g.voxels.data());
-                    if (dist >= best[i]) continue;
+                    if (to_plane >= best[i]) continue;
+                    const Eigen::Vector3f q = closestPointOnTriangle(p, a, b, c);
+                    const float dist = (p - q).norm();
+                    if (dist >= band_m || dist >= best[i]) continue;
                     best[i] = dist;
                     const float along = (p - q).dot(n);
                     if (dist > 1e-6f && std::abs(along) < 0.7f * dist) {
@@ -361,6 +380,7 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
         }
     }
     const float h = observed.voxel_size_m;
+    double c0 = finishCpuNowMs();
 
     // The views that show the model's outside.
     std::vector<Eigen::Vector3f> face_normals(mesh.triangles.size());
@@ -491,8 +511,20 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
     // a pinch is rare (a few on a head), and this moves the surface there by at most a voxel.
     constexpr int kRepairRounds = 4;
     IndexedMesh closed;
+    report.cpu_ms.close_field += finishCpuNowMs() - c0;
+    c0 = finishCpuNowMs();
+    // A round of thickening changes the voxels around a few pinches: the mesher meshes again only the blocks
+    // whose voxels changed (and their neighbours), the same mesh as extractTriangles. It keeps the grid it was
+    // given, hence a copy.
+    IncrementalMesher mesher(mp);
     for (int round = 0;; ++round) {
-        closed = extractTriangles(solid, mp);
+        VoxelBlockGrid meshed = solid;
+        closed = mesher.update(meshed);
+        if (round == 0) {
+            const double c1 = finishCpuNowMs();
+            report.cpu_ms.close_march = c1 - c0;
+            c0 = c1;
+        }
         const std::vector<Eigen::Vector3f> spots = pinches(closed);
         if (spots.empty() || round == kRepairRounds) break;
         for (const Eigen::Vector3f& spot : spots) {
@@ -507,8 +539,11 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
         }
         ++report.pinches_repaired;
     }
+    report.cpu_ms.close_thicken = finishCpuNowMs() - c0;
+    c0 = finishCpuNowMs();
     removeDefects(closed);
     const MeshDefects defects = countDefects(closed);
+    report.cpu_ms.close_check = finishCpuNowMs() - c0;
     if (closed.triangles.empty() || defects.boundary_edges > 0 || defects.non_manifold_edges > 0 ||
         defects.non_manifold_vertices > 0) {
         report.notes.push_back("watertight: the closed model came out with " + std::to_string(defects.boundary_edges) +

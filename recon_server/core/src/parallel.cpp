@@ -351,6 +351,7 @@ void nameThisThread(const char* name) {
 void setParallelSerial(bool serial) { t_serial = serial; }
 bool parallelSerial() { return t_serial; }
 void setParallelAccounting(bool on) { t_accounting = on; }
+bool parallelAccounting() { return t_accounting; }
 int64_t parallelPoolCpuNs() { return t_pool_cpu_ns.load(std::memory_order_acquire); }
 
 }  // namespace facescan::recon

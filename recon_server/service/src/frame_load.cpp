@@ -96,6 +96,17 @@ int FrameLoad::stepToFit(float down_ms) const {
     return kEconomySteps - 1;
 }
 
+void FrameLoad::leaveToFinish() {
+    if (!joined_ || tid_ != static_cast<int>(syscall(SYS_gettid))) return;
+    leave();
+    // Absolute, from the value at join: a throttled worker whose nice could not be lowered again is at
+    // base + kThrottledNice already, and must not end up at the sum of both.
+    if (getpriority(PRIO_PROCESS, static_cast<id_t>(tid_)) < base_nice_ + kFinishNice) {
+        (void)setpriority(PRIO_PROCESS, static_cast<id_t>(tid_), base_nice_ + kFinishNice);
+    }
+    if (runningWorkers() > 0) recon::setParallelSerial(true);
+}
+
 void FrameLoad::leave() {
     if (!joined_) return;
     throttle(false);

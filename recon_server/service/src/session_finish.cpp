@@ -81,6 +81,8 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     recon::TexturedMesh textured;
     std::string texture_json = "null";
     if (rec) {
+        // Below the sessions still scanning, on the session's own worker (frame_load.hpp).
+        if (load_) load_->leaveToFinish();
         recon::TsdfSnapshot grid;
         rec->copyVolume(grid);
         recon::MeshParams mesh_params = params_.recon.mesh;

@@ -63,6 +63,20 @@ StatusOr<Eigen::AlignedBox3f> parseCropBox(const std::string& text);  // "x0,y0,
 const char* keepPartsName(KeepParts keep);
 const char* closingModeName(ClosingMode close);
 
+// CPU milliseconds per step of a finish: the calling thread's, plus what the parallel pool's workers spent on its
+// calls (parallel.hpp's accounting), so parallelism does not hide cost. The watertight steps: the field (the seen
+// band, the views, carving), marching cubes with its largest piece, the pinch checks and the rounds of thickening
+// (each meshes again), the final manifold check.
+struct FinishCpuMs {
+    double parts = 0, close = 0, decimate = 0, distance = 0;
+    double close_field = 0, close_march = 0, close_thicken = 0, close_check = 0;  // within close
+    double total() const { return parts + close + decimate + distance; }
+};
+
+// CPU milliseconds spent so far by the calling thread and, on its behalf, the pool (turns the thread's pool
+// accounting on).
+double finishCpuNowMs();
+
 struct FinishReport {
     size_t triangles_in = 0;
     size_t triangles_out = 0;
@@ -81,10 +95,12 @@ struct FinishReport {
     // measured
     DistanceFigures distance;
     double ms_parts = 0, ms_close = 0, ms_decimate = 0, ms_distance = 0;  // milliseconds, wall clock
+    FinishCpuMs cpu_ms;
     std::vector<std::string> notes;  // what the user should know (a budget not reached, a hole too large, ...)
 
-    std::string summary() const;  // one line for logs and the command line
-    std::string json() const;     // one JSON object (summary.json's "finish")
+    std::string summary() const;       // one line for logs and the command line
+    std::string json() const;          // one JSON object (summary.json's "finish")
+    std::string cpuBreakdown() const;  // one line: CPU ms per step (the watertight steps where it closed)
 };
 
 // Finishes `mesh` in place (metres; colours and normals kept, normals recomputed where the mesh changed).

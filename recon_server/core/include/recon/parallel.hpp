@@ -33,6 +33,7 @@ bool parallelSerial();
 // Accounting: pool workers add the CPU time they spend on its calls (two clock reads per worker and call, none
 // while off), so CLOCK_THREAD_CPUTIME_ID plus this is what the thread's work cost, whoever ran it.
 void setParallelAccounting(bool on);
+bool parallelAccounting();
 int64_t parallelPoolCpuNs();  // since accounting was first turned on for the calling thread
 
 // Names the calling thread for top -H, ps -L and perf (Linux: at most 15 characters are kept). The pool's workers

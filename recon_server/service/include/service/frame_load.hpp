@@ -80,6 +80,16 @@ class FrameLoad {
     // leave(), on the same thread, undoes both and the throttle; safe to call twice.
     void join();
     void leave();
+    // On the worker thread, for its session's finish (the model closed, decimated and textured: seconds of CPU; the
+    // worker ends with it): leave(), then run kFinishNice above the thread's nice value at join, and, while other
+    // sessions' workers run, on this thread alone (the pool's workers run at the workers' priority: chunks of the
+    // finish there would compete with their frames at full weight). So a finish does not take the cores from the
+    // sessions still scanning. Nothing when not joined on this thread (a session finished without a worker).
+    void leaveToFinish();
+    // Not the background's 10: against scanning workers that fill every core a thread at nice 10 gets a tenth of
+    // a core, and the watchdog's 20 s a step would no longer cover a finish's 3 s of CPU; at 5 (CFS weight 335
+    // against 1024: a quarter) it takes about 12 s.
+    static constexpr int kFinishNice = 5;
 
     // Around each frame, on the worker thread. endFrame updates the average and throttles or releases the thread.
     void beginFrame();
