@@ -80,6 +80,7 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     std::string finish_json = "null";
     recon::TexturedMesh textured;
     std::string texture_json = "null";
+    std::vector<uint8_t> textured_draco;
     if (rec) {
         recon::TsdfSnapshot grid;
         rec->copyVolume(grid);
@@ -104,6 +105,28 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         }
         if (!extracted.triangles.empty()) {
             texture_json = bakeFinishedTexture(extracted, textured);
+            nextWatchedStep();
+        }
+        if (textured.valid()) {
+            // For clients that ask for the texture (textured.drc). Normals go with it: its vertices are split where
+            // charts meet, and normals recomputed from the triangles would differ on the two sides of a cut.
+            if (!textured.mesh.hasNormals() && textured.source_vertex.size() == textured.mesh.vertexCount()) {
+                // The normals of the model before it was cut, so both copies of a vertex on a cut get one normal.
+                recon::IndexedMesh welded;
+                welded.positions_m = extracted.positions_m;
+                welded.triangles = extracted.triangles;
+                recon::computeVertexNormals(welded);
+                textured.mesh.normals.reserve(textured.mesh.vertexCount());
+                for (const uint32_t v : textured.source_vertex) textured.mesh.normals.push_back(welded.normals.at(v));
+            }
+            wire::MeshCodecParams params;
+            params.normal_bits = 10;
+            if (Status s = wire::encodeTexturedMeshDraco(textured, params, textured_draco); !s.isOk()) {
+                textured_draco.clear();
+                std::fprintf(stderr,
+                             "facescan-server: session %s: the textured model cannot be encoded for clients: %s\n",
+                             id_.c_str(), s.toString().c_str());
+            }
             nextWatchedStep();
         }
         if (!extracted.triangles.empty()) {
@@ -133,6 +156,7 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     files.draco = result.draco.get();
     files.trajectory_tum = trajectoryTum();
     files.textured = &textured;
+    files.textured_draco = &textured_draco;
     files.summary_json = summaryJson(s, result, finish_json, texture_json);
     files.frames_tsv = frameTimingsTsv();
     files.preview_png = &png;
