@@ -104,20 +104,28 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
             }
         }
         if (!extracted.triangles.empty()) {
-            texture_json = bakeFinishedTexture(extracted, textured);
+            const auto params = meshCodecParams(grid, wire::MeshCodecParams{}.max_position_error_m);
+            auto encoded = encodeMesh(extracted, params, &mesh);
+            if (encoded.isOk()) {
+                result = std::move(*encoded);
+            } else {
+                status = encoded.status();
+            }
+        }
+        // The texture of the mesh as encoded (cleaned on Draco's grid): the textured files and textured.drc are
+        // the model of mesh.ply and mesh.drc, triangle for triangle, split only where the charts meet.
+        if (status.isOk() && !mesh.triangles.empty()) {
+            texture_json = bakeFinishedTexture(mesh, textured);
             nextWatchedStep();
         }
         if (textured.valid()) {
             // For clients that ask for the texture (textured.drc). Normals go with it: its vertices are split where
-            // charts meet, and normals recomputed from the triangles would differ on the two sides of a cut.
+            // charts meet, and normals recomputed from the triangles would differ on the two sides of a cut; these
+            // are the normals of the model before it was cut, one for both copies of a vertex on a cut.
             if (!textured.mesh.hasNormals() && textured.source_vertex.size() == textured.mesh.vertexCount()) {
-                // The normals of the model before it was cut, so both copies of a vertex on a cut get one normal.
-                recon::IndexedMesh welded;
-                welded.positions_m = extracted.positions_m;
-                welded.triangles = extracted.triangles;
-                recon::computeVertexNormals(welded);
+                const std::vector<Eigen::Vector3f> normals = recon::vertexNormals(mesh);
                 textured.mesh.normals.reserve(textured.mesh.vertexCount());
-                for (const uint32_t v : textured.source_vertex) textured.mesh.normals.push_back(welded.normals.at(v));
+                for (const uint32_t v : textured.source_vertex) textured.mesh.normals.push_back(normals.at(v));
             }
             wire::MeshCodecParams params;
             params.normal_bits = 10;
@@ -128,15 +136,6 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
                              id_.c_str(), s.toString().c_str());
             }
             nextWatchedStep();
-        }
-        if (!extracted.triangles.empty()) {
-            const auto params = meshCodecParams(grid, wire::MeshCodecParams{}.max_position_error_m);
-            auto encoded = encodeMesh(extracted, params, &mesh);
-            if (encoded.isOk()) {
-                result = std::move(*encoded);
-            } else {
-                status = encoded.status();
-            }
         }
         cv::Mat shaded;
         rec->renderPreview(pose, shaded);
