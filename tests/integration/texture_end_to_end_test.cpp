@@ -3,7 +3,8 @@
 // in a private domain, and the real `facescan mesh` writes what the server sends. A finished scan with colour comes
 // back textured (GLB, OBJ + MTL + PNG, PLY + PNG: texture coordinates present, the picture decodes, its size is
 // the server's textured.png), also once a restarted server answers from its data dir; --vertex-colours keeps one
-// file. And a server finishing with --close watertight sends a closed model: every edge shared by two faces.
+// file; a scan without colour answers with the mesh alone. And a server finishing with --close watertight sends a
+// closed model: every edge shared by two faces.
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>
 
@@ -61,11 +62,18 @@ struct Scan {
         server = std::make_unique<ChildProcess>(with(args), dir / "server.log");
     }
     // The recording to its end: the server finishes it and writes its files.
-    int record(int frames) const {
-        ChildProcess agent(with({FACESCAN_AGENT_BIN, "--session", session, "--source",
-                                 "synthetic:frames=" + std::to_string(frames) + ",subject=builtin,seed=3", "--rate",
-                                 "max", "--wait-for-server", "30"}),
-                           dir / "agent.log");
+    int record(int frames, const std::vector<std::string>& extra = {}) const {
+        std::vector<std::string> args = {FACESCAN_AGENT_BIN,
+                                         "--session",
+                                         session,
+                                         "--source",
+                                         "synthetic:frames=" + std::to_string(frames) + ",subject=builtin,seed=3",
+                                         "--rate",
+                                         "max",
+                                         "--wait-for-server",
+                                         "30"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        ChildProcess agent(with(args), dir / "agent.log");
         return agent.wait(90s);
     }
     bool waitForFiles() const {
@@ -182,6 +190,25 @@ TEST(TextureEndToEnd, AFinishedScansTextureReachesFacescanMeshFromMemoryAndFromD
     ASSERT_TRUE(OpenMesh::IO::read_mesh(textured, ply.string(), opts));
     EXPECT_TRUE(opts.vertex_has_texcoord());
     EXPECT_EQ(cv::imread((scan.dir / "again.png").string(), cv::IMREAD_COLOR).size(), server_atlas.size());
+}
+
+// Depth only (agent --no-colour): no texture, and the same request gets the vertex-coloured mesh, as before.
+TEST(TextureEndToEnd, AScanWithoutColourAnswersWithTheMeshAlone) {
+    Scan scan(18, "nocolour");
+    scan.startServer();
+    ASSERT_EQ(scan.record(16, {"--no-colour"}), 0) << scan.logs();
+    ASSERT_TRUE(scan.waitForFiles()) << scan.logs();
+    EXPECT_FALSE(fs::exists(scan.dir / "data" / scan.session / "textured.drc"));
+    const fs::path obj = scan.dir / "plain.obj";
+    const auto run = scan.cli({"mesh", scan.session, "-o", obj.string()});
+    ASSERT_EQ(run.exit_code, 0) << run.out << scan.logs();
+    EXPECT_TRUE(contains(run.out, "wrote " + obj.string() + ": ")) << run.out;
+    EXPECT_FALSE(contains(run.out, "textured")) << run.out;
+    EXPECT_FALSE(fs::exists(scan.dir / "plain.mtl"));
+    EXPECT_FALSE(fs::exists(scan.dir / "plain.png"));
+    const std::string text = readText(obj);
+    EXPECT_GT(countLines(text, "f "), 1000u);
+    EXPECT_EQ(countLines(text, "vt "), 0u);
 }
 
 TEST(TextureEndToEnd, AWatertightFinishThroughTheServerComesBackClosed) {
