@@ -2,9 +2,10 @@
 // (synthetic Kinect with colour, a recording, so the scan finishes at its end) run as child processes on loopback
 // in a private domain, and the real `facescan mesh` writes what the server sends. A finished scan with colour comes
 // back textured (GLB, OBJ + MTL + PNG, PLY + PNG: texture coordinates present, the picture decodes, its size is
-// the server's textured.png), also once a restarted server answers from its data dir; --vertex-colours keeps one
-// file; a scan without colour answers with the mesh alone. And a server finishing with --close watertight sends a
-// closed model: every edge shared by two faces.
+// the server's textured.png), from a retired session's files and from a restarted server's data dir, and at once
+// after `facescan mesh --finish` from the session still in memory; --vertex-colours keeps one file; a scan without
+// colour answers with the mesh alone. And a server finishing with --close watertight sends a closed model: every
+// edge shared by two faces.
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>
 
@@ -120,7 +121,7 @@ std::map<std::pair<uint32_t, uint32_t>, int> edgeUses(const recon::IndexedMesh& 
     return uses;
 }
 
-TEST(TextureEndToEnd, AFinishedScansTextureReachesFacescanMeshFromMemoryAndFromDisk) {
+TEST(TextureEndToEnd, AFinishedScansTextureReachesFacescanMeshAlsoFromARestartedServer) {
     Scan scan(16, "tex");
     scan.startServer();
     ASSERT_EQ(scan.record(24), 0) << scan.logs();
@@ -190,6 +191,37 @@ TEST(TextureEndToEnd, AFinishedScansTextureReachesFacescanMeshFromMemoryAndFromD
     ASSERT_TRUE(OpenMesh::IO::read_mesh(textured, ply.string(), opts));
     EXPECT_TRUE(opts.vertex_has_texcoord());
     EXPECT_EQ(cv::imread((scan.dir / "again.png").string(), cv::IMREAD_COLOR).size(), server_atlas.size());
+}
+
+// `facescan mesh --finish` during a live scan: the server finishes it and the texture comes at once, from the
+// session still in the server's memory.
+TEST(TextureEndToEnd, FinishingALiveScanFromTheClientBringsTheTexture) {
+    Scan scan(19, "live");
+    scan.startServer();
+    ChildProcess agent(
+        scan.with({FACESCAN_AGENT_BIN, "--session", scan.session, "--source",
+                   "synthetic:frames=900,subject=builtin,seed=4", "--rate", "real", "--wait-for-server", "30"}),
+        scan.dir / "agent.log");
+    std::smatch integrated;
+    const std::regex kIntegrated(R"(([0-9]+) integrated)");
+    ASSERT_TRUE(facescan::testing::pollUntilTrue(
+        [&] {
+            const std::string out = scan.cli({"status", scan.session}).out;
+            return contains(out, "SCANNING") && std::regex_search(out, integrated, kIntegrated) &&
+                   std::stoi(integrated[1].str()) >= 20;
+        },
+        60s))
+        << scan.cli({"status", scan.session}).out << scan.logs();
+    const fs::path glb = scan.dir / "live.glb";
+    const auto run = scan.cli({"mesh", scan.session, "-o", glb.string(), "--finish"});
+    ASSERT_EQ(run.exit_code, 0) << run.out << scan.logs();
+    EXPECT_TRUE(contains(run.out, "finished " + scan.session)) << run.out;
+    EXPECT_TRUE(contains(run.out, "textured (")) << run.out;
+    const cv::Mat server_atlas =
+        cv::imread((scan.dir / "data" / scan.session / "textured.png").string(), cv::IMREAD_COLOR);
+    EXPECT_TRUE(contains(run.out, std::to_string(server_atlas.cols) + " x " + std::to_string(server_atlas.rows)))
+        << run.out;
+    agent.stop();
 }
 
 // Depth only (agent --no-colour): no texture, and the same request gets the vertex-coloured mesh, as before.
