@@ -83,16 +83,22 @@ const std::vector<CommandSpec>& commandSpecs() {
          "mesh",
          1,
          1,
-         {"-o", "--finish", "--max-triangles", "--keep", "--close", "--crop"},
-         "Usage: facescan mesh SESSION -o FILE [--finish] [--max-triangles N|web|avatar|print|full]\n"
-         "                    [--keep head|all] [--close none|holes|watertight] [--crop X0,Y0,Z0,X1,Y1,Z1]\n"
+         {"-o", "--finish", "--max-triangles", "--keep", "--close", "--crop", "--vertex-colours"},
+         "Usage: facescan mesh SESSION -o FILE [--finish] [--vertex-colours]\n"
+         "                    [--max-triangles N|web|avatar|print|full] [--keep head|all]\n"
+         "                    [--close none|holes|watertight] [--crop X0,Y0,Z0,X1,Y1,Z1]\n"
          "Fetches the full-resolution mesh (the final one, or the current model while scanning) and writes it\n"
          "atomically. The format follows the extension: .ply (binary, colours), .obj and .off (colours),\n"
          ".stl (no colours), .drc (Draco, colours), .glb (glTF 2.0 binary, vertex colours). Positions are in\n"
          "metres, in the first camera's frame (x right, y down, z away from the camera); .glb uses glTF's axes\n"
          "(y up, the face looking along +z), the same mesh turned 180 degrees about x.\n"
+         "A finished scan with colour has a texture (the colour camera's resolution, sharper than vertex colours):\n"
+         ".glb then holds it as its base colour texture, .obj comes with FILE.mtl and FILE.png beside it, and\n"
+         ".ply has texture coordinates and FILE.png beside it; the vertex colours are kept in .obj and .ply.\n"
+         "The output says which files were written.\n"
          "  -o FILE         output file (required)\n"
          "  --finish        end the scan first (the server writes it to its data folder)\n"
+         "  --vertex-colours  the mesh with vertex colours only, no texture (one file, as while scanning)\n"
          "The server's model is the tracked head alone, at full resolution unless the server was given a budget.\n"
          "These options finish it further here, before writing (the report says what changed):\n"
          "  --max-triangles N|web|avatar|print|full\n"
@@ -106,7 +112,8 @@ const std::vector<CommandSpec>& commandSpecs() {
          "                  (closed, manifold, one piece). Here it has the mesh alone, re-meshed on 1.5 mm voxels\n"
          "                  (the report says how far the seen surface moved, about 0.05 mm); the server's\n"
          "                  --close watertight keeps the seen surface exactly. Too little of a head stays open\n"
-         "  --crop X0,Y0,Z0,X1,Y1,Z1  keep only what lies inside this box (metres, the mesh's frame)\n"},
+         "  --crop X0,Y0,Z0,X1,Y1,Z1  keep only what lies inside this box (metres, the mesh's frame)\n"
+         "                  (these four work on the vertex-coloured mesh: the texture is not fetched with them)\n"},
         {Command::kPreview,
          "preview",
          1,
@@ -347,6 +354,8 @@ StatusOr<CliOptions> parseArgs(const std::vector<std::string>& args) {
         } else if (option == "--crop") {
             ASSIGN_OR_RETURN(options.finish_params.crop_m, recon::parseCropBox(value));
             options.finish_here = true;
+        } else if (option == "--vertex-colours") {
+            options.vertex_colours = true;
         } else if (option == "--force") {
             options.force = true;
         } else if (option == "--save") {

@@ -8,6 +8,7 @@
 
 #include "client/mesh_file.hpp"
 #include "client/status_json.hpp"
+#include "client/textured_mesh_file.hpp"
 #include "command_util.hpp"
 #include "facescan/version.hpp"
 #include "wire/mesh_codec.hpp"
@@ -216,6 +217,36 @@ std::string sizeText(size_t bytes) {
     return buf;
 }
 
+// A finished model with its texture (textured_mesh_file.hpp): the files written, and what they hold.
+int writeTextured(const CliOptions& options, const CommandReply& reply) {
+    auto textured = decodeTexturedMesh(reply.payload, reply.texture);
+    if (!textured.isOk()) {
+        return fail(kExitServerError, "the server's textured model cannot be decoded: " + textured.status().message() +
+                                          " (--vertex-colours fetches the mesh without its texture)");
+    }
+    auto written = writeTexturedMeshFiles(*textured, options.output);
+    if (!written.isOk()) {
+        return fail(written.status().code() == StatusCode::kUnavailable ? kExitCannotWrite : kExitServerError,
+                    written.status().message());
+    }
+    std::string names;
+    size_t bytes = 0;
+    for (const std::filesystem::path& path : *written) {
+        std::error_code ec;
+        bytes += static_cast<size_t>(std::filesystem::file_size(path, ec));
+        names += (names.empty() ? "" : ", ") + path.string();
+    }
+    std::printf("wrote %s: %s vertices, %s triangles, textured (%d x %d texture%s) (%s)\n", names.c_str(),
+                std::to_string(textured->mesh.vertexCount()).c_str(),
+                std::to_string(textured->mesh.triangleCount()).c_str(), textured->atlas_bgr.cols,
+                textured->atlas_bgr.rows,
+                textured->mesh.hasColours() && meshFormatFor(options.output).value() != MeshFormat::kGlb
+                    ? ", vertex colours kept"
+                    : "",
+                sizeText(bytes).c_str());
+    return kExitOk;
+}
+
 int runMesh(const CliOptions& options) {
     // Fail before any network work when the result could not be written anyway.
     if (Status s = checkWritable(options.output); !s.isOk()) return fail(kExitCannotWrite, s.message());
@@ -229,12 +260,15 @@ int runMesh(const CliOptions& options) {
         std::printf("finished %s on %s: %s triangles\n", options.session.c_str(), finished->server_id.c_str(),
                     std::to_string(finished->triangle_count).c_str());
     }
-    auto reply = client->request(options.session, facescan_wire_CMD_GET_MESH);
+    // The texture when the file can hold it; finishing here works on the vertex-coloured mesh.
+    const bool want_texture = formatHasTexture(format) && !options.vertex_colours && !options.finish_here;
+    auto reply = client->request(options.session, facescan_wire_CMD_GET_MESH, want_texture);
     if (!reply.isOk()) return fail(exitCodeForRequest(reply.status()), reply.status().message());
     if (reply->payload.empty()) {
         return fail(kExitServerError,
                     "the server sent no mesh for '" + options.session + "' (nothing integrated yet?)");
     }
+    if (!reply->texture.empty()) return writeTextured(options, *reply);
     // Decoded even for .drc: the bytes are checked before they land in a file, and the counts are reported.
     auto mesh = wire::decodeIndexedMesh(reply->payload.data(), reply->payload.size());
     if (!mesh.isOk()) return fail(kExitServerError, "the server's mesh cannot be decoded: " + mesh.status().message());
@@ -255,7 +289,10 @@ int runMesh(const CliOptions& options) {
     const auto bytes = std::filesystem::file_size(options.output, ec);
     std::printf("wrote %s: %s vertices, %s triangles, %s (%s)\n", options.output.c_str(),
                 std::to_string(mesh->vertexCount()).c_str(), std::to_string(mesh->triangleCount()).c_str(),
-                formatHasColours(format) && mesh->hasColours() ? "with colours" : "no colours",
+                formatHasColours(format) && mesh->hasColours()
+                    ? (want_texture ? "vertex colours (no texture: the scan is not finished, or had no colour)"
+                                    : "with colours")
+                    : "no colours",
                 sizeText(ec ? 0 : bytes).c_str());
     return kExitOk;
 }

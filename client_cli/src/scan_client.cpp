@@ -193,7 +193,8 @@ Status ScanClient::waitForCommandServer() {
     return Status::ok();
 }
 
-StatusOr<CommandReply> ScanClient::request(const std::string& session_id, facescan_wire_CommandKind kind) {
+StatusOr<CommandReply> ScanClient::request(const std::string& session_id, facescan_wire_CommandKind kind,
+                                           bool want_texture) {
     RETURN_IF_ERROR(waitForCommandServer());
     Endpoints& e = *endpoints_;
     const std::string request_id = nextRequestId();
@@ -202,6 +203,7 @@ StatusOr<CommandReply> ScanClient::request(const std::string& session_id, facesc
     command.request_id = wire::stringView(request_id);
     command.client_id = wire::stringView(client_id_);
     command.kind = kind;
+    command.want_texture = want_texture;
     RETURN_IF_ERROR(e.command_writer->write(command));
 
     const auto deadline = Clock::now() + config_.timeout;
@@ -226,6 +228,7 @@ StatusOr<CommandReply> ScanClient::request(const std::string& session_id, facesc
                 reply.triangle_count = r.triangle_count;
                 if (r.ok) {
                     reply.payload = copyBytes(r.payload);
+                    reply.texture = copyBytes(r.texture);
                     if (!ok_reply) ok_reply = std::move(reply);
                 } else if (!error_reply) {
                     error_reply = std::move(reply);

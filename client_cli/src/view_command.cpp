@@ -68,12 +68,18 @@ int runView(const CliOptions& options) {
             connected.status().message().c_str());
     }
     std::mutex commands_mutex;  // a ScanClient runs one request at a time
-    MeshFetcher fetch_mesh = [&](const std::string& session) -> StatusOr<std::vector<uint8_t>> {
-        if (!commands) return hub.snapshotMesh(session);
+    MeshFetcher fetch_mesh = [&](const std::string& session, bool want_texture) -> StatusOr<FetchedMesh> {
+        FetchedMesh fetched;
+        if (!commands) {
+            ASSIGN_OR_RETURN(fetched.draco, hub.snapshotMesh(session));
+            return fetched;
+        }
         std::lock_guard lock(commands_mutex);
-        ASSIGN_OR_RETURN(CommandReply reply, commands->request(session, facescan_wire_CMD_GET_MESH));
+        ASSIGN_OR_RETURN(CommandReply reply, commands->request(session, facescan_wire_CMD_GET_MESH, want_texture));
         if (reply.payload.empty()) return notFound("session '" + session + "' has no mesh yet (nothing integrated)");
-        return std::move(reply.payload);
+        fetched.draco = std::move(reply.payload);
+        fetched.texture_png = std::move(reply.texture);
+        return fetched;
     };
     ViewServerConfig config;
     config.bind = options.view_bind;

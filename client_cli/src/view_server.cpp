@@ -15,6 +15,7 @@
 
 #include "client/mesh_file.hpp"
 #include "client/status_json.hpp"
+#include "client/textured_mesh_file.hpp"
 #include "client/tls_front.hpp"
 #include "client/view_logins.hpp"
 #include "view_auth.hpp"
@@ -134,6 +135,8 @@ struct ViewServer::Impl {
     int handleApi(mg_connection* conn, std::string_view rest);
     int sendAsset(mg_connection* conn, const LoadedAsset& asset);
     int sendMesh(mg_connection* conn, const std::string& session, const std::string& extension);
+    int sendTextured(mg_connection* conn, const std::string& session);
+    int respondFetchError(mg_connection* conn, const Status& status);
 
     // Writes one WebSocket message; false once the browser is gone.
     static bool send(mg_connection* conn, int opcode, std::string_view bytes) {
@@ -181,7 +184,10 @@ int ViewServer::Impl::handleRequest(mg_connection* conn) {
         const size_t slash = rest.find('/');
         if (slash != std::string_view::npos) {
             const std::string_view what = rest.substr(slash + 1);
-            const char* action = what == "snapshot.drc" ? "snapshot" : what.starts_with("mesh.") ? "download" : nullptr;
+            const char* action = what == "snapshot.drc"      ? "snapshot"
+                                 : what.starts_with("mesh.") ? "download"
+                                 : what == "textured"        ? "textured model"
+                                                             : nullptr;
             if (action) {
                 record(action + (what.starts_with("mesh.") ? " " + std::string(what.substr(5)) : std::string()),
                        std::string(rest.substr(0, slash)), who(conn),
@@ -247,26 +253,64 @@ int ViewServer::Impl::handleApi(mg_connection* conn, std::string_view rest) {
         return 200;
     }
     if (what.starts_with("mesh.")) return sendMesh(conn, session, what.substr(5));
-    return respondError(conn, 404, "no such resource '" + what + "' (snapshot.drc, mesh.ply|obj|stl|off|drc|glb)");
+    if (what == "textured") return sendTextured(conn, session);
+    return respondError(conn, 404,
+                        "no such resource '" + what + "' (snapshot.drc, mesh.ply|obj|stl|off|drc|glb, textured)");
 }
 
 int ViewServer::Impl::sendMesh(mg_connection* conn, const std::string& session, const std::string& extension) {
     auto format = meshFormatFor("mesh." + extension);
     if (!format.isOk()) return respondError(conn, 400, format.status().message());
-    auto draco = fetch_mesh(session);
-    if (!draco.isOk()) {
-        const StatusCode code = draco.status().code();
-        const int http = code == StatusCode::kNotFound                                               ? 404
-                         : code == StatusCode::kDeadlineExceeded || code == StatusCode::kUnavailable ? 503
-                                                                                                     : 502;
-        return respondError(conn, http, draco.status().message());
+    // Only a GLB holds the texture in one file (an OBJ or a PLY would need its picture beside it).
+    auto fetched = fetch_mesh(session, *format == MeshFormat::kGlb);
+    if (!fetched.isOk()) return respondFetchError(conn, fetched.status());
+    const std::vector<uint8_t>* draco = &fetched->draco;
+    if (!fetched->texture_png.empty()) {
+        auto textured = decodeTexturedMesh(fetched->draco, fetched->texture_png);
+        if (!textured.isOk()) {
+            return respondError(conn, 502,
+                                "the server's textured model cannot be decoded: " + textured.status().message());
+        }
+        auto glb = texturedGlbBytes(*textured);
+        if (!glb.isOk()) return respondError(conn, 502, glb.status().message());
+        respond(conn, 200, meshMimeType(*format), *glb,
+                {{"Content-Disposition", "attachment; filename=\"" + session + ".glb\""}});
+        return 200;
     }
     auto mesh = wire::decodeIndexedMesh(draco->data(), draco->size());
     if (!mesh.isOk()) return respondError(conn, 502, "the server's mesh cannot be decoded: " + mesh.status().message());
-    auto bytes = encodeMeshFile(*mesh, *format, &*draco);
+    auto bytes = encodeMeshFile(*mesh, *format, draco);
     if (!bytes.isOk()) return respondError(conn, 502, bytes.status().message());
     respond(conn, 200, meshMimeType(*format), *bytes,
             {{"Content-Disposition", "attachment; filename=\"" + session + "." + meshFormatName(*format) + "\""}});
+    return 200;
+}
+
+int ViewServer::Impl::respondFetchError(mg_connection* conn, const Status& status) {
+    const StatusCode code = status.code();
+    const int http = code == StatusCode::kNotFound                                               ? 404
+                     : code == StatusCode::kDeadlineExceeded || code == StatusCode::kUnavailable ? 503
+                                                                                                 : 502;
+    return respondError(conn, http, status.message());
+}
+
+// The page's textured model: passed on as the server sent it (the page's decoders check it), like the snapshots.
+int ViewServer::Impl::sendTextured(mg_connection* conn, const std::string& session) {
+    auto fetched = fetch_mesh(session, true);
+    if (!fetched.isOk()) return respondFetchError(conn, fetched.status());
+    if (fetched->texture_png.empty()) {
+        return respondError(conn, 404,
+                            "session '" + session + "' has no texture (not finished yet, or scanned without colour)");
+    }
+    const std::string header = "{\"texture_bytes\": " + std::to_string(fetched->texture_png.size()) + "}";
+    std::string body;
+    body.reserve(4 + header.size() + fetched->texture_png.size() + fetched->draco.size());
+    const uint32_t length = static_cast<uint32_t>(header.size());
+    for (int i = 0; i < 4; ++i) body.push_back(static_cast<char>((length >> (8 * i)) & 0xffu));
+    body += header;
+    body.append(reinterpret_cast<const char*>(fetched->texture_png.data()), fetched->texture_png.size());
+    body.append(reinterpret_cast<const char*>(fetched->draco.data()), fetched->draco.size());
+    respond(conn, 200, "application/octet-stream", body);
     return 200;
 }
 

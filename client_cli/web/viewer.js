@@ -1,6 +1,7 @@
 // facescan view: the page's own script. It follows the sessions over one WebSocket, decodes the server's Draco
 // snapshots as they are (three.js DRACOLoader, wasm, in a worker) and draws them; the C++ side encodes nothing
-// per browser. Measurements for tests and benchmarks are kept in window.facescanStats.
+// per browser. A finished scan with a texture is then drawn textured (the server's atlas as the material's map);
+// live snapshots keep their vertex colours. Measurements for tests and benchmarks are kept in window.facescanStats.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { DRACOLoader } from 'three/addons/loaders/DRACOLoader.js';
@@ -40,6 +41,8 @@ const material = new THREE.MeshStandardMaterial({
 });
 // The server's meshes are in the first camera's frame (y down, z away from the camera): turned 180 degrees about
 // x, the face is upright and looks at the viewer, as in the GLB download.
+// The finished model's material: its texture (set when one is shown), glTF's convention (v down, no flip).
+const texturedMaterial = new THREE.MeshStandardMaterial({ roughness: 0.85, metalness: 0, side: THREE.DoubleSide });
 const face = new THREE.Mesh(new THREE.BufferGeometry(), material);
 face.rotation.x = Math.PI;
 scene.add(face);
@@ -91,7 +94,10 @@ function frameFace() {
   requestRender();
 }
 $('reset-view').addEventListener('click', frameFace);
-$('wireframe').addEventListener('change', (e) => { material.wireframe = e.target.checked; requestRender(); });
+$('wireframe').addEventListener('change', (e) => {
+  material.wireframe = texturedMaterial.wireframe = e.target.checked;
+  requestRender();
+});
 
 // --- decoding: the latest snapshot wins ------------------------------------------------------------------------
 const draco = new DRACOLoader();
@@ -102,8 +108,12 @@ let pending = null;  // a snapshot that arrived while another was decoding
 let framedSession = null;
 const erasedSessions = new Set();  // deleted while this page was open: never drawn again
 
+let texturedSession = null;  // the session whose finished model is drawn textured: its snapshots are not drawn
+const texturesTried = new Set();
+
 function onSnapshot(header, bytes) {
   if (header.session !== stats.followed || erasedSessions.has(header.session)) return;
+  if (header.session === texturedSession) return;
   const received = nowMs();
   // The size is kept now: decoding hands the buffer to the decoder's worker.
   const snap = { header, bytes, size: bytes.byteLength, received };
@@ -115,7 +125,9 @@ function decode(snap) {
   const t0 = performance.now();
   draco.parse(snap.bytes, (geometry) => {
     const decodeMs = performance.now() - t0;
-    if (erasedSessions.has(snap.header.session)) { geometry.dispose(); finishDecode(); return; }
+    if (erasedSessions.has(snap.header.session) || snap.header.session === texturedSession) {
+      geometry.dispose(); finishDecode(); return;
+    }
     if (!geometry.attributes.normal) geometry.computeVertexNormals();  // snapshots may come without normals
     const old = face.geometry;
     face.geometry = geometry;
@@ -147,6 +159,55 @@ function finishDecode() {
   if (pending) { const next = pending; pending = null; decode(next); }
 }
 
+// --- the finished model with its texture: [u32 header length][{"texture_bytes": N}][PNG][Draco with TEX_COORD] ---
+async function loadTextured(id) {
+  texturesTried.add(id);
+  const t0 = performance.now();
+  try {
+    const response = await fetch(`/api/sessions/${encodeURIComponent(id)}/textured`);
+    if (!response.ok) return;  // no texture (scanned without colour): the vertex colours stay
+    const body = await response.arrayBuffer();
+    const headerLength = new DataView(body).getUint32(0, true);
+    const header = JSON.parse(new TextDecoder().decode(new Uint8Array(body, 4, headerLength)));
+    const pngStart = 4 + headerLength;
+    const image = await createImageBitmap(new Blob([body.slice(pngStart, pngStart + header.texture_bytes)],
+      { type: 'image/png' }));
+    const geometry = await new Promise((resolve, reject) => draco.parse(body.slice(pngStart + header.texture_bytes),
+      resolve, reject));
+    if (stats.followed !== id || erasedSessions.has(id) || !geometry.attributes.uv) {
+      geometry.dispose(); image.close(); return;
+    }
+    if (!geometry.attributes.normal) geometry.computeVertexNormals();
+    const texture = new THREE.Texture(image);
+    texture.flipY = false;
+    texture.colorSpace = THREE.SRGBColorSpace;
+    texture.anisotropy = renderer.capabilities.getMaxAnisotropy();
+    texture.needsUpdate = true;
+    texturedMaterial.map?.dispose();
+    texturedMaterial.map = texture;
+    texturedMaterial.needsUpdate = true;
+    texturedSession = id;
+    pending = null;
+    const old = face.geometry;
+    face.geometry = geometry;
+    face.material = texturedMaterial;
+    old.dispose();
+    $('overlay').hidden = true;
+    if (framedSession !== id) { framedSession = id; face.updateMatrixWorld(); frameFace(); }
+    const vertices = geometry.attributes.position.count;
+    const triangles = (geometry.index ? geometry.index.count : vertices) / 3;
+    $('snapshot').textContent = `final model, textured (${image.width} × ${image.height} texture, ` +
+      `${(body.byteLength / 1024 / 1024).toFixed(1)} MB)`;
+    $('mesh-size').textContent = `${vertices.toLocaleString()} vertices, ${triangles.toLocaleString()} triangles`;
+    requestRender((drawnMs) => {
+      stats.textured = { session: id, width: image.width, height: image.height, bytes: body.byteLength, vertices,
+        triangles, ms: performance.now() - t0, drawn_ms: drawnMs };
+    });
+  } catch (error) {
+    console.warn('facescan: the textured model of', id, 'cannot be shown; the vertex colours stay:', error);
+  }
+}
+
 // --- sessions and progress -------------------------------------------------------------------------------------
 let sessions = [];
 const wanted = new URLSearchParams(location.search).get('session');
@@ -164,6 +225,9 @@ function follow(id) {
   $('snapshot').textContent = 'none yet';
   face.geometry.dispose();
   face.geometry = new THREE.BufferGeometry();
+  face.material = material;
+  texturedSession = null;
+  texturesTried.delete(id);
   requestRender();
   if (socket && socket.readyState === WebSocket.OPEN) socket.send(`follow ${id}`);
   showSessions();
@@ -203,6 +267,7 @@ function showSessions() {
   $('dropped').textContent = (s.frames_dropped + s.frames_skipped).toLocaleString() + (s.frames_skipped ? ' (skipped to stay live)' : '');
   $('fps').textContent = s.fps.toFixed(1);
   $('server').textContent = s.server || '–';
+  if (s.state === 'FINISHED' && !texturesTried.has(s.session)) loadTextured(s.session);
 }
 
 function onSessions(list) {
@@ -213,6 +278,10 @@ function onSessions(list) {
     pending = null;
     face.geometry.dispose();
     face.geometry = new THREE.BufferGeometry();
+    face.material = material;
+    texturedMaterial.map?.dispose();
+    texturedMaterial.map = null;
+    texturedSession = null;
     requestRender();
     $('overlay').hidden = false;
     $('overlay').textContent = `Scan ${stats.followed} was deleted: nothing of it is shown any more.`;

@@ -49,6 +49,7 @@ Status MeshCodecParams::validate() const {
         return invalidArgument("MeshCodecParams: position_bits outside [0, 30]");
     if (normal_bits < 0 || normal_bits > 30) return invalidArgument("MeshCodecParams: normal_bits outside [0, 30]");
     if (speed < 0 || speed > 10) return invalidArgument("MeshCodecParams: speed outside [0, 10]");
+    if (uv_bits < 1 || uv_bits > 30) return invalidArgument("MeshCodecParams: uv_bits outside [1, 30]");
     if (!(lattice_step_m >= 0.0f) || !std::isfinite(lattice_step_m) || !lattice_origin_m.allFinite()) {
         return invalidArgument("MeshCodecParams: lattice_step_m must be >= 0 and the lattice finite");
     }
@@ -225,6 +226,81 @@ Status encodeMeshDraco(const recon::Mesh& mesh, const MeshCodecParams& params, s
     return encodeMeshDraco(recon::fromOpenMesh(mesh), params, out);
 }
 
+Status encodeTexturedMeshDraco(const recon::TexturedMesh& textured, const MeshCodecParams& params,
+                               std::vector<uint8_t>& out) {
+    RETURN_IF_ERROR(params.validate());
+    const recon::IndexedMesh& mesh = textured.mesh;
+    if (mesh.triangles.empty()) return invalidArgument("Draco encoder: mesh has no triangles");
+    const size_t nv = mesh.vertexCount();
+    if (textured.uv.size() != nv) {
+        return invalidArgument("Draco encoder: " + num(textured.uv.size()) + " texture coordinates for " + num(nv) +
+                               " vertices");
+    }
+    if (nv > std::numeric_limits<uint32_t>::max()) return invalidArgument("Draco encoder: too many vertices");
+    for (const recon::Triangle& t : mesh.triangles) {
+        if (t[0] >= nv || t[1] >= nv || t[2] >= nv) {
+            return invalidArgument("Draco encoder: a triangle indexes past the " + num(nv) + " vertices");
+        }
+    }
+    float lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) lo[a] = std::numeric_limits<float>::max(), hi[a] = std::numeric_limits<float>::lowest();
+    for (size_t i = 0; i < nv; ++i) {
+        const Eigen::Vector3f& p = mesh.positions_m[i];
+        if (!p.allFinite() || !textured.uv[i].allFinite()) {
+            return invalidArgument("Draco encoder: vertex " + num(i) + " is not finite");
+        }
+        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+    }
+    float range = 0.0f;
+    for (int a = 0; a < 3; ++a) range = std::max(range, hi[a] - lo[a]);
+    if (range == 0.0f) range = 1.0f;
+    const int position_bits =
+        params.position_bits > 0 ? params.position_bits : positionBitsFor(range, params.max_position_error_m);
+
+    draco::Mesh dm;
+    dm.set_num_points(static_cast<uint32_t>(nv));
+    dm.SetNumFaces(mesh.triangles.size());
+    for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+        const recon::Triangle& t = mesh.triangles[f];
+        dm.SetFace(draco::FaceIndex(static_cast<uint32_t>(f)),
+                   {draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
+    }
+    auto addAttribute = [&](draco::GeometryAttribute::Type type, int components, draco::DataType dt, bool normalized,
+                            int bytes, const void* values) {
+        draco::GeometryAttribute ga;
+        ga.Init(type, nullptr, static_cast<uint8_t>(components), dt, normalized, components * bytes, 0);
+        draco::PointAttribute* att = dm.attribute(dm.AddAttribute(ga, true, static_cast<uint32_t>(nv)));
+        att->buffer()->Write(0, values, nv * size_t(components) * size_t(bytes));
+    };
+    static_assert(sizeof(Eigen::Vector3f) == 12 && sizeof(Eigen::Vector2f) == 8 && sizeof(recon::Rgb8) == 3);
+    addAttribute(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32, false, 4, mesh.positions_m.data());
+    const bool send_normals = params.normal_bits > 0 && mesh.hasNormals();
+    if (send_normals) {
+        std::vector<Eigen::Vector3f> normals = mesh.normals;
+        for (Eigen::Vector3f& n : normals) {
+            if (!n.allFinite()) n.setZero();
+        }
+        addAttribute(draco::GeometryAttribute::NORMAL, 3, draco::DT_FLOAT32, false, 4, normals.data());
+    }
+    if (params.colours && mesh.hasColours()) {
+        addAttribute(draco::GeometryAttribute::COLOR, 3, draco::DT_UINT8, true, 1, mesh.colours_rgb.data());
+    }
+    addAttribute(draco::GeometryAttribute::TEX_COORD, 2, draco::DT_FLOAT32, false, 4, textured.uv.data());
+
+    draco::Encoder encoder;
+    encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
+    encoder.SetSpeedOptions(params.speed, params.speed);
+    encoder.SetAttributeQuantization(draco::GeometryAttribute::POSITION, position_bits);
+    if (send_normals) encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, params.normal_bits);
+    encoder.SetAttributeQuantization(draco::GeometryAttribute::TEX_COORD, params.uv_bits);
+    draco::EncoderBuffer buffer;
+    const draco::Status st = encoder.EncodeMeshToBuffer(dm, &buffer);
+    if (!st.ok()) return internalError("Draco encoding failed: " + st.error_msg_string());
+    out.assign(reinterpret_cast<const uint8_t*>(buffer.data()),
+               reinterpret_cast<const uint8_t*>(buffer.data()) + buffer.size());
+    return Status::ok();
+}
+
 StatusOr<DracoMeshInfo> inspectDracoMesh(const uint8_t* data, size_t size) {
     if (data == nullptr || size < kDracoHeaderBytes) {
         return dataLoss("Draco payload truncated (" + num(size) + " bytes)");
@@ -280,7 +356,10 @@ StatusOr<DracoMeshInfo> inspectDracoMesh(const uint8_t* data, size_t size) {
     return info;
 }
 
-Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mesh, size_t max_vertices) {
+namespace {
+
+Status decodeDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mesh, std::vector<Eigen::Vector2f>* uv,
+                   size_t max_vertices) {
     ASSIGN_OR_RETURN(const DracoMeshInfo info, inspectDracoMesh(data, size));
     const size_t max_faces = 4 * max_vertices;
     if (info.claimed_vertices > max_vertices || info.claimed_faces > max_faces) {
@@ -307,8 +386,10 @@ Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mes
     // Draco does not bound-check a point's value index on access: check every attribute's mapping here. The data
     // type must be what our encoder writes (float positions/normals, uint8 colours): Draco's ConvertValue reads a
     // hostile DT_BOOL attribute's bytes as bool, which is undefined behaviour (found by fuzz_mesh_draco).
-    auto usable = [nv](const draco::PointAttribute* a, draco::DataType type) {
-        if (a == nullptr || a->num_components() != 3 || a->buffer() == nullptr || a->data_type() != type) return false;
+    auto usable = [nv](const draco::PointAttribute* a, draco::DataType type, int components = 3) {
+        if (a == nullptr || a->num_components() != components || a->buffer() == nullptr || a->data_type() != type) {
+            return false;
+        }
         for (size_t i = 0; i < nv; ++i) {
             if (a->mapped_index(draco::PointIndex(static_cast<uint32_t>(i))).value() >= a->size()) return false;
         }
@@ -317,6 +398,9 @@ Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mes
     if (!usable(pos, draco::DT_FLOAT32)) return dataLoss("Draco mesh has no usable 3D position attribute");
     if (nrm && !usable(nrm, draco::DT_FLOAT32)) nrm = nullptr;
     if (col && !usable(col, draco::DT_UINT8)) col = nullptr;
+    const draco::PointAttribute* tex = uv ? dm->GetNamedAttribute(draco::GeometryAttribute::TEX_COORD) : nullptr;
+    if (tex && !usable(tex, draco::DT_FLOAT32, 2)) tex = nullptr;
+    if (uv) uv->clear();
 
     mesh.clear();
     mesh.positions_m.resize(nv);
@@ -334,6 +418,14 @@ Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mes
         }
         if (col) col->GetValue(col->mapped_index(pi), mesh.colours_rgb[i].data());
     }
+    if (tex) {
+        uv->resize(nv);
+        for (size_t i = 0; i < nv; ++i) {
+            Eigen::Vector2f& t = (*uv)[i];
+            tex->GetValue(tex->mapped_index(draco::PointIndex(static_cast<uint32_t>(i))), t.data());
+            if (!t.allFinite()) return dataLoss("Draco texture coordinate " + num(i) + " is not finite");
+        }
+    }
     mesh.triangles.resize(nf);
     size_t degenerate = 0;
     for (size_t f = 0; f < nf; ++f) {
@@ -348,6 +440,17 @@ Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mes
     if (degenerate > 0) return dataLoss("Draco mesh has " + num(degenerate) + " degenerate faces of " + num(nf));
     if (!nrm) recon::computeVertexNormals(mesh);
     return Status::ok();
+}
+
+}  // namespace
+
+Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mesh, size_t max_vertices) {
+    return decodeDraco(data, size, mesh, nullptr, max_vertices);
+}
+
+Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mesh, std::vector<Eigen::Vector2f>& uv,
+                       size_t max_vertices) {
+    return decodeDraco(data, size, mesh, &uv, max_vertices);
 }
 
 StatusOr<recon::IndexedMesh> decodeIndexedMesh(const uint8_t* data, size_t size, size_t max_vertices) {

@@ -26,6 +26,15 @@ TEST(CliArgs, MeshWithGlobalOptionsAnywhere) {
     EXPECT_EQ(parsed->domain.profile, "loopback");
     EXPECT_EQ(parsed->domain.domain_id, 42u);
     EXPECT_EQ(parsed->timeout.count(), 2500);
+    EXPECT_FALSE(parsed->vertex_colours);  // the texture, when the server has one
+}
+
+TEST(CliArgs, MeshVertexColoursTakesNoValueAndOnlyForMesh) {
+    auto parsed = parse({"mesh", "s", "-o", "f.obj", "--vertex-colours"});
+    ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+    EXPECT_TRUE(parsed->vertex_colours);
+    EXPECT_FALSE(parse({"mesh", "s", "-o", "f.obj", "--vertex-colours=yes"}).isOk());
+    EXPECT_FALSE(parse({"preview", "s", "-o", "f.png", "--vertex-colours"}).isOk());
 }
 
 TEST(CliArgs, MeshFinishingOptionsAndTheirBadValues) {

@@ -15,6 +15,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "client/gltf_mesh.hpp"
+#include "client/textured_mesh_file.hpp"
 #include "wire/mesh_codec.hpp"
 
 namespace facescan::client {
@@ -297,6 +298,80 @@ TEST(TexturedGlb, CarriesTexcoordsAndTheAtlasAsBaseColourTexture) {
     recon::TexturedMesh untextured;
     untextured.mesh = t.mesh;
     EXPECT_FALSE(meshToGlb(untextured).isOk());
+}
+
+// A textured quad as a finished scan's GET_MESH reply carries it: Draco with texture coordinates and the PNG.
+recon::TexturedMesh texturedQuad() {
+    recon::TexturedMesh t;
+    t.mesh.positions_m = {{0, 0, 0.5f}, {0.1f, 0, 0.5f}, {0.1f, 0.1f, 0.5f}, {0, 0.1f, 0.5f}};
+    t.mesh.colours_rgb = {{{10, 20, 30}}, {{10, 20, 30}}, {{10, 20, 30}}, {{10, 20, 30}}};
+    t.mesh.triangles = {{0, 2, 1}, {0, 3, 2}};
+    t.uv = {{0.1f, 0.1f}, {0.9f, 0.1f}, {0.9f, 0.9f}, {0.1f, 0.9f}};
+    t.atlas_bgr = cv::Mat(8, 16, CV_8UC3);
+    cv::randu(t.atlas_bgr, cv::Scalar::all(0), cv::Scalar::all(255));
+    return t;
+}
+
+TEST(TexturedFiles, DecodingChecksTheCoordinatesAndThePicture) {
+    const recon::TexturedMesh t = texturedQuad();
+    std::vector<uint8_t> draco, png, plain;
+    ASSERT_TRUE(wire::encodeTexturedMeshDraco(t, {}, draco).isOk());
+    ASSERT_TRUE(cv::imencode(".png", t.atlas_bgr, png));
+    auto decoded = decodeTexturedMesh(draco, png);
+    ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
+    EXPECT_EQ(decoded->uv.size(), decoded->mesh.vertexCount());
+    EXPECT_EQ(decoded->mesh.triangleCount(), 2u);
+    EXPECT_EQ(cv::norm(decoded->atlas_bgr, t.atlas_bgr, cv::NORM_INF), 0.0);
+
+    const std::vector<uint8_t> not_png(100, 7);
+    EXPECT_EQ(decodeTexturedMesh(draco, not_png).status().code(), StatusCode::kDataLoss);
+    std::vector<uint8_t> huge = png;  // the IHDR's width and height (big-endian) at 16 and 20
+    huge[16] = 0x7f;
+    const auto refused = decodeTexturedMesh(draco, huge);
+    EXPECT_EQ(refused.status().code(), StatusCode::kDataLoss);
+    EXPECT_NE(refused.status().message().find("claims"), std::string::npos) << refused.status().message();
+    ASSERT_TRUE(wire::encodeMeshDraco(t.mesh, {}, plain).isOk());
+    EXPECT_EQ(decodeTexturedMesh(plain, png).status().code(), StatusCode::kDataLoss);
+    EXPECT_EQ(decodeTexturedMesh(std::vector<uint8_t>(draco.begin(), draco.begin() + 20), png).status().code(),
+              StatusCode::kDataLoss);
+}
+
+TEST(TexturedFiles, ObjWithMtlAndPngPlyWithPngGlbAlone) {
+    const recon::TexturedMesh t = texturedQuad();
+    const fs::path dir = fs::temp_directory_path() / ("facescan_textured_files_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    auto read = [](const fs::path& p) {
+        std::ifstream in(p, std::ios::binary);
+        return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    };
+    // A name with a space: the names inside the files are plain (an OBJ's mtllib ends at a space).
+    auto obj = writeTexturedMeshFiles(t, dir / "my face.obj");
+    ASSERT_TRUE(obj.isOk()) << obj.status().toString();
+    ASSERT_EQ(obj->size(), 3u);
+    EXPECT_EQ((*obj)[0], dir / "my face.obj");
+    EXPECT_EQ((*obj)[1], dir / "my_face.mtl");
+    EXPECT_EQ((*obj)[2], dir / "my_face.png");
+    EXPECT_NE(read(dir / "my face.obj").find("mtllib my_face.mtl"), std::string::npos);
+    EXPECT_NE(read(dir / "my_face.mtl").find("map_Kd my_face.png"), std::string::npos);
+    const cv::Mat png = cv::imread((dir / "my_face.png").string(), cv::IMREAD_COLOR);
+    ASSERT_FALSE(png.empty());
+    EXPECT_EQ(cv::norm(png, t.atlas_bgr, cv::NORM_INF), 0.0);
+
+    auto ply = writeTexturedMeshFiles(t, dir / "face.PLY");
+    ASSERT_TRUE(ply.isOk()) << ply.status().toString();
+    EXPECT_EQ(*ply, (std::vector<fs::path>{dir / "face.PLY", dir / "face.png"}));
+    EXPECT_NE(read(dir / "face.PLY").find("comment TextureFile face.png"), std::string::npos);
+
+    auto glb = writeTexturedMeshFiles(t, dir / "face.glb");
+    ASSERT_TRUE(glb.isOk());
+    EXPECT_EQ(*glb, std::vector<fs::path>{dir / "face.glb"});
+    EXPECT_EQ(read(dir / "face.glb").substr(0, 4), "glTF");
+
+    EXPECT_EQ(writeTexturedMeshFiles(t, dir / "face.stl").status().code(), StatusCode::kInvalidArgument);
+    EXPECT_FALSE(fs::exists(dir / "face.stl"));
+    EXPECT_EQ(writeTexturedMeshFiles(t, dir / "missing" / "face.obj").status().code(), StatusCode::kUnavailable);
+    fs::remove_all(dir);
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <cmath>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
 
 #include "client/view_hub.hpp"
 #include "http_client.hpp"
@@ -50,6 +51,19 @@ std::vector<uint8_t> draco(const recon::Mesh& mesh) {
     std::vector<uint8_t> bytes;
     EXPECT_TRUE(wire::encodeMeshDraco(mesh, {}, bytes).isOk());
     return bytes;
+}
+
+// The patch textured: each vertex mapped by its position onto a 32 x 16 picture, left half red, right half blue.
+FetchedMesh texturedPatch() {
+    recon::TexturedMesh t;
+    t.mesh = recon::fromOpenMesh(patch(0.7f));
+    for (const Eigen::Vector3f& p : t.mesh.positions_m) t.uv.emplace_back(p.x() / 0.11f, p.y() / 0.11f);
+    t.atlas_bgr = cv::Mat(16, 32, CV_8UC3, cv::Scalar(0, 0, 255));
+    t.atlas_bgr.colRange(16, 32).setTo(cv::Scalar(255, 0, 0));
+    FetchedMesh fetched;
+    EXPECT_TRUE(wire::encodeTexturedMeshDraco(t, {}, fetched.draco).isOk());
+    EXPECT_TRUE(cv::imencode(".png", t.atlas_bgr, fetched.texture_png));
+    return fetched;
 }
 
 MeshSnapshotData snapshotOf(const std::string& session, uint32_t seq) {
@@ -113,10 +127,12 @@ class ViewServerTest : public ::testing::Test {
     }
 
     // Stands in for the servers' GET_MESH (the real fetcher is ScanClient::request, run over DDS in the
-    // integration tests): scan-1 has a mesh, "offline" has no server answering, anything else is unknown.
-    static StatusOr<std::vector<uint8_t>> fetch(const std::string& session) {
+    // integration tests): scan-1 has a mesh, "finished-1" a texture too (when asked for), "offline" has no server
+    // answering, anything else is unknown.
+    static StatusOr<FetchedMesh> fetch(const std::string& session, bool want_texture) {
         ++fetches_;
-        if (session == "scan-1") return draco(patch(0.7f));
+        if (session == "scan-1") return FetchedMesh{draco(patch(0.7f)), {}};
+        if (session == "finished-1") return want_texture ? texturedPatch() : FetchedMesh{draco(patch(0.7f)), {}};
         if (session == "offline") return deadlineExceeded("no server answered on domain 7");
         return notFound("unknown session '" + session + "'");
     }
@@ -218,6 +234,52 @@ TEST_F(ViewServerTest, DownloadsEveryFormatAsAnAttachment) {
     ASSERT_EQ(model.meshes.size(), 1u);
     EXPECT_EQ(model.accessors[model.meshes[0].primitives[0].attributes.at("POSITION")].count, 144u);
     EXPECT_TRUE(model.meshes[0].primitives[0].attributes.count("COLOR_0"));
+}
+
+TEST_F(ViewServerTest, AFinishedModelsTextureForThePageAndInTheGlb) {
+    // The page's textured model: header, the PNG, then the Draco bytes with texture coordinates.
+    const FetchedMesh expected = texturedPatch();
+    const auto r = httpRequest(port_, "/api/sessions/finished-1/textured");
+    ASSERT_EQ(r.status, 200) << r.body;
+    ASSERT_GT(r.body.size(), 4u);
+    uint32_t header_length = 0;
+    for (int i = 0; i < 4; ++i) header_length |= uint32_t(uint8_t(r.body[i])) << (8 * i);
+    ASSERT_LT(4 + header_length, r.body.size());
+    const std::string header = r.body.substr(4, header_length);
+    EXPECT_EQ(header, "{\"texture_bytes\": " + std::to_string(expected.texture_png.size()) + "}");
+    const std::string png = r.body.substr(4 + header_length, expected.texture_png.size());
+    EXPECT_EQ(png, std::string(expected.texture_png.begin(), expected.texture_png.end()));
+    const std::string drc = r.body.substr(4 + header_length + expected.texture_png.size());
+    recon::IndexedMesh mesh;
+    std::vector<Eigen::Vector2f> uv;
+    ASSERT_TRUE(wire::decodeMeshDraco(reinterpret_cast<const uint8_t*>(drc.data()), drc.size(), mesh, uv).isOk());
+    EXPECT_EQ(uv.size(), 144u);
+    // A model without a texture (still scanning, or no colour): 404 with the reason.
+    const auto none = httpRequest(port_, "/api/sessions/scan-1/textured");
+    EXPECT_EQ(none.status, 404);
+    EXPECT_TRUE(contains(none.body, "has no texture")) << none.body;
+
+    // The GLB download holds the texture; the other formats keep the vertex colours.
+    const auto glb = httpRequest(port_, "/api/sessions/finished-1/mesh.glb");
+    ASSERT_EQ(glb.status, 200) << glb.body;
+    tinygltf::Model model;
+    tinygltf::TinyGLTF reader;
+    std::string err, warn;
+    ASSERT_TRUE(reader.LoadBinaryFromMemory(&model, &err, &warn,
+                                            reinterpret_cast<const unsigned char*>(glb.body.data()),
+                                            static_cast<unsigned>(glb.body.size())))
+        << err;
+    ASSERT_EQ(model.meshes.size(), 1u);
+    EXPECT_TRUE(model.meshes[0].primitives[0].attributes.count("TEXCOORD_0"));
+    ASSERT_EQ(model.images.size(), 1u);
+    ASSERT_GE(model.images[0].bufferView, 0);
+    const tinygltf::BufferView& iv = model.bufferViews[static_cast<size_t>(model.images[0].bufferView)];
+    const std::vector<uint8_t> atlas(model.buffers[0].data.begin() + static_cast<long>(iv.byteOffset),
+                                     model.buffers[0].data.begin() + static_cast<long>(iv.byteOffset + iv.byteLength));
+    EXPECT_EQ(cv::imdecode(atlas, cv::IMREAD_COLOR).size(), cv::Size(32, 16));
+    const auto ply = httpRequest(port_, "/api/sessions/finished-1/mesh.ply");
+    ASSERT_EQ(ply.status, 200);
+    EXPECT_FALSE(contains(ply.body, "TextureFile"));
 }
 
 TEST_F(ViewServerTest, UnknownSessionsAre404WithAMessage) {

@@ -118,6 +118,18 @@ int main(int argc, char** argv) {
             ++written;
         }
     }
+    // The finished model with its texture coordinates (a finished session's GET_MESH): each vertex mapped by its
+    // position, so the seed has a TEX_COORD attribute for the decoder to check.
+    for (const int n : {3, 6}) {
+        facescan::recon::TexturedMesh textured;
+        textured.mesh = facescan::recon::fromOpenMesh(smallMesh(n));
+        for (const Eigen::Vector3f& p : textured.mesh.positions_m) textured.uv.emplace_back(p.x() + 0.5f, p.y() + 0.5f);
+        textured.atlas_bgr = cv::Mat(4, 4, CV_8UC3, cv::Scalar::all(128));
+        std::vector<uint8_t> drc;
+        if (!encodeTexturedMeshDraco(textured, {}, drc).isOk()) return 1;
+        writeFile(out / "mesh_draco" / ("textured" + std::to_string(n) + ".drc"), drc);
+        ++written;
+    }
     // Replicas: whole (mode 0) and, for the body parser, the uncompressed body (mode 1) of a full and a delta.
     fs::create_directories(out / "replica");
     for (const bool full : {true, false}) {

@@ -87,7 +87,10 @@ TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
     EXPECT_EQ(status.exit_code, 0) << status.out;
     EXPECT_TRUE(contains(status.out, "FINISHED")) << status.out;
 
-    const CliRun ply = runCli("mesh " + session + " -o " + (dir / "face.ply").string() + " --finish" + dds);
+    // The vertex-coloured files (--vertex-colours), which must agree with each other and with the Draco bytes;
+    // texture_end_to_end_test fetches the textured ones.
+    const CliRun ply =
+        runCli("mesh " + session + " -o " + (dir / "face.ply").string() + " --finish --vertex-colours" + dds);
     ASSERT_EQ(ply.exit_code, 0) << ply.out << "\nserver:\n" << readText(dir / "server.log");
     recon::Mesh mesh;
     OpenMesh::IO::Options opts = OpenMesh::IO::Options::VertexColor;
@@ -110,7 +113,7 @@ TEST(EndToEnd, ScanWatchFinishFetchEveryFormatAndMeasure) {
     // Every other format: the same vertex and face counts read back through OpenMesh (Draco: the codec).
     for (const char* ext : {"obj", "stl", "off"}) {
         const fs::path path = dir / (std::string("face.") + ext);
-        const CliRun run = runCli("mesh " + session + " -o " + path.string() + dds);
+        const CliRun run = runCli("mesh " + session + " -o " + path.string() + " --vertex-colours" + dds);
         ASSERT_EQ(run.exit_code, 0) << run.out;
         recon::Mesh back;
         ASSERT_TRUE(OpenMesh::IO::read_mesh(back, path.string())) << ext;

@@ -67,7 +67,8 @@ void scanRecording(const std::string& source, const std::string& name, int frame
 
     const CommandRun mesh = runCli("mesh " + session + " -o " + (dir / "scan.ply").string() + dds);
     EXPECT_EQ(mesh.exit_code, 0) << mesh.out << "\nserver:\n" << readText(dir / "server.log");
-    EXPECT_TRUE(contains(mesh.out, "with colours")) << "colour from the recording's own colour camera: " << mesh.out;
+    // Colour from the recording's own colour camera: vertex colours, kept beside the texture when one was baked.
+    EXPECT_TRUE(contains(mesh.out, "vertex colours")) << mesh.out;
     fs::remove_all(dir);
 }
 

@@ -1,7 +1,8 @@
 // `facescan view` over real DDS, no browser: facescan-server and facescan-agent (synthetic Kinect, a recording)
 // and the real `facescan view` program run as child processes on loopback in a private domain; a WebSocket client
 // follows the scan and decodes the snapshots it is pushed; the HTTP API answers with the session, its latest
-// snapshot and its final mesh (GLB read back with TinyGLTF, PLY with OpenMesh, the same counts), 404 for a session
+// snapshot and its final mesh (GLB read back with TinyGLTF, textured, PLY with OpenMesh, vertex-coloured, one
+// model), the page's textured model, 404 for a session
 // no server knows, 400 for a malformed one; Ctrl-C stops the viewer cleanly. The browser test adds the page itself.
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>
@@ -106,15 +107,37 @@ TEST(ViewEndToEnd, FollowsARealScanAndServesItsMeshes) {
                                             static_cast<unsigned>(glb.body.size())))
         << err;
     const auto& prim = model.meshes.at(0).primitives.at(0);
-    ASSERT_TRUE(prim.attributes.count("COLOR_0")) << "the agent sends colour: the GLB has vertex colours";
+    // The agent sends colour: the finished model has a texture, which the GLB holds (the PLY: vertex colours).
+    ASSERT_TRUE(prim.attributes.count("TEXCOORD_0")) << "the agent sends colour: the GLB has the texture";
+    EXPECT_EQ(model.images.size(), 1u);
     const auto ply = httpRequest(port, "/api/sessions/" + session + "/mesh.ply");
     ASSERT_EQ(ply.status, 200);
     { std::ofstream(dir / "face.ply", std::ios::binary) << ply.body; }
     recon::Mesh mesh;
-    ASSERT_TRUE(OpenMesh::IO::read_mesh(mesh, (dir / "face.ply").string()));
+    OpenMesh::IO::Options colour = OpenMesh::IO::Options::VertexColor;
+    mesh.request_vertex_colors();
+    ASSERT_TRUE(OpenMesh::IO::read_mesh(mesh, (dir / "face.ply").string(), colour));
+    EXPECT_TRUE(colour.check(OpenMesh::IO::Options::VertexColor));
     EXPECT_GT(mesh.n_faces(), 1000u);
-    EXPECT_EQ(model.accessors[prim.attributes.at("POSITION")].count, mesh.n_vertices());
-    EXPECT_EQ(model.accessors[prim.indices].count, 3 * mesh.n_faces());
+    // One model: the textured one is split where its charts meet, and is the finished model before Draco's grid
+    // (the PLY is after it, which may drop a degenerate triangle, and OpenMesh's reader leaves out a non-manifold one).
+    EXPECT_GE(model.accessors[prim.attributes.at("POSITION")].count, mesh.n_vertices());
+    EXPECT_NEAR(double(model.accessors[prim.indices].count) / 3.0, double(mesh.n_faces()), 0.05 * mesh.n_faces());
+    // The page's textured model: [u32 header length][{"texture_bytes": N}][PNG][Draco with texture coordinates].
+    const auto textured = httpRequest(port, "/api/sessions/" + session + "/textured");
+    ASSERT_EQ(textured.status, 200) << textured.body;
+    const uint32_t texture_header = uint8_t(textured.body[0]) | uint8_t(textured.body[1]) << 8;
+    std::smatch texture_bytes;
+    const std::string texture_json = textured.body.substr(4, texture_header);
+    ASSERT_TRUE(std::regex_search(texture_json, texture_bytes, std::regex(R"("texture_bytes": (\d+))")))
+        << texture_json;
+    const std::string textured_drc = textured.body.substr(4 + texture_header + std::stoul(texture_bytes[1].str()));
+    recon::IndexedMesh textured_mesh;
+    std::vector<Eigen::Vector2f> uv;
+    ASSERT_TRUE(wire::decodeMeshDraco(reinterpret_cast<const uint8_t*>(textured_drc.data()), textured_drc.size(),
+                                      textured_mesh, uv)
+                    .isOk());
+    EXPECT_EQ(uv.size(), textured_mesh.vertexCount());
 
     // Bad input reaches no crash: a session no server knows (the servers' own answer) and a malformed one.
     const auto unknown = httpRequest(port, "/api/sessions/no-such-scan/mesh.glb");

@@ -79,8 +79,8 @@ std::unique_ptr<Viewer> startViewer(const fs::path& tls_dir, LoginParams login =
     config.login = login;
     config.audit_file = audit;
     auto started =
-        ViewServer::start(config, viewer->hub, [](const std::string& session) -> StatusOr<std::vector<uint8_t>> {
-            if (session == "scan-7") return patchDraco();
+        ViewServer::start(config, viewer->hub, [](const std::string& session, bool) -> StatusOr<FetchedMesh> {
+            if (session == "scan-7") return FetchedMesh{patchDraco(), {}};
             return notFound("unknown session '" + session + "'");
         });
     if (started.isOk()) {

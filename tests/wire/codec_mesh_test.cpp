@@ -304,3 +304,99 @@ TEST(MeshDraco, GridAlignedWithTheVoxelLinesKeepsTheBudgetAndSavesBytes) {
 
 }  // namespace
 }  // namespace facescan::wire
+
+namespace facescan::wire {
+namespace {
+
+// The bump grid as a textured mesh cut down the middle: the middle column's vertices have one copy per side, the
+// left half maps to the left of the atlas and the right half to the right, with a gap between (two charts).
+// Every vertex (copies included) has its own id colour.
+recon::TexturedMesh twoCharts(int n, float side_m) {
+    const recon::IndexedMesh grid = recon::fromOpenMesh(bumpGrid(n, side_m));
+    recon::TexturedMesh t;
+    const int cut = n / 2;
+    std::vector<uint32_t> copy(grid.vertexCount(), UINT32_MAX);  // the right side's copy of a middle vertex
+    auto addVertex = [&](uint32_t v, bool right) {
+        const int i = static_cast<int>(v) % n, j = static_cast<int>(v) / n;
+        t.mesh.positions_m.push_back(grid.positions_m[v]);
+        t.mesh.normals.push_back(grid.normals[v]);
+        const float u = float(i) / float(n - 1);
+        t.uv.emplace_back(right ? 0.1f + u * 0.9f : u * 0.9f, float(j) / float(n - 1));
+        t.source_vertex.push_back(v);
+        return static_cast<uint32_t>(t.mesh.positions_m.size() - 1);
+    };
+    for (uint32_t v = 0; v < grid.vertexCount(); ++v) addVertex(v, static_cast<int>(v) % n > cut);
+    for (const recon::Triangle& tri : grid.triangles) {
+        const bool right =
+            static_cast<int>(tri[0]) % n + static_cast<int>(tri[1]) % n + static_cast<int>(tri[2]) % n > 3 * cut;
+        recon::Triangle out = tri;
+        for (uint32_t& v : out) {
+            if (right && static_cast<int>(v) % n == cut) {
+                if (copy[v] == UINT32_MAX) copy[v] = addVertex(v, true);
+                v = copy[v];
+            }
+        }
+        t.mesh.triangles.push_back(out);
+    }
+    for (uint32_t v = 0; v < t.mesh.vertexCount(); ++v) {
+        const OpenMesh::Vec3uc c = idColour(v);
+        t.mesh.colours_rgb.push_back({c[0], c[1], c[2]});
+    }
+    t.atlas_bgr = cv::Mat(64, 64, CV_8UC3, cv::Scalar(10, 20, 30));
+    return t;
+}
+
+TEST(MeshDraco, TexturedMeshKeepsItsCoordinatesAndTheCopiesOnACut) {
+    const recon::TexturedMesh t = twoCharts(41, 0.2f);
+    ASSERT_TRUE(t.valid());
+    ASSERT_GT(t.mesh.vertexCount(), 41u * 41u);  // the cut's copies
+    MeshCodecParams params;
+    params.normal_bits = 10;
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(encodeTexturedMeshDraco(t, params, bytes).isOk());
+    recon::IndexedMesh decoded;
+    std::vector<Eigen::Vector2f> uv;
+    const Status s = decodeMeshDraco(bytes.data(), bytes.size(), decoded, uv);
+    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_EQ(uv.size(), decoded.vertexCount());
+    EXPECT_EQ(decoded.triangleCount(), t.mesh.triangleCount());
+    EXPECT_EQ(decoded.vertexCount(), t.mesh.vertexCount());  // no copy welded away
+    const std::vector<uint32_t> ids = colourIds(decoded);
+    double max_error_m = 0.0, max_uv_error = 0.0;
+    for (size_t i = 0; i < decoded.vertexCount(); ++i) {
+        ASSERT_LT(ids[i], t.mesh.vertexCount());
+        max_error_m = std::max(max_error_m, double((decoded.positions_m[i] - t.mesh.positions_m[ids[i]]).norm()));
+        max_uv_error = std::max(max_uv_error, double((uv[i] - t.uv[ids[i]]).cwiseAbs().maxCoeff()));
+    }
+    EXPECT_LT(max_error_m, 0.05e-3);
+    EXPECT_LT(max_uv_error, 1.0 / 65535.0);  // 16 bits over the coordinates' range (at most 1)
+    EXPECT_EQ(faceIds(decoded, ids), faceIds(t.mesh, colourIds(t.mesh)));
+
+    // A receiver that does not ask for texture coordinates (and an older one) decodes the same mesh without them.
+    auto plain = decodeIndexedMesh(bytes.data(), bytes.size());
+    ASSERT_TRUE(plain.isOk()) << plain.status().toString();
+    EXPECT_EQ(plain->vertexCount(), decoded.vertexCount());
+    // And a payload without coordinates leaves uv empty.
+    std::vector<uint8_t> untextured;
+    ASSERT_TRUE(encodeMeshDraco(t.mesh, {}, untextured).isOk());
+    ASSERT_TRUE(decodeMeshDraco(untextured.data(), untextured.size(), decoded, uv).isOk());
+    EXPECT_TRUE(uv.empty());
+}
+
+TEST(MeshDraco, TexturedEncoderRejectsBadInput) {
+    std::vector<uint8_t> bytes;
+    recon::TexturedMesh t = twoCharts(6, 0.1f);
+    t.uv.pop_back();
+    EXPECT_EQ(encodeTexturedMeshDraco(t, {}, bytes).code(), StatusCode::kInvalidArgument);
+    t = twoCharts(6, 0.1f);
+    t.uv[3].x() = NAN;
+    EXPECT_EQ(encodeTexturedMeshDraco(t, {}, bytes).code(), StatusCode::kInvalidArgument);
+    t = twoCharts(6, 0.1f);
+    MeshCodecParams params;
+    params.uv_bits = 0;
+    EXPECT_EQ(encodeTexturedMeshDraco(t, params, bytes).code(), StatusCode::kInvalidArgument);
+    EXPECT_EQ(encodeTexturedMeshDraco(recon::TexturedMesh{}, {}, bytes).code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace facescan::wire

@@ -51,6 +51,7 @@ struct CliOptions {
     // head region on this side, keep = head means the largest part without its floating fragments.
     recon::FinishParams finish_params;
     bool finish_here = false;                   // any of those options was given
+    bool vertex_colours = false;                // mesh --vertex-colours: never the texture, the vertex colours
     bool force = false;                         // delete --force: finish a running scan, then delete it
     std::string save_dir;                       // watch --save DIR: write each snapshot there
     std::string save_format = "ply";            // watch --save-format: ply|obj|stl|off|drc|glb

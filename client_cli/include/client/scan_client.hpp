@@ -40,6 +40,9 @@ struct CommandReply {
     uint32_t vertex_count = 0;
     uint32_t triangle_count = 0;
     std::vector<uint8_t> payload;
+    // GET_MESH with want_texture of a finished model that has a texture: its atlas (PNG), and the payload is the
+    // textured model (Draco with texture coordinates). Empty otherwise.
+    std::vector<uint8_t> texture;
 };
 
 // The latest ScanStatus of a session (wire::ScanStatusData, converted in one place) and whether its server lives.
@@ -103,7 +106,10 @@ class ScanClient {
     // after an error reply, other servers get `grace` to answer ok. Errors: DeadlineExceeded (no server),
     // NotFound ("unknown session 'X'", the server's text), InvalidArgument (any other refusal),
     // PermissionDenied (DDS Security: this identity's role may not send commands).
-    StatusOr<CommandReply> request(const std::string& session_id, facescan_wire_CommandKind kind);
+    // want_texture: GET_MESH of a finished model asks for its texture too (CommandReply::texture); a server without
+    // one, or of an older version, answers with the vertex-coloured mesh.
+    StatusOr<CommandReply> request(const std::string& session_id, facescan_wire_CommandKind kind,
+                                   bool want_texture = false);
 
     // The ScanStatus of every session on the domain, as far as it has arrived: waits for a server, then up to
     // `settle` for the durable samples. Sorted by session id.

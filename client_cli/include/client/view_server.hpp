@@ -9,7 +9,12 @@
 //   GET /api/sessions/ID                       one session's status; 404 when unknown
 //   GET /api/sessions/ID/snapshot.drc          the latest MeshSnapshot's Draco bytes, as received; 404 when none
 //   GET /api/sessions/ID/mesh.EXT              the full-resolution mesh from its server (ScanCommand GET_MESH) as
-//                                              EXT = ply obj stl off drc glb, an attachment named ID.EXT
+//                                              EXT = ply obj stl off drc glb, an attachment named ID.EXT; a finished
+//                                              model with a texture: the GLB holds it (the others: vertex colours)
+//   GET /api/sessions/ID/textured              the finished model with its texture, for the page: [u32 header
+//                                              length, little-endian][JSON header {"texture_bytes": N}][the
+//                                              texture's N PNG bytes][Draco with texture coordinates]; 404 when it
+//                                              has none (not finished, or scanned without colour)
 //   WS  /ws                                    server -> browser: the sessions message (text) and snapshots
 //                                              (binary, client/view_hub.hpp); browser -> server: "follow ID"
 // Errors are JSON {"error": "..."}: 400 for a malformed request (bad session id, unknown format, bad method), 404
@@ -60,9 +65,14 @@ struct ViewServerConfig {
 // True for an address only this machine reaches: 127.0.0.0/8, ::1 and ::ffff:127.x.x.x.
 bool isLoopbackAddress(const std::string& ip);
 
-// The full-resolution mesh of a session as Draco bytes (ScanClient::request(GET_MESH) in the real viewer).
+// The full-resolution mesh of a session as Draco bytes (ScanClient::request(GET_MESH) in the real viewer) and, when
+// asked for and the finished model has one, its texture (PNG; the Draco bytes then have texture coordinates).
+struct FetchedMesh {
+    std::vector<uint8_t> draco;
+    std::vector<uint8_t> texture_png;  // empty: none
+};
 // NotFound: unknown session; DeadlineExceeded or Unavailable: no server answered.
-using MeshFetcher = std::function<StatusOr<std::vector<uint8_t>>(const std::string& session_id)>;
+using MeshFetcher = std::function<StatusOr<FetchedMesh>(const std::string& session_id, bool want_texture)>;
 
 class ViewServer {
  public:

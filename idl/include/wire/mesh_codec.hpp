@@ -15,6 +15,7 @@
 #include "recon/indexed_mesh.hpp"
 #include "recon/mesh.hpp"
 #include "recon/status.hpp"
+#include "recon/texture_atlas.hpp"
 
 namespace facescan::wire {
 
@@ -33,6 +34,9 @@ struct MeshCodecParams {
     // Draco encode/decode speed [0, 10]: without normals 8 is smaller and faster than 7 (facescan-bench mesh
     // --sweep: 143 vs 151 KB, 21 vs 22 ms); 0-1 save 8 % more at 3x the time.
     int speed = 8;
+    // [1, 30] bits per texture coordinate (encodeTexturedMeshDraco): 16 put a coordinate within 1/131070 of the
+    // atlas, an eighth of a texel of the largest atlas (8192 texels a side)
+    int uv_bits = 16;
 
     Status validate() const;
 };
@@ -51,6 +55,16 @@ Status encodeMeshDraco(const recon::IndexedMesh& mesh, const MeshCodecParams& pa
                        recon::IndexedMesh* encoded = nullptr);
 Status encodeMeshDraco(const recon::Mesh& mesh, const MeshCodecParams& params, std::vector<uint8_t>& out);
 
+// The finished model with its texture (recon/texture_atlas.hpp) for ScanReply.payload: positions (quantised within
+// max_position_error_m on a grid from the mesh's own bounding box), vertex colours, normals (when normal_bits > 0
+// and the mesh has them: its vertices are split where charts meet, and normals computed from the triangles would
+// differ on the two sides of a cut) and the texture coordinates as Draco's TEX_COORD (uv_bits each). The mesh is
+// not cleaned on the grid as encodeMeshDraco does (welding would join the copies of a vertex on a cut): Draco keeps
+// every vertex apart, so no face loses a vertex. INVALID_ARGUMENT for a mesh without triangles or texture
+// coordinates, non-finite values or out-of-range indices.
+Status encodeTexturedMeshDraco(const recon::TexturedMesh& mesh, const MeshCodecParams& params,
+                               std::vector<uint8_t>& out);
+
 // What the Draco header and connectivity prefix claim, read without Draco (see the file comment).
 struct DracoMeshInfo {
     int method = 0;                 // 0 sequential, 1 edgebreaker
@@ -67,6 +81,10 @@ Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mes
                        size_t max_vertices = kMaxMeshVertices);
 StatusOr<recon::IndexedMesh> decodeIndexedMesh(const uint8_t* data, size_t size,
                                                size_t max_vertices = kMaxMeshVertices);
+// The same, and the texture coordinates when the payload has them (TEX_COORD, two floats per vertex, glTF's
+// convention: v down); `uv` is left empty when it has none. DATA_LOSS for a coordinate that is not finite.
+Status decodeMeshDraco(const uint8_t* data, size_t size, recon::IndexedMesh& mesh, std::vector<Eigen::Vector2f>& uv,
+                       size_t max_vertices = kMaxMeshVertices);
 // The same as an OpenMesh mesh (recon::toOpenMesh: non-manifold faces get their own vertex copies).
 Status decodeMeshDraco(const uint8_t* data, size_t size, recon::Mesh& mesh, size_t max_vertices = kMaxMeshVertices);
 StatusOr<recon::Mesh> decodeMeshDraco(const uint8_t* data, size_t size, size_t max_vertices = kMaxMeshVertices);

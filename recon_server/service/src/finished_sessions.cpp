@@ -162,4 +162,24 @@ StatusOr<MeshResult> readFinishedMesh(const std::filesystem::path& dir) {
     return result;
 }
 
+StatusOr<TexturedResult> readFinishedTexture(const std::filesystem::path& dir) {
+    std::error_code ec;
+    if (!std::filesystem::exists(dir / "textured.drc", ec) || !std::filesystem::exists(dir / "textured.png", ec)) {
+        return notFound("the session finished without a texture (" + dir.string() + " has no textured.drc)");
+    }
+    ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, readFinishedFile(dir, "textured.drc"));
+    TexturedResult result;
+    ASSIGN_OR_RETURN(result.png, readFinishedFile(dir, "textured.png"));
+    recon::IndexedMesh mesh;
+    std::vector<Eigen::Vector2f> uv;
+    if (Status s = wire::decodeMeshDraco(bytes.data(), bytes.size(), mesh, uv); !s.isOk()) {
+        return dataLoss((dir / "textured.drc").string() + ": " + s.message());
+    }
+    if (uv.empty()) return dataLoss((dir / "textured.drc").string() + " has no texture coordinates");
+    result.mesh.vertex_count = static_cast<uint32_t>(mesh.vertexCount());
+    result.mesh.triangle_count = static_cast<uint32_t>(mesh.triangleCount());
+    result.mesh.draco = std::make_shared<const std::vector<uint8_t>>(std::move(bytes));
+    return result;
+}
+
 }  // namespace facescan::service

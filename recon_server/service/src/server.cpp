@@ -315,7 +315,7 @@ void Server::takeCommands() {
                                    ? std::string()
                                    : identify(command_reader_->handle(), info.publication_handle, client);
         got.push_back({wire::fromDds(msg.session_id), wire::fromDds(msg.request_id), static_cast<uint32_t>(msg.kind),
-                       steadyNowNs(), client, std::move(identity)});
+                       steadyNowNs(), client, std::move(identity), msg.want_texture});
     });
     if (!n.isOk()) std::fprintf(stderr, "facescan-server: %s\n", n.status().toString().c_str());
     if (!ownSessionsFree()) {
@@ -445,6 +445,8 @@ void Server::runCommand(const Command& c) {
                                    [this, c](const Status& s, const MeshResult& m) { reply(c, s, &m); });
             return;
         case facescan_wire_CMD_GET_MESH: {
+            // A live session has no texture yet: its mesh keeps the vertex colours.
+            if (c.want_texture && answerTextured(c, session->filesDir())) return;
             auto m = session->mesh();
             if (!m.isOk()) return reply(c, m.status());
             return reply(c, Status::ok(), &*m, m->draco.get());
@@ -463,8 +465,8 @@ void Server::runCommand(const Command& c) {
     }
 }
 
-void Server::reply(const Command& c, const Status& status, const MeshResult* mesh,
-                   const std::vector<uint8_t>* payload) {
+void Server::reply(const Command& c, const Status& status, const MeshResult* mesh, const std::vector<uint8_t>* payload,
+                   const std::vector<uint8_t>* texture) {
     facescan_wire_ScanReply r{};
     r.session_id = wire::stringView(c.session_id);
     r.request_id = wire::stringView(c.request_id);
@@ -478,6 +480,7 @@ void Server::reply(const Command& c, const Status& status, const MeshResult* mes
         r.triangle_count = mesh->triangle_count;
     }
     if (payload) r.payload = wire::octetView(payload->data(), payload->size());
+    if (texture) r.texture = wire::octetView(texture->data(), texture->size());
     audit(c, status);  // on record before the answer (and any scan data in it) leaves
     if (const Status s = reply_writer_->write(r); !s.isOk()) {
         std::fprintf(stderr, "facescan-server: reply to %s: %s\n", c.request_id.c_str(), s.toString().c_str());

@@ -204,6 +204,7 @@ bool Server::answerFromFiles(const Command& c) {
             break;
         }
         case facescan_wire_CMD_GET_MESH: {
+            if (c.want_texture && answerTextured(c, dir)) break;
             auto m = readFinishedMesh(dir);
             if (!m.isOk()) {
                 reply(c, m.status());
@@ -227,6 +228,21 @@ bool Server::answerFromFiles(const Command& c) {
         }
         default: reply(c, Status::ok()); break;
     }
+    return true;
+}
+
+bool Server::answerTextured(const Command& c, const std::filesystem::path& dir) {
+    if (dir.empty()) return false;  // still scanning, or finished without its files
+    auto textured = readFinishedTexture(dir);
+    if (!textured.isOk()) {
+        // A damaged textured.drc is the server's problem, not the client's: it still gets the vertex-coloured model.
+        if (textured.status().code() != StatusCode::kNotFound) {
+            std::fprintf(stderr, "facescan-server: session %s: the texture is not sent: %s\n", c.session_id.c_str(),
+                         textured.status().toString().c_str());
+        }
+        return false;
+    }
+    reply(c, Status::ok(), &textured->mesh, textured->mesh.draco.get(), &textured->png);
     return true;
 }
 

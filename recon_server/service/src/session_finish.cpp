@@ -80,6 +80,7 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     std::string finish_json = "null";
     recon::TexturedMesh textured;
     std::string texture_json = "null";
+    std::vector<uint8_t> textured_draco;
     if (rec) {
         // Below the sessions still scanning, on the session's own worker (frame_load.hpp).
         if (load_) load_->leaveToFinish();
@@ -105,10 +106,6 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
             }
         }
         if (!extracted.triangles.empty()) {
-            texture_json = bakeFinishedTexture(extracted, textured);
-            nextWatchedStep();
-        }
-        if (!extracted.triangles.empty()) {
             const auto params = meshCodecParams(grid, wire::MeshCodecParams{}.max_position_error_m);
             auto encoded = encodeMesh(extracted, params, &mesh);
             if (encoded.isOk()) {
@@ -116,6 +113,31 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
             } else {
                 status = encoded.status();
             }
+        }
+        // The texture of the mesh as encoded (cleaned on Draco's grid): the textured files and textured.drc are
+        // the model of mesh.ply and mesh.drc, triangle for triangle, split only where the charts meet.
+        if (status.isOk() && !mesh.triangles.empty()) {
+            texture_json = bakeFinishedTexture(mesh, textured);
+            nextWatchedStep();
+        }
+        if (textured.valid()) {
+            // For clients that ask for the texture (textured.drc). Normals go with it: its vertices are split where
+            // charts meet, and normals recomputed from the triangles would differ on the two sides of a cut; these
+            // are the normals of the model before it was cut, one for both copies of a vertex on a cut.
+            if (!textured.mesh.hasNormals() && textured.source_vertex.size() == textured.mesh.vertexCount()) {
+                const std::vector<Eigen::Vector3f> normals = recon::vertexNormals(mesh);
+                textured.mesh.normals.reserve(textured.mesh.vertexCount());
+                for (const uint32_t v : textured.source_vertex) textured.mesh.normals.push_back(normals.at(v));
+            }
+            wire::MeshCodecParams params;
+            params.normal_bits = 10;
+            if (Status s = wire::encodeTexturedMeshDraco(textured, params, textured_draco); !s.isOk()) {
+                textured_draco.clear();
+                std::fprintf(stderr,
+                             "facescan-server: session %s: the textured model cannot be encoded for clients: %s\n",
+                             id_.c_str(), s.toString().c_str());
+            }
+            nextWatchedStep();
         }
         cv::Mat shaded;
         rec->renderPreview(pose, shaded);
@@ -135,6 +157,7 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
     files.draco = result.draco.get();
     files.trajectory_tum = trajectoryTum();
     files.textured = &textured;
+    files.textured_draco = &textured_draco;
     files.summary_json = summaryJson(s, result, finish_json, texture_json);
     files.frames_tsv = frameTimingsTsv();
     files.preview_png = &png;

@@ -88,6 +88,10 @@ Status writeSessionFiles(const std::filesystem::path& dir, const SessionFiles& f
         RETURN_IF_ERROR(writeFileAtomic(dir / "textured.mtl", obj.mtl));
         RETURN_IF_ERROR(writeFileAtomic(dir / "textured.obj", obj.obj));
         RETURN_IF_ERROR(writeFileAtomic(dir / "textured.ply", ply));
+        if (files.textured_draco && !files.textured_draco->empty()) {
+            RETURN_IF_ERROR(
+                writeFileAtomic(dir / "textured.drc", files.textured_draco->data(), files.textured_draco->size()));
+        }
     }
     RETURN_IF_ERROR(writeFileAtomic(dir / "trajectory.txt", files.trajectory_tum));
     if (!files.frames_tsv.empty()) RETURN_IF_ERROR(writeFileAtomic(dir / "frames.tsv", files.frames_tsv));

@@ -2,7 +2,8 @@
 // 30 Hz) and `facescan view` run as processes on loopback in a private domain; Debian's headless chromium opens
 // the page, waits for the mesh, takes two screenshots a few snapshots apart, checks that the face is drawn and
 // that the picture changed, that the console shows no error, that the status says what to do while the subject is
-// out of view and that the scan comes back, downloads the GLB and reads it back with three.js' glTF reader. Run by
+// out of view and that the scan comes back, downloads the GLB and reads it back with three.js' glTF reader, and once
+// the scan has finished, that the page draws the finished model with its texture (a screenshot of it). Run by
 // viewer_browser_test.sh (which skips when the browser cannot start).
 // Usage: node viewer_browser_test.mjs OUT_DIR DOMAIN   (env: FACESCAN_SERVER, FACESCAN_AGENT, FACESCAN_CLI,
 //        FACESCAN_WEB_NODE_MODULES, CHROMIUM)
@@ -177,7 +178,21 @@ try {
   log(`GLB ${download.suggestedFilename()}: ${glb.length} bytes, ${geometry.attributes.position.count} vertices, ` +
       `${geometry.index.count / 3} triangles, colours: ${Boolean(geometry.attributes.color)}`);
   assert.ok(geometry.attributes.position.count > 1000);
-  assert.ok(geometry.attributes.color, 'the GLB has no vertex colours (COLOR_0)');
+  // Vertex colours while scanning; the texture once finished (the recording may have ended by now).
+  assert.ok(geometry.attributes.color || (meshes[0].material.map && geometry.attributes.uv),
+    'the GLB has neither vertex colours (COLOR_0) nor a texture');
+
+  // The recording ends and the server finishes the scan: the page draws the finished model with its texture.
+  await page.waitForFunction((id) => window.facescanStats.textured?.session === id, session, { timeout: 90000 });
+  await page.click('#reset-view'); await settle();
+  await page.screenshot({ path: path.join(outDir, 'viewer-textured.png') });
+  const textured = await page.evaluate(() => window.facescanStats.textured);
+  const texturedView = await sample('textured');
+  log(`finished model drawn textured: ${textured.width} x ${textured.height} texture, ${textured.vertices} ` +
+      `vertices, ${(textured.bytes / 1024 / 1024).toFixed(1)} MB fetched and shown in ${textured.ms.toFixed(0)} ms; ` +
+      `face covers ${(100 * texturedView.share).toFixed(1)}% of the centre`);
+  assert.ok(textured.width >= 64 && textured.height >= 64, `no texture: ${JSON.stringify(textured)}`);
+  assert.ok(texturedView.share > 0.1, 'the textured face is not drawn');
 
   // A URL naming a session nobody scans: the page says so (and offers the list).
   const lost = await browser.newPage();

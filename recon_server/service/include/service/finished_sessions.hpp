@@ -68,5 +68,13 @@ std::optional<std::filesystem::path> findFinishedSessionDir(const std::filesyste
 // A finished session's results, read from its folder (session_store.hpp names the files).
 StatusOr<MeshResult> readFinishedMesh(const std::filesystem::path& dir);  // mesh.drc, counts from decoding it
 StatusOr<std::vector<uint8_t>> readFinishedFile(const std::filesystem::path& dir, const std::string& name);
+// The textured model of a finished session: textured.drc (Draco with texture coordinates; the counts from decoding
+// it, which also checks it) and its atlas textured.png. NotFound when the session has no texture (no colour, or
+// finished by a version that did not write textured.drc); DataLoss when textured.drc cannot be decoded.
+struct TexturedResult {
+    MeshResult mesh;
+    std::vector<uint8_t> png;
+};
+StatusOr<TexturedResult> readFinishedTexture(const std::filesystem::path& dir);
 
 }  // namespace facescan::service

@@ -99,8 +99,9 @@ class Server {
         std::string session_id, request_id;
         uint32_t kind = 0;
         int64_t received_ns = 0;
-        std::string client_id;  // as the client sent it (its DDS Security identity's name first, when it has one)
-        std::string identity;   // who sent it, for the audit trail (identify())
+        std::string client_id;      // as the client sent it (its DDS Security identity's name first, when it has one)
+        std::string identity;       // who sent it, for the audit trail (identify())
+        bool want_texture = false;  // GET_MESH: the finished model's texture too, when it has one
     };
     struct Candidate {  // a CameraInfo of a session nobody owns yet
         wire::CameraInfoData camera;
@@ -132,7 +133,10 @@ class Server {
     // participant authenticated with (wire/peer_identity.hpp), the client id it claims only beside it.
     std::string identify(dds_entity_t reader, dds_instance_handle_t writer, const std::string& claimed_client);
     void reply(const Command& c, const Status& status, const MeshResult* mesh = nullptr,
-               const std::vector<uint8_t>* payload = nullptr);
+               const std::vector<uint8_t>* payload = nullptr, const std::vector<uint8_t>* texture = nullptr);
+    // GET_MESH with want_texture of a session finished into `dir`: the textured model (textured.drc and its atlas,
+    // finished_sessions.hpp) when the session has one; false when it has none (the caller answers as without).
+    bool answerTextured(const Command& c, const std::filesystem::path& dir);
     void publishStatus(const SessionStats& s);
     void publishSnapshot(const std::string& session_id, const SnapshotResult& snap);
     void publishRefused(const std::string& session_id, const std::string& detail);

@@ -1,5 +1,6 @@
 // Writing a finished session to the data dir (--data-dir/SESSION/): mesh.ply (binary, normals and colours),
-// mesh.drc (Draco), trajectory.txt (TUM), preview.png (the last shaded view), summary.json, frames.tsv (each processed
+// mesh.drc (Draco), the textured model when there is one (textured.obj/.mtl/.png, textured.ply, textured.drc),
+// trajectory.txt (TUM), preview.png (the last shaded view), summary.json, frames.tsv (each processed
 // frame's timings). Once a finished session has left the server's memory, these files answer its commands
 // (finished_sessions.hpp). Every file goes to NAME.tmp first, is fsync'ed and then renamed over NAME, so a crash
 // leaves either the old file or the whole new one, never a half file.
@@ -35,6 +36,10 @@ struct SessionFiles {
     // The textured model (recon/texture_atlas.hpp), when one was baked: textured.obj + textured.mtl + textured.png
     // and textured.ply (u, v per vertex, naming textured.png); null or invalid: not written.
     const recon::TexturedMesh* textured = nullptr;
+    // The textured model as Draco with texture coordinates (wire::encodeTexturedMeshDraco): textured.drc, what a
+    // client that asks for the texture gets with textured.png (finished_sessions.hpp); written with the textured
+    // files when not empty.
+    const std::vector<uint8_t>* textured_draco = nullptr;
     std::string summary_json;  // written last: its presence means the session is complete
 };
 
