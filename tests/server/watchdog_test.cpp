@@ -53,6 +53,17 @@ TEST(Watchdog, ALoopStuckInOneStepIsReportedByNameAndAWaitingOneIsNot) {
     EXPECT_FALSE(watchdog.stalled(steadyNowNs() + 3'000'000'000).has_value());
 }
 
+// A scan's finish on a loaded machine is one long step: it gets its own limit, and the next step the usual one.
+TEST(Watchdog, ALongStepHasItsOwnLimitAndTheNextStepTheUsualOne) {
+    Watchdog watchdog({1.0, 0.05}, [](const std::string&) {});
+    const auto worker = watchdog.add("a session's worker");
+    worker->beginLong(30.0);
+    EXPECT_FALSE(watchdog.stalled(steadyNowNs() + 10'000'000'000).has_value());  // 10 s into a 30 s step
+    EXPECT_TRUE(watchdog.stalled(steadyNowNs() + 31'000'000'000).has_value());
+    worker->begin();
+    EXPECT_TRUE(watchdog.stalled(steadyNowNs() + 2'000'000'000).has_value());  // back to 1 s
+}
+
 TEST(Watchdog, ABeatNobodyHoldsIsNotWatched) {
     Watchdog watchdog({0.1, 0.05}, [](const std::string&) {});
     {

@@ -1,6 +1,7 @@
 // Finishing a session: the final full-resolution mesh, its Draco bytes (encodeMesh, which snapshots use too), a
 // last preview, and the files in the data dir (session_store.hpp). Runs on the session's worker (or on the caller's
 // thread when the session never had a worker), never on the intake thread.
+#include <algorithm>
 #include <cstdio>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
@@ -12,6 +13,8 @@
 
 namespace facescan::service {
 namespace {
+
+constexpr double kFinishStepLimitS = 60.0;  // seconds the finished model (closing, budget) may take on a busy machine
 
 std::string num(double v) {
     std::ostringstream o;
@@ -58,10 +61,11 @@ bool Session::mayWrite() {
     }
 }
 
-void Session::nextWatchedStep() {
+void Session::nextWatchedStep(double limit_s) {
     // Only while the worker is inside a step (finalize on the worker): a finalize on another thread (a session
     // that never had a worker) must not start a step that nobody ends.
-    if (beat_ && beat_->busySinceNs() != 0) beat_->begin();
+    if (!beat_ || beat_->busySinceNs() == 0) return;
+    limit_s > 0 ? beat_->beginLong(limit_s) : beat_->begin();
 }
 
 void Session::finalize(const std::string& why, const FinishCallback& done) {
@@ -94,7 +98,9 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         // the intake or another session's worker. Its params were validated at start, so it cannot refuse; its
         // notes (a budget not reached, holes left) go to the log and summary.json.
         const recon::HeadRegion region = rec->headRegion();
-        nextWatchedStep();
+        // Seconds of CPU with closing and a budget, at a lower priority than the sessions still scanning
+        // (leaveToFinish): on a saturated machine that is tens of seconds of wall time, and not a stuck server.
+        nextWatchedStep(std::max(kFinishStepLimitS, 4.0 * params_.stall_limit_s));
         auto finished = recon::finishMesh(extracted, params_.finish, &region, &grid);
         nextWatchedStep();
         if (finished.isOk()) {

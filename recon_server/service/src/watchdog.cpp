@@ -9,7 +9,14 @@
 
 namespace facescan::service {
 
-void Watchdog::Beat::begin() { since_ns_.store(steadyNowNs(), std::memory_order_relaxed); }
+void Watchdog::Beat::begin() {
+    step_limit_s_.store(0, std::memory_order_relaxed);
+    since_ns_.store(steadyNowNs(), std::memory_order_relaxed);
+}
+void Watchdog::Beat::beginLong(double limit_s) {
+    step_limit_s_.store(limit_s, std::memory_order_relaxed);
+    since_ns_.store(steadyNowNs(), std::memory_order_relaxed);
+}
 void Watchdog::Beat::end() { since_ns_.store(0, std::memory_order_relaxed); }
 
 Watchdog::Watchdog(Options options, std::function<void(const std::string&)> on_stall,

@@ -243,8 +243,9 @@ class Session {
     void copySnapshotIfAsked();
     void finalize(const std::string& why, const FinishCallback& done);
     // Meshing, finishing the model and encoding it are one watchdog step each (a triangle budget on a loaded host
-    // takes seconds of its own): starts the next step of the worker's finish.
-    void nextWatchedStep();
+    // takes seconds of its own): starts the next step of the worker's finish, within the watchdog's stall limit or
+    // `limit_s` seconds when given.
+    void nextWatchedStep(double limit_s = 0);
     // finalize, before it writes: waits while the server's view is stale (hold_); false once the session was given up
     // (abandon) or is closing.
     bool mayWrite();

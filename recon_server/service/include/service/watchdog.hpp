@@ -24,15 +24,23 @@ class Watchdog {
      public:
         Beat(std::string name, double limit_s) : name_(std::move(name)), limit_s_(limit_s) {}
         void begin();  // a step starts now: it must end within the stall limit
-        void end();    // back to waiting for work: not expected to progress
+        // A step known to be long (a scan's finish, on a loaded machine at a lower priority) that must end within
+        // this many seconds instead; the next begin() goes back to the usual limit.
+        void beginLong(double limit_s);
+        void end();  // back to waiting for work: not expected to progress
         int64_t busySinceNs() const { return since_ns_.load(std::memory_order_relaxed); }
         const std::string& name() const { return name_; }
-        double limitS() const { return limit_s_; }  // 0: the watchdog's stall limit
+        // 0: the watchdog's stall limit
+        double limitS() const {
+            const double step = step_limit_s_.load(std::memory_order_relaxed);
+            return step > 0 ? step : limit_s_;
+        }
 
      private:
         std::string name_;
         double limit_s_ = 0;
-        std::atomic<int64_t> since_ns_{0};  // steady clock; 0 while waiting
+        std::atomic<double> step_limit_s_{0};  // this step's own limit (beginLong); 0: limit_s_
+        std::atomic<int64_t> since_ns_{0};     // steady clock; 0 while waiting
     };
 
     struct Options {
