@@ -13,6 +13,7 @@
 
 #include "capture/agent.hpp"
 #include "facescan/version.hpp"
+#include "recon/face_pipeline.hpp"
 #include "wire/dds_options.hpp"
 
 namespace {
@@ -63,6 +64,10 @@ options:
                         astra, realsense-d415, azure-kinect, truedepth (default: what the device reports; a
                         source that cannot tell: kinect-v1)
   --depth-range MIN:MAX the camera's working range in metres, over the sensor's (e.g. 0.2:0.5)
+  --roll auto|0|90|180|270
+                        how the camera is held: how far the person appears turned clockwise in the image (a
+                        phone in portrait: 90 or 270; upside down: 180); the server uses it unless its own
+                        --roll is set (default auto: the server finds it from the frames)
   --session ID          session id (default: a fresh unique id, printed at start)
   --frames N            stop after N frames (default: all)
   --rate real|max|HZ    real: the source's own rate (default); max: as fast as the server takes them, with no
@@ -154,6 +159,10 @@ int main(int argc, char** argv) {
             }
             options.depth_min_m = lo;
             options.depth_max_m = hi;
+        } else if (arg == "--roll") {
+            const auto roll = recon::parseRoll(text);
+            if (!roll.isOk()) return usageError("--roll: " + roll.status().message());
+            options.roll_deg = *roll;
         } else if (arg == "--session") {
             options.session_id = text;
         } else if (arg == "--frames") {

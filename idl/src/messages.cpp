@@ -22,6 +22,11 @@ Status CameraInfoData::validate() const {
                                std::to_string(depth_units_m));
     }
     if (!(rate_hz > 0 && rate_hz <= 1000)) return invalidArgument("frame rate must be in (0, 1000] Hz");
+    if (roll_deg != kRollUnknown && roll_deg != 0 && roll_deg != 90 && roll_deg != 180 && roll_deg != 270) {
+        return invalidArgument("camera roll " + std::to_string(roll_deg) +
+                               " deg: must be 0, 90, 180 or 270 (how far the person appears turned clockwise), or "
+                               "unknown (auto)");
+    }
     if (const Status s = sensor.validate(); !s.isOk())
         return invalidArgument("camera '" + sensor.name + "': " + s.message());
     const recon::Intrinsics& c = colourIntrinsics();
@@ -183,6 +188,8 @@ facescan_wire_CameraInfo toMessage(const CameraInfoData& info) {
         for (int c = 0; c < 3; ++c) msg.R_colour_depth[3 * r + c] = info.T_colour_depth.linear()(r, c);
         msg.t_colour_depth_m[r] = info.T_colour_depth.translation()(r);
     }
+    // 0 on the wire is "unknown" (what an older agent leaves), so upright and known travels as a full turn.
+    msg.roll_deg = info.roll_deg == CameraInfoData::kRollUnknown ? 0 : info.roll_deg == 0 ? 360 : info.roll_deg;
     return msg;
 }
 
@@ -243,6 +250,12 @@ StatusOr<CameraInfoData> fromMessage(const facescan_wire_CameraInfo& msg) {
         }
         for (int r = 0; r < 3; ++r) info.T_colour_depth.matrix()(r, 3) = msg.t_colour_depth_m[r];
     }
+    if (msg.roll_deg != 0 && msg.roll_deg != 90 && msg.roll_deg != 180 && msg.roll_deg != 270 && msg.roll_deg != 360) {
+        return invalidArgument("CameraInfo roll_deg " + std::to_string(msg.roll_deg) +
+                               " is none of 0 (unknown), 90, 180, 270 or 360 (upright): the agent is broken or of "
+                               "another version; run facescan-agent --roll auto|0|90|180|270");
+    }
+    info.roll_deg = msg.roll_deg == 0 ? CameraInfoData::kRollUnknown : msg.roll_deg % 360;
     RETURN_IF_ERROR(info.validate());
     return info;
 }

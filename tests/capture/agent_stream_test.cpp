@@ -194,14 +194,15 @@ TEST(AgentStream, TumFolderArrivesBitExactAndInOrder) {
 }
 
 // The camera travels with the stream: the synthetic near-range sensor's description (its range, family and noise)
-// arrives in CameraInfo, with --depth-range over it; the frames are its own 320x240 ones.
+// arrives in CameraInfo, with --depth-range over it and how the camera is held (--roll); the frames are its own
+// 320x240 ones.
 TEST(AgentStream, TheCameraArrivesInCameraInfoWithTheAgentsOverrides) {
     const std::string spec = "synthetic:frames=8,seed=3,subject=builtin,sensor=truedepth";
     const auto expected = expectedDepth(spec);
     ASSERT_EQ(expected.size(), 8u);
     EXPECT_EQ(expected.front().cols, 320);
     std::optional<wire::CameraInfoData> camera;
-    streamAndCompare(spec, expected, 4, {"--depth-range", "0.2:0.6"}, {}, &camera);
+    streamAndCompare(spec, expected, 4, {"--depth-range", "0.2:0.6", "--roll", "90"}, {}, &camera);
     ASSERT_TRUE(camera.has_value());
     EXPECT_EQ(camera->sensor.name, "truedepth");
     EXPECT_EQ(camera->sensor.family, recon::SensorFamily::kStructuredLight);
@@ -210,6 +211,7 @@ TEST(AgentStream, TheCameraArrivesInCameraInfoWithTheAgentsOverrides) {
     EXPECT_TRUE(camera->sensor.noise.known());
     EXPECT_EQ(camera->intrinsics.width_px, 320);
     EXPECT_EQ(camera->colourIntrinsics(), camera->intrinsics) << "registered colour";
+    EXPECT_EQ(camera->roll_deg, 90);
 }
 
 // A live camera: nothing to read ahead.

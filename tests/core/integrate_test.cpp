@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "recon/depth_filter.hpp"
@@ -50,9 +51,10 @@ Pose turned(float yaw_rad, float pitch_rad, const Eigen::Vector3f& t) {
 enum class Expect { kUnchanged, kUpdated, kEitherWay };
 
 // Algorithm 3 (eq. 4.22-4.26) for one voxel, written out as the thesis states it: project the voxel, look up the
-// pixel's measurement, weight it by viewing angle and depth, and average. kEitherWay where the voxel sits within
-// rounding of a decision (a pixel border, the -mu cut-off, the colour's +mu): the integrator reaches the voxel's
-// position by sums along the grid (1e-7 m off the direct transform), so such a voxel may fall on either side.
+// pixel's measurement, weight it by viewing angle (the normal around the pixel) and depth, and average. kEitherWay
+// where the voxel sits within rounding of a decision (a pixel border, the -mu cut-off, the colour's +mu): the
+// integrator reaches the voxel's position by sums along the grid (1e-7 m off the direct transform), so such a voxel may
+// fall on either side.
 Expect referenceUpdate(const TsdfParams& p, const SurfaceLevel& frame, const cv::Mat& bgr, const Pose& T_world_camera,
                        const Eigen::Vector3f& voxel_world, Voxel& vx) {
     constexpr float kPxEps = 1e-3f, kDistEps = 1e-6f;  // pixels, metres
@@ -64,10 +66,17 @@ Expect referenceUpdate(const TsdfParams& p, const SurfaceLevel& frame, const cv:
     const int u = static_cast<int>(std::floor(px.x())), v = static_cast<int>(std::floor(px.y()));
     if (!frame.roi.contains({u, v})) return Expect::kUnchanged;
     const float z = frame.depth_m.at<float>(v, u);
-    const cv::Vec3f n = frame.normal.at<cv::Vec3f>(v, u);
-    if (!(z > 0.0f) || std::isnan(n[0])) return Expect::kUnchanged;
+    if (!(z > 0.0f) || u == frame.roi.x || v == frame.roi.y) return Expect::kUnchanged;
+    // The angle's normal: the mean of eq. 4.10's normals of the four pixel squares around the pixel, none where
+    // one is missing.
+    Eigen::Vector3f n = Eigen::Vector3f::Zero();
+    for (const auto& [du, dv] : {std::pair{0, 0}, std::pair{-1, 0}, std::pair{0, -1}, std::pair{-1, -1}}) {
+        const cv::Vec3f m = frame.normal.at<cv::Vec3f>(v + dv, u + du);
+        if (std::isnan(m[0])) return Expect::kUnchanged;
+        n += Eigen::Vector3f(m[0], m[1], m[2]);
+    }
     const Eigen::Vector3f ray = kCam.ray(static_cast<float>(u), static_cast<float>(v));
-    const float cos_angle = -Eigen::Vector3f(n[0], n[1], n[2]).dot(ray) / ray.norm();
+    const float cos_angle = -n.normalized().dot(ray) / ray.norm();
     if (cos_angle < p.min_cos_angle) return Expect::kUnchanged;
     const float w = std::exp(-(1.0f - cos_angle) / p.weight_angle_sigma -
                              z * z / (2.0f * p.weight_depth_sigma_m * p.weight_depth_sigma_m));

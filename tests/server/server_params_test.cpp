@@ -10,6 +10,7 @@
 
 #include "sample_replica.hpp"
 #include "service/replica_log.hpp"
+#include "service/session.hpp"
 #include "service/session_store.hpp"
 
 namespace facescan::service {
@@ -162,6 +163,33 @@ TEST(ServerParams, RollIsAFlagAndAConfigKey) {
     ASSERT_FALSE(bad.isOk());
     EXPECT_NE(bad.status().message().find("auto, 0, 90, 180 or 270"), std::string::npos) << bad.status().message();
     EXPECT_NE(bad.status().message().find("--roll"), std::string::npos) << bad.status().message();
+}
+
+// The agent's --roll (CameraInfo's hint) sets the session's roll while the server's own is auto; the server's
+// face.roll, when set, wins; no hint leaves it to be found from the frames (upright until then).
+TEST(ServerParams, TheAgentsRollHintIsUsedUnlessTheServerSetsItsOwn) {
+    wire::CameraInfoData camera;
+    camera.session_id = "rolled";
+    const auto server_auto = parseServerArgs({});
+    const auto server_90 = parseServerArgs({"--roll", "90"});
+    ASSERT_TRUE(server_auto.isOk() && server_90.isOk());
+
+    camera.roll_deg = 180;
+    auto hinted = SessionEngine::build(server_auto->params, camera, nullptr);
+    ASSERT_TRUE(hinted.isOk()) << hinted.status().toString();
+    EXPECT_EQ(hinted->pipeline->roll().degrees(), 180);
+    EXPECT_NE(hinted->camera_line.find("roll 180 deg (the agent's --roll)"), std::string::npos) << hinted->camera_line;
+
+    auto overridden = SessionEngine::build(server_90->params, camera, nullptr);
+    ASSERT_TRUE(overridden.isOk()) << overridden.status().toString();
+    EXPECT_EQ(overridden->pipeline->roll().degrees(), 90);
+    EXPECT_NE(overridden->camera_line.find("roll 90 deg (face.roll)"), std::string::npos) << overridden->camera_line;
+
+    camera.roll_deg = wire::CameraInfoData::kRollUnknown;
+    auto found = SessionEngine::build(server_auto->params, camera, nullptr);
+    ASSERT_TRUE(found.isOk()) << found.status().toString();
+    EXPECT_EQ(found->pipeline->roll().degrees(), 0);
+    EXPECT_EQ(found->camera_line.find("roll"), std::string::npos) << found->camera_line;
 }
 
 TEST(SessionStore, WritesAtomicallyAndLeavesNoTemporaryFiles) {

@@ -1,6 +1,8 @@
 // CameraInfo carries the camera: its range, kind, noise, colour camera and extrinsics round-trip; an older agent's
 // CameraInfo (the appended fields zero) and an older server's replica (format 2) read as a Kinect v1; and each
-// description that cannot be right, and depth in the wrong units, is refused with one line saying what to do.
+// description that cannot be right, and depth in the wrong units, is refused with one line saying what to do. The
+// agent's roll hint travels too (0 on the wire, an older agent's, is unknown) and a roll that is no quarter turn is
+// refused.
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -56,6 +58,44 @@ TEST(CameraInfo, AnOlderAgentsCameraInfoIsAKinectV1) {
     EXPECT_EQ(out->sensor, recon::SensorModel::kinectV1());
     EXPECT_EQ(out->colourIntrinsics(), out->intrinsics);
     EXPECT_TRUE(out->T_colour_depth.matrix().isIdentity());
+}
+
+TEST(CameraInfo, TheRollHintRoundTripsAndAnOlderAgentsIsUnknown) {
+    for (const int roll : {CameraInfoData::kRollUnknown, 0, 90, 180, 270}) {
+        CameraInfoData in = trueDepthCamera();
+        in.roll_deg = roll;
+        ASSERT_TRUE(in.validate().isOk()) << roll << ": " << in.validate().toString();
+        const facescan_wire_CameraInfo msg = toMessage(in);
+        // Unknown travels as the 0 an older agent leaves; upright and known as a full turn.
+        EXPECT_EQ(msg.roll_deg, roll == CameraInfoData::kRollUnknown ? 0 : roll == 0 ? 360 : roll);
+        const auto out = fromMessage(msg);
+        ASSERT_TRUE(out.isOk()) << roll << ": " << out.status().toString();
+        EXPECT_EQ(out->roll_deg, roll);
+    }
+    CameraInfoData in;
+    in.session_id = "old-agent";
+    facescan_wire_CameraInfo msg = toMessage(in);
+    msg.roll_deg = 0;  // an agent from before the field
+    const auto out = fromMessage(msg);
+    ASSERT_TRUE(out.isOk()) << out.status().toString();
+    EXPECT_EQ(out->roll_deg, CameraInfoData::kRollUnknown);
+}
+
+TEST(CameraInfo, ARollThatIsNoQuarterTurnIsRefusedWithOneLine) {
+    for (const int wire_roll : {45, -90, 1, 359, 450, 720}) {
+        CameraInfoData in = trueDepthCamera();
+        facescan_wire_CameraInfo msg = toMessage(in);
+        msg.roll_deg = wire_roll;
+        const auto out = fromMessage(msg);
+        ASSERT_FALSE(out.isOk()) << wire_roll;
+        EXPECT_NE(out.status().message().find("--roll"), std::string::npos) << out.status().message();
+        EXPECT_EQ(out.status().message().find('\n'), std::string::npos) << out.status().message();
+    }
+    CameraInfoData c = trueDepthCamera();
+    c.roll_deg = 45;
+    const Status s = c.validate();
+    ASSERT_FALSE(s.isOk());
+    EXPECT_NE(s.message().find("0, 90, 180 or 270"), std::string::npos) << s.message();
 }
 
 void expectRefused(const CameraInfoData& c, const std::string& says) {

@@ -82,6 +82,12 @@ Status AgentOptions::validate() const {
     if (wait_for_server_s < 0) return invalidArgument("--wait-for-server must be >= 0 seconds");
     if (!(stalled_after_s > 0)) return invalidArgument("--stalled-after must be > 0 seconds");
     if (!sensor.empty()) RETURN_IF_ERROR(recon::findSensorPreset(sensor).status());
+    if (roll_deg != wire::CameraInfoData::kRollUnknown && roll_deg != 0 && roll_deg != 90 && roll_deg != 180 &&
+        roll_deg != 270) {
+        return invalidArgument("--roll " + std::to_string(roll_deg) +
+                               " cannot be right: auto, 0, 90, 180 or 270 (how far the person appears turned "
+                               "clockwise in the image: a phone held in portrait 90 or 270, upside down 180)");
+    }
     if ((depth_min_m != 0 || depth_max_m != 0) && !(depth_min_m > 0 && depth_max_m > depth_min_m)) {
         return invalidArgument("--depth-range " + std::to_string(depth_min_m) + ":" + std::to_string(depth_max_m) +
                                " cannot be right: give MIN:MAX in metres with 0 < MIN < MAX, e.g. 0.2:0.5");
@@ -288,6 +294,7 @@ Status Agent::run(const std::atomic<bool>& external_stop, const std::function<vo
     camera.colour_intrinsics =
         info.colour_registered ? recon::Intrinsics{0, 0, 0.0f, 0.0f, 0.0f, 0.0f} : info.colour_intrinsics;
     camera.T_colour_depth = info.colour_registered ? recon::Pose::Identity() : info.T_colour_depth;
+    camera.roll_deg = options_.roll_deg;
     RETURN_IF_ERROR(camera.validate());
     RETURN_IF_ERROR(s.info_writer.write(wire::toMessage(camera)));
 

@@ -31,6 +31,10 @@ struct CameraInfoData {
     // depth-camera points into it. Registered colour has the depth camera's and the identity.
     recon::Intrinsics colour_intrinsics{0, 0, 0.0f, 0.0f, 0.0f, 0.0f};
     recon::Pose T_colour_depth = recon::Pose::Identity();
+    // How the camera is held (the agent's --roll; recon::FacePipelineParams::roll_deg's meaning): 0, 90, 180 or
+    // 270 degrees, or kRollUnknown for the server to find it from the frames (an older agent sends none).
+    static constexpr int kRollUnknown = -1;
+    int roll_deg = kRollUnknown;
     const recon::Intrinsics& colourIntrinsics() const {
         return colour_intrinsics.width_px == 0 ? intrinsics : colour_intrinsics;
     }

@@ -433,7 +433,9 @@ std::string serverUsage() {
            "  --roll auto|0|90|180|270\n"
            "                          how the cameras are held: how far the person appears turned clockwise in the\n"
            "                          image (a phone in portrait: 90 or 270, upside down: 180); auto (the default)\n"
-           "                          finds it from the frames and follows a camera that turns during the scan\n"
+           "                          takes each agent's --roll, and where the agent gave none finds it from the\n"
+           "                          frames and follows a camera that turns during the scan; a value here wins\n"
+           "                          over the agents'\n"
            "  --check                 check the configuration (file, flags, DDS profile, data dir) and exit\n" +
            wire::ddsOptionsHelp(26) +
            "  --version               print the version and the git commit it was built from\n"

@@ -19,8 +19,18 @@ StatusOr<SessionEngine> SessionEngine::build(const ServerParams& params, const w
     SessionEngine e;
     // Depth windows, pixel thresholds and the distance advice from the camera the agent described.
     recon::FacePipelineParams face_params = params.face;
+    // How the camera is held: the server's own face.roll when set, else the agent's hint (--roll), else found
+    // from the frames.
+    static_assert(wire::CameraInfoData::kRollUnknown == recon::FacePipelineParams::kRollAuto);
+    const bool roll_from_agent =
+        face_params.roll_deg == recon::FacePipelineParams::kRollAuto && camera.roll_deg != camera.kRollUnknown;
+    if (roll_from_agent) face_params.roll_deg = camera.roll_deg;
     recon::adaptToSensor(camera.sensor, camera.intrinsics, recon_params, face_params, e.advice);
     e.camera_line = recon::describeSensor(camera.sensor, e.advice, recon_params.tsdf);
+    if (face_params.roll_deg != recon::FacePipelineParams::kRollAuto) {
+        e.camera_line += "; held at roll " + std::to_string(face_params.roll_deg) +
+                         (roll_from_agent ? " deg (the agent's --roll)" : " deg (face.roll)");
+    }
     e.recon = std::make_shared<recon::Reconstructor>(camera.intrinsics, recon_params);
     if (!e.recon->initStatus().isOk()) return e.recon->initStatus();
     if (replica) RETURN_IF_ERROR(e.recon->restoreState(replica->state));

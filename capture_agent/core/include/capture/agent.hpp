@@ -54,6 +54,9 @@ struct AgentOptions {
     std::string sensor;
     float depth_min_m = 0;  // metres; --depth-range MIN:MAX
     float depth_max_m = 0;  // metres
+    // How the camera is held (--roll): how far the person appears turned clockwise in the image, 0, 90, 180 or 270
+    // degrees, told to the server in CameraInfo; unknown (auto) leaves the server to find it from the frames.
+    int roll_deg = wire::CameraInfoData::kRollUnknown;
 
     // The sensor the stream will describe: the source's, or the preset, with the overrides applied.
     StatusOr<recon::SensorModel> resolveSensor(const SourceInfo& source) const;
