@@ -67,19 +67,29 @@ Expect referenceUpdate(const TsdfParams& p, const SurfaceLevel& frame, const cv:
     if (!frame.roi.contains({u, v})) return Expect::kUnchanged;
     const float z = frame.depth_m.at<float>(v, u);
     if (!(z > 0.0f) || u == frame.roi.x || v == frame.roi.y) return Expect::kUnchanged;
-    // The angle's normal: the mean of eq. 4.10's normals of the four pixel squares around the pixel, none where
-    // one is missing.
+    // The angle's normal: the mean of eq. 4.10's normals of the four pixel squares around the pixel; where one is
+    // missing (a depth edge), the pixel's own alone, and the weight scaled by edge_weight. None without its own.
     Eigen::Vector3f n = Eigen::Vector3f::Zero();
+    bool edge = false;
     for (const auto& [du, dv] : {std::pair{0, 0}, std::pair{-1, 0}, std::pair{0, -1}, std::pair{-1, -1}}) {
         const cv::Vec3f m = frame.normal.at<cv::Vec3f>(v + dv, u + du);
-        if (std::isnan(m[0])) return Expect::kUnchanged;
+        if (std::isnan(m[0])) {
+            if (du == 0 && dv == 0) return Expect::kUnchanged;
+            edge = true;
+            continue;
+        }
         n += Eigen::Vector3f(m[0], m[1], m[2]);
+    }
+    if (edge) {
+        const cv::Vec3f own = frame.normal.at<cv::Vec3f>(v, u);
+        n = Eigen::Vector3f(own[0], own[1], own[2]);
     }
     const Eigen::Vector3f ray = kCam.ray(static_cast<float>(u), static_cast<float>(v));
     const float cos_angle = -n.normalized().dot(ray) / ray.norm();
     if (cos_angle < p.min_cos_angle) return Expect::kUnchanged;
-    const float w = std::exp(-(1.0f - cos_angle) / p.weight_angle_sigma -
-                             z * z / (2.0f * p.weight_depth_sigma_m * p.weight_depth_sigma_m));
+    const float w =
+        (edge ? p.edge_weight : 1.0f) * std::exp(-(1.0f - cos_angle) / p.weight_angle_sigma -
+                                                 z * z / (2.0f * p.weight_depth_sigma_m * p.weight_depth_sigma_m));
     const float d = z * ray.norm() - q.norm();  // eq. 4.24
     if (std::fabs(d + p.trunc_dist_m) < kDistEps || std::fabs(d - p.trunc_dist_m) < kDistEps) return Expect::kEitherWay;
     if (d < -p.trunc_dist_m) return Expect::kUnchanged;

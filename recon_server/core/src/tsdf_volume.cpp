@@ -91,6 +91,7 @@ Status TsdfParams::validate() const {
     if (!(weight_angle_sigma > 0.0f) || !(weight_depth_sigma_m > 0.0f))
         return invalidArgument("tsdf weight sigmas must be > 0");
     if (!(min_cos_angle >= 0.0f && min_cos_angle < 1.0f)) return invalidArgument("tsdf min_cos_angle in [0, 1)");
+    if (!(edge_weight >= 0.0f && edge_weight <= 1.0f)) return invalidArgument("tsdf edge_weight in [0, 1]");
     if (max_blocks < 1) return invalidArgument("tsdf max_blocks must be >= 1");
     if (!std::isfinite(centre_behind_surface_m)) return invalidArgument("tsdf centre_behind_surface_m not finite");
     return Status::ok();
@@ -267,10 +268,9 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
                 // so the noisy, mixed depths along edges kept their full weight on the other side, and which side
                 // that was turned with the camera: held upside down, the model came out 0.2 mm thicker.
                 const cv::Vec3f &n00 = nrm[u], &n10 = nrm[u - 1], &n01 = nrm_up[u], &n11 = nrm_up[u - 1];
-                if (!(z[u] > 0.0f) || std::isnan(n00[0]) || std::isnan(n10[0]) || std::isnan(n01[0]) ||
-                    std::isnan(n11[0]))
-                    continue;
-                const cv::Vec3f n_sum = n00 + n10 + n01 + n11;  // all four face the camera: no cancelling
+                if (!(z[u] > 0.0f) || std::isnan(n00[0])) continue;
+                const bool edge = std::isnan(n10[0]) || std::isnan(n01[0]) || std::isnan(n11[0]);
+                const cv::Vec3f n_sum = edge ? n00 : n00 + n10 + n01 + n11;  // all face the camera: no cancelling
                 const Eigen::Vector3f ray = k.ray(static_cast<float>(u), static_cast<float>(v));
                 const float ray_len = ray.norm();
                 // Viewing angle between the normal and the ray towards the camera.
@@ -278,7 +278,8 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
                                         (ray_len * std::sqrt(n_sum.dot(n_sum)));
                 if (cos_angle < min_cos) continue;
                 rw[u] = cv::Vec2f(z[u] * ray_len,
-                                  std::exp(-(1.0f - cos_angle) * inv_angle_sigma - z[u] * z[u] * inv_two_depth_var));
+                                  (edge ? params_.edge_weight : 1.0f) * std::exp(-(1.0f - cos_angle) * inv_angle_sigma -
+                                                                                 z[u] * z[u] * inv_two_depth_var));
             }
         }
     });

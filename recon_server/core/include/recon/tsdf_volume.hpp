@@ -26,9 +26,13 @@ struct TsdfParams {
     float max_weight = 256.0f;     // W(x) saturates here (Meyer: 256), so the model keeps adapting
     // Weight of a measurement (Algorithm 3): exp(-(1 - cos theta) / angle_sigma) * exp(-Z^2 / (2 depth_sigma^2)),
     // theta = angle between the surface normal and the viewing ray, Z = measured depth.
-    float weight_angle_sigma = 0.5f;        // dimensionless; in units of (1 - cos theta)
-    float weight_depth_sigma_m = 1.5f;      // metres
-    float min_cos_angle = 0.2f;             // cos; grazing measurements (> ~78 deg) are not integrated
+    float weight_angle_sigma = 0.5f;    // dimensionless; in units of (1 - cos theta)
+    float weight_depth_sigma_m = 1.5f;  // metres
+    float min_cos_angle = 0.2f;         // cos; grazing measurements (> ~78 deg) are not integrated
+    // A measurement next to a depth edge (one of the four pixel squares around it has no eq. 4.10 normal) gets this
+    // share of its weight: the mixed, noisy depths there would thicken the model, but a model of a few frames needs
+    // its rim to align the next frames after a gap.
+    float edge_weight = 0.05f;              // dimensionless, in [0, 1]
     int max_blocks = 8192;                  // count; block pool reserved up front (8192 x 512 voxels x 12 B = 48 MB)
     float centre_behind_surface_m = 0.07f;  // metres; the cube's centre is placed this far behind the centroid of
                                             // the first frame's head points, along the view ray (a head's depth)
