@@ -15,6 +15,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "client/view_hub.hpp"
+#include "glb_reader.hpp"
 #include "http_client.hpp"
 #include "wire/mesh_codec.hpp"
 
@@ -23,6 +24,7 @@ namespace {
 
 using namespace std::chrono_literals;
 using facescan::testing::httpRequest;
+using facescan::testing::readGlb;
 using facescan::testing::WsClient;
 
 // A small coloured patch: a real mesh for the real codec.
@@ -225,12 +227,8 @@ TEST_F(ViewServerTest, DownloadsEveryFormatAsAnAttachment) {
     const auto glb = httpRequest(port_, "/api/sessions/scan-1/mesh.glb");
     EXPECT_EQ(glb.header("Content-Type"), "model/gltf-binary");
     tinygltf::Model model;
-    tinygltf::TinyGLTF reader;
-    std::string err, warn;
-    ASSERT_TRUE(reader.LoadBinaryFromMemory(&model, &err, &warn,
-                                            reinterpret_cast<const unsigned char*>(glb.body.data()),
-                                            static_cast<unsigned>(glb.body.size())))
-        << err;
+    std::string err;
+    ASSERT_TRUE(readGlb(glb.body, model, err)) << err;
     ASSERT_EQ(model.meshes.size(), 1u);
     EXPECT_EQ(model.accessors[model.meshes[0].primitives[0].attributes.at("POSITION")].count, 144u);
     EXPECT_TRUE(model.meshes[0].primitives[0].attributes.count("COLOR_0"));
@@ -263,12 +261,8 @@ TEST_F(ViewServerTest, AFinishedModelsTextureForThePageAndInTheGlb) {
     const auto glb = httpRequest(port_, "/api/sessions/finished-1/mesh.glb");
     ASSERT_EQ(glb.status, 200) << glb.body;
     tinygltf::Model model;
-    tinygltf::TinyGLTF reader;
-    std::string err, warn;
-    ASSERT_TRUE(reader.LoadBinaryFromMemory(&model, &err, &warn,
-                                            reinterpret_cast<const unsigned char*>(glb.body.data()),
-                                            static_cast<unsigned>(glb.body.size())))
-        << err;
+    std::string err;
+    ASSERT_TRUE(readGlb(glb.body, model, err)) << err;
     ASSERT_EQ(model.meshes.size(), 1u);
     EXPECT_TRUE(model.meshes[0].primitives[0].attributes.count("TEXCOORD_0"));
     ASSERT_EQ(model.images.size(), 1u);

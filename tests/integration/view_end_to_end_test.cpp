@@ -14,6 +14,7 @@
 
 #include "child_process.hpp"
 #include "client/web_assets.hpp"
+#include "glb_reader.hpp"
 #include "http_client.hpp"
 #include "test_domain.hpp"
 #include "wire/mesh_codec.hpp"
@@ -25,6 +26,7 @@ using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 using facescan::testing::ChildProcess;
 using facescan::testing::httpRequest;
+using facescan::testing::readGlb;
 using facescan::testing::readText;
 using facescan::testing::WsClient;
 
@@ -100,12 +102,8 @@ TEST(ViewEndToEnd, FollowsARealScanAndServesItsMeshes) {
     const auto glb = httpRequest(port, "/api/sessions/" + session + "/mesh.glb");
     ASSERT_EQ(glb.status, 200) << glb.body << logs();
     tinygltf::Model model;
-    tinygltf::TinyGLTF reader;
-    std::string err, warn;
-    ASSERT_TRUE(reader.LoadBinaryFromMemory(&model, &err, &warn,
-                                            reinterpret_cast<const unsigned char*>(glb.body.data()),
-                                            static_cast<unsigned>(glb.body.size())))
-        << err;
+    std::string err;
+    ASSERT_TRUE(readGlb(glb.body, model, err)) << err;
     const auto& prim = model.meshes.at(0).primitives.at(0);
     // The agent sends colour: the finished model has a texture, which the GLB holds (the PLY: vertex colours).
     ASSERT_TRUE(prim.attributes.count("TEXCOORD_0")) << "the agent sends colour: the GLB has the texture";

@@ -12,6 +12,7 @@
 
 #include "child_process.hpp"
 #include "client/web_assets.hpp"
+#include "glb_reader.hpp"
 #include "http_client.hpp"
 #include "site_fixture.hpp"
 #include "test_domain.hpp"
@@ -103,12 +104,8 @@ TEST(SecureView, TheViewerIdentityWatchesAScanAndDownloadsItsFinalSnapshot) {
     const auto glb = ft::httpRequest(port, "/api/sessions/" + session + "/mesh.glb");
     ASSERT_EQ(glb.status, 200) << glb.body;
     tinygltf::Model model;
-    tinygltf::TinyGLTF reader;
-    std::string err, warn;
-    ASSERT_TRUE(reader.LoadBinaryFromMemory(&model, &err, &warn,
-                                            reinterpret_cast<const unsigned char*>(glb.body.data()),
-                                            static_cast<unsigned>(glb.body.size())))
-        << err;
+    std::string err;
+    ASSERT_TRUE(ft::readGlb(glb.body, model, err)) << err;
     EXPECT_TRUE(model.meshes.at(0).primitives.at(0).attributes.count("COLOR_0"));
 
     // Without an identity, the same viewer on the same domain sees nothing of the secured scan.
