@@ -84,28 +84,99 @@ struct DracoGrid {
     }
 };
 
+// What both encoders check of their input (triangles, every index in range, finite positions and texture
+// coordinates) and the positions' box: per-axis minimum and maximum, and the largest extent (Draco's range).
+Status checkedBounds(const recon::IndexedMesh& mesh, const std::vector<Eigen::Vector2f>* uv, float lo[3], float hi[3],
+                     float& range) {
+    if (mesh.triangles.empty()) return invalidArgument("Draco encoder: mesh has no triangles");
+    const size_t nv = mesh.vertexCount();
+    for (const recon::Triangle& t : mesh.triangles) {
+        if (t[0] >= nv || t[1] >= nv || t[2] >= nv) {
+            return invalidArgument("Draco encoder: a triangle indexes past the " + num(nv) + " vertices");
+        }
+    }
+    for (int a = 0; a < 3; ++a) lo[a] = std::numeric_limits<float>::max(), hi[a] = std::numeric_limits<float>::lowest();
+    for (size_t i = 0; i < nv; ++i) {
+        const Eigen::Vector3f& p = mesh.positions_m[i];
+        if (!p.allFinite() || (uv && !(*uv)[i].allFinite())) {
+            return invalidArgument("Draco encoder: vertex " + num(i) + " is not finite");
+        }
+        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+    }
+    range = 0.0f;
+    for (int a = 0; a < 3; ++a) range = std::max(range, hi[a] - lo[a]);
+    if (range == 0.0f) range = 1.0f;  // Draco's own choice for a single point
+    return Status::ok();
+}
+
+// The per-vertex attributes a Draco mesh is built from; those left null are not sent. Normals must be finite.
+struct DracoAttributes {
+    const std::vector<Eigen::Vector3f>* positions_m = nullptr;
+    const std::vector<Eigen::Vector3f>* normals = nullptr;
+    const std::vector<recon::Rgb8>* colours_rgb = nullptr;
+    const std::vector<Eigen::Vector2f>* uv = nullptr;
+};
+
+// The mesh with Edgebreaker into `out`: positions at position_bits, on the explicit grid (grid_min, grid_range)
+// when grid_min is given, else on the one Draco takes from the vertices.
+Status encodeDracoBytes(const std::vector<recon::Triangle>& triangles, const DracoAttributes& attributes,
+                        const MeshCodecParams& params, int position_bits, const float* grid_min, float grid_range,
+                        std::vector<uint8_t>& out) {
+    const auto nv = static_cast<uint32_t>(attributes.positions_m->size());
+    draco::Mesh dm;
+    dm.set_num_points(nv);
+    dm.SetNumFaces(triangles.size());
+    for (size_t f = 0; f < triangles.size(); ++f) {
+        const recon::Triangle& t = triangles[f];
+        dm.SetFace(draco::FaceIndex(static_cast<uint32_t>(f)),
+                   {draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
+    }
+    auto addAttribute = [&](draco::GeometryAttribute::Type type, int components, draco::DataType dt, bool normalized,
+                            int bytes, const void* values) {
+        draco::GeometryAttribute ga;
+        ga.Init(type, nullptr, static_cast<uint8_t>(components), dt, normalized, components * bytes, 0);
+        draco::PointAttribute* att = dm.attribute(dm.AddAttribute(ga, true, nv));
+        att->buffer()->Write(0, values, size_t(nv) * size_t(components) * size_t(bytes));
+    };
+    static_assert(sizeof(Eigen::Vector3f) == 12 && sizeof(Eigen::Vector2f) == 8 && sizeof(recon::Rgb8) == 3);
+    addAttribute(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32, false, 4, attributes.positions_m->data());
+    if (attributes.normals) {
+        addAttribute(draco::GeometryAttribute::NORMAL, 3, draco::DT_FLOAT32, false, 4, attributes.normals->data());
+    }
+    if (attributes.colours_rgb) {
+        addAttribute(draco::GeometryAttribute::COLOR, 3, draco::DT_UINT8, true, 1, attributes.colours_rgb->data());
+    }
+    if (attributes.uv) {
+        addAttribute(draco::GeometryAttribute::TEX_COORD, 2, draco::DT_FLOAT32, false, 4, attributes.uv->data());
+    }
+
+    draco::Encoder encoder;
+    encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
+    encoder.SetSpeedOptions(params.speed, params.speed);
+    if (grid_min) {
+        encoder.SetAttributeExplicitQuantization(draco::GeometryAttribute::POSITION, position_bits, 3, grid_min,
+                                                 grid_range);
+    } else {
+        encoder.SetAttributeQuantization(draco::GeometryAttribute::POSITION, position_bits);
+    }
+    if (attributes.normals) encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, params.normal_bits);
+    if (attributes.uv) encoder.SetAttributeQuantization(draco::GeometryAttribute::TEX_COORD, params.uv_bits);
+    draco::EncoderBuffer buffer;
+    const draco::Status st = encoder.EncodeMeshToBuffer(dm, &buffer);
+    if (!st.ok()) return internalError("Draco encoding failed: " + st.error_msg_string());
+    out.assign(reinterpret_cast<const uint8_t*>(buffer.data()),
+               reinterpret_cast<const uint8_t*>(buffer.data()) + buffer.size());
+    return Status::ok();
+}
+
 }  // namespace
 
 Status encodeMeshDraco(const recon::IndexedMesh& mesh, const MeshCodecParams& params, std::vector<uint8_t>& out,
                        recon::IndexedMesh* encoded) {
     RETURN_IF_ERROR(params.validate());
-    if (mesh.triangles.empty()) return invalidArgument("Draco encoder: mesh has no triangles");
+    float lo[3], hi[3], range = 0.0f;
+    RETURN_IF_ERROR(checkedBounds(mesh, nullptr, lo, hi, range));
     const size_t nv_in = mesh.vertexCount();
-    for (const recon::Triangle& t : mesh.triangles) {
-        if (t[0] >= nv_in || t[1] >= nv_in || t[2] >= nv_in) {
-            return invalidArgument("Draco encoder: a triangle indexes past the " + num(nv_in) + " vertices");
-        }
-    }
-    float lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) lo[a] = std::numeric_limits<float>::max(), hi[a] = std::numeric_limits<float>::lowest();
-    for (size_t i = 0; i < nv_in; ++i) {
-        const Eigen::Vector3f& p = mesh.positions_m[i];
-        if (!p.allFinite()) return invalidArgument("Draco encoder: vertex " + num(i) + " is not finite");
-        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
-    }
-    float range = 0.0f;
-    for (int a = 0; a < 3; ++a) range = std::max(range, hi[a] - lo[a]);
-    if (range == 0.0f) range = 1.0f;  // Draco's own choice for a single point
     int position_bits =
         params.position_bits > 0 ? params.position_bits : positionBitsFor(range, params.max_position_error_m);
     DracoGrid grid;
@@ -175,49 +246,18 @@ Status encodeMeshDraco(const recon::IndexedMesh& mesh, const MeshCodecParams& pa
     work.triangles = mesh.triangles;
     recon::removeDefects(work);
     if (work.triangles.empty()) return invalidArgument("Draco encoder: no triangle survives quantisation");
-    const uint32_t nv = static_cast<uint32_t>(work.vertexCount());
-    const size_t nf = work.triangleCount();
-
-    draco::Mesh dm;
-    dm.set_num_points(nv);
-    dm.SetNumFaces(nf);
-    for (size_t f = 0; f < nf; ++f) {
-        const recon::Triangle& t = work.triangles[f];
-        dm.SetFace(draco::FaceIndex(static_cast<uint32_t>(f)),
-                   {draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
-    }
-    auto addAttribute = [&](draco::GeometryAttribute::Type type, draco::DataType dt, bool normalized, int bytes,
-                            const void* values) {
-        draco::GeometryAttribute ga;
-        ga.Init(type, nullptr, 3, dt, normalized, 3 * bytes, 0);
-        draco::PointAttribute* att = dm.attribute(dm.AddAttribute(ga, true, nv));
-        att->buffer()->Write(0, values, size_t(nv) * 3 * size_t(bytes));
-        return att;
-    };
-    static_assert(sizeof(Eigen::Vector3f) == 12 && sizeof(recon::Rgb8) == 3);
-    addAttribute(draco::GeometryAttribute::POSITION, draco::DT_FLOAT32, false, 4, work.positions_m.data());
     if (send_normals) {
         for (Eigen::Vector3f& n : work.normals) {
             if (!n.allFinite()) n.setZero();
         }
-        addAttribute(draco::GeometryAttribute::NORMAL, draco::DT_FLOAT32, false, 4, work.normals.data());
     }
-    if (work.hasColours()) {
-        addAttribute(draco::GeometryAttribute::COLOR, draco::DT_UINT8, true, 1, work.colours_rgb.data());
-    }
-
-    draco::Encoder encoder;
-    encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
-    encoder.SetSpeedOptions(params.speed, params.speed);
+    DracoAttributes attributes;
+    attributes.positions_m = &work.positions_m;
+    attributes.normals = send_normals ? &work.normals : nullptr;
+    attributes.colours_rgb = work.hasColours() ? &work.colours_rgb : nullptr;
     // The grid is given explicitly: Draco would otherwise take origin and range from the cleaned vertices, and a
     // dropped extreme vertex would move its grid off the one the mesh was cleaned on.
-    encoder.SetAttributeExplicitQuantization(draco::GeometryAttribute::POSITION, position_bits, 3, grid.min, range);
-    if (send_normals) encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, params.normal_bits);
-    draco::EncoderBuffer buffer;
-    const draco::Status st = encoder.EncodeMeshToBuffer(dm, &buffer);
-    if (!st.ok()) return internalError("Draco encoding failed: " + st.error_msg_string());
-    out.assign(reinterpret_cast<const uint8_t*>(buffer.data()),
-               reinterpret_cast<const uint8_t*>(buffer.data()) + buffer.size());
+    RETURN_IF_ERROR(encodeDracoBytes(work.triangles, attributes, params, position_bits, grid.min, range, out));
     if (encoded) *encoded = std::move(work);
     return Status::ok();
 }
@@ -230,75 +270,29 @@ Status encodeTexturedMeshDraco(const recon::TexturedMesh& textured, const MeshCo
                                std::vector<uint8_t>& out) {
     RETURN_IF_ERROR(params.validate());
     const recon::IndexedMesh& mesh = textured.mesh;
-    if (mesh.triangles.empty()) return invalidArgument("Draco encoder: mesh has no triangles");
     const size_t nv = mesh.vertexCount();
     if (textured.uv.size() != nv) {
         return invalidArgument("Draco encoder: " + num(textured.uv.size()) + " texture coordinates for " + num(nv) +
                                " vertices");
     }
     if (nv > std::numeric_limits<uint32_t>::max()) return invalidArgument("Draco encoder: too many vertices");
-    for (const recon::Triangle& t : mesh.triangles) {
-        if (t[0] >= nv || t[1] >= nv || t[2] >= nv) {
-            return invalidArgument("Draco encoder: a triangle indexes past the " + num(nv) + " vertices");
-        }
-    }
-    float lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) lo[a] = std::numeric_limits<float>::max(), hi[a] = std::numeric_limits<float>::lowest();
-    for (size_t i = 0; i < nv; ++i) {
-        const Eigen::Vector3f& p = mesh.positions_m[i];
-        if (!p.allFinite() || !textured.uv[i].allFinite()) {
-            return invalidArgument("Draco encoder: vertex " + num(i) + " is not finite");
-        }
-        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
-    }
-    float range = 0.0f;
-    for (int a = 0; a < 3; ++a) range = std::max(range, hi[a] - lo[a]);
-    if (range == 0.0f) range = 1.0f;
+    float lo[3], hi[3], range = 0.0f;
+    RETURN_IF_ERROR(checkedBounds(mesh, &textured.uv, lo, hi, range));
     const int position_bits =
         params.position_bits > 0 ? params.position_bits : positionBitsFor(range, params.max_position_error_m);
-
-    draco::Mesh dm;
-    dm.set_num_points(static_cast<uint32_t>(nv));
-    dm.SetNumFaces(mesh.triangles.size());
-    for (size_t f = 0; f < mesh.triangles.size(); ++f) {
-        const recon::Triangle& t = mesh.triangles[f];
-        dm.SetFace(draco::FaceIndex(static_cast<uint32_t>(f)),
-                   {draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
-    }
-    auto addAttribute = [&](draco::GeometryAttribute::Type type, int components, draco::DataType dt, bool normalized,
-                            int bytes, const void* values) {
-        draco::GeometryAttribute ga;
-        ga.Init(type, nullptr, static_cast<uint8_t>(components), dt, normalized, components * bytes, 0);
-        draco::PointAttribute* att = dm.attribute(dm.AddAttribute(ga, true, static_cast<uint32_t>(nv)));
-        att->buffer()->Write(0, values, nv * size_t(components) * size_t(bytes));
-    };
-    static_assert(sizeof(Eigen::Vector3f) == 12 && sizeof(Eigen::Vector2f) == 8 && sizeof(recon::Rgb8) == 3);
-    addAttribute(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32, false, 4, mesh.positions_m.data());
-    const bool send_normals = params.normal_bits > 0 && mesh.hasNormals();
-    if (send_normals) {
-        std::vector<Eigen::Vector3f> normals = mesh.normals;
+    DracoAttributes attributes;
+    attributes.positions_m = &mesh.positions_m;
+    std::vector<Eigen::Vector3f> normals;
+    if (params.normal_bits > 0 && mesh.hasNormals()) {
+        normals = mesh.normals;
         for (Eigen::Vector3f& n : normals) {
             if (!n.allFinite()) n.setZero();
         }
-        addAttribute(draco::GeometryAttribute::NORMAL, 3, draco::DT_FLOAT32, false, 4, normals.data());
+        attributes.normals = &normals;
     }
-    if (params.colours && mesh.hasColours()) {
-        addAttribute(draco::GeometryAttribute::COLOR, 3, draco::DT_UINT8, true, 1, mesh.colours_rgb.data());
-    }
-    addAttribute(draco::GeometryAttribute::TEX_COORD, 2, draco::DT_FLOAT32, false, 4, textured.uv.data());
-
-    draco::Encoder encoder;
-    encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
-    encoder.SetSpeedOptions(params.speed, params.speed);
-    encoder.SetAttributeQuantization(draco::GeometryAttribute::POSITION, position_bits);
-    if (send_normals) encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, params.normal_bits);
-    encoder.SetAttributeQuantization(draco::GeometryAttribute::TEX_COORD, params.uv_bits);
-    draco::EncoderBuffer buffer;
-    const draco::Status st = encoder.EncodeMeshToBuffer(dm, &buffer);
-    if (!st.ok()) return internalError("Draco encoding failed: " + st.error_msg_string());
-    out.assign(reinterpret_cast<const uint8_t*>(buffer.data()),
-               reinterpret_cast<const uint8_t*>(buffer.data()) + buffer.size());
-    return Status::ok();
+    attributes.colours_rgb = params.colours && mesh.hasColours() ? &mesh.colours_rgb : nullptr;
+    attributes.uv = &textured.uv;
+    return encodeDracoBytes(mesh.triangles, attributes, params, position_bits, nullptr, 0.0f, out);
 }
 
 StatusOr<DracoMeshInfo> inspectDracoMesh(const uint8_t* data, size_t size) {

@@ -9,10 +9,7 @@
 
 namespace facescan::service {
 
-void Watchdog::Beat::begin() {
-    step_limit_s_.store(0, std::memory_order_relaxed);
-    since_ns_.store(steadyNowNs(), std::memory_order_relaxed);
-}
+void Watchdog::Beat::begin() { beginLong(0); }
 void Watchdog::Beat::beginLong(double limit_s) {
     step_limit_s_.store(limit_s, std::memory_order_relaxed);
     since_ns_.store(steadyNowNs(), std::memory_order_relaxed);
