@@ -26,7 +26,8 @@ StatusOr<recon::TexturedMesh> decodeTexturedMesh(const std::vector<uint8_t>& dra
         return uint32_t{png[at]} << 24 | uint32_t{png[at + 1]} << 16 | uint32_t{png[at + 2]} << 8 | png[at + 3];
     };
     const uint32_t width = be32(16), height = be32(20);
-    const uint32_t max_px = static_cast<uint32_t>(recon::TextureParams{}.max_atlas_px);
+    // Any server's setting (texture.max_atlas_px), not this build's default.
+    const auto max_px = static_cast<uint32_t>(recon::kMaxAtlasPxLimit);
     if (width == 0 || height == 0 || width > max_px || height > max_px) {
         return dataLoss("the texture claims " + std::to_string(width) + " x " + std::to_string(height) +
                         " pixels (at most " + std::to_string(max_px) + " a side)");

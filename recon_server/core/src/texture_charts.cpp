@@ -75,7 +75,9 @@ Status TextureParams::validate() const {
     if (!(texels_per_pixel > 0 && texels_per_pixel <= 4)) {
         return invalidArgument("texels_per_pixel must be in (0, 4]");
     }
-    if (max_atlas_px < 64 || max_atlas_px > 16384) return invalidArgument("max_atlas_px must be in [64, 16384]");
+    if (max_atlas_px < 64 || max_atlas_px > kMaxAtlasPxLimit) {
+        return invalidArgument("max_atlas_px must be in [64, " + std::to_string(kMaxAtlasPxLimit) + "]");
+    }
     if (max_memory_bytes < (size_t{1} << 20)) return invalidArgument("max_memory_bytes must be at least 1 MiB");
     if (padding_px < 0 || padding_px > 64) return invalidArgument("padding_px must be in [0, 64] texels");
     if (!(cap_cos > 0 && cap_cos <= 1)) return invalidArgument("cap_cos must be in (0, 1]");

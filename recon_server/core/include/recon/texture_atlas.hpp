@@ -38,6 +38,9 @@ struct TextureView {
     Pose T_colour_mesh = Pose::Identity();  // maps the mesh's frame (metres) into this colour camera
 };
 
+// The largest atlas side a server may be set to (TextureParams::max_atlas_px): what a client accepts from any server.
+inline constexpr int kMaxAtlasPxLimit = 16384;  // pixels
+
 struct TextureParams {
     // metres of surface per texel; 0 = the colour camera's own resolution: the median distance from the views to
     // the mesh divided by their focal length, over `texels_per_pixel`
