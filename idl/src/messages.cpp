@@ -27,6 +27,12 @@ Status CameraInfoData::validate() const {
                                " deg: must be 0, 90, 180 or 270 (how far the person appears turned clockwise), or "
                                "unknown (auto)");
     }
+    if (dropped_before_seq != 0 && (!every_frame || followed_epoch == 0)) {
+        return invalidArgument(
+            "the agent says it dropped frames before " + std::to_string(dropped_before_seq) +
+            std::string(every_frame ? " without having followed an owner" : " of a live scan, which keeps none") +
+            ": the agent is broken or of another version");
+    }
     if (const Status s = sensor.validate(); !s.isOk())
         return invalidArgument("camera '" + sensor.name + "': " + s.message());
     const recon::Intrinsics& c = colourIntrinsics();
@@ -190,6 +196,8 @@ facescan_wire_CameraInfo toMessage(const CameraInfoData& info) {
     }
     // 0 on the wire is "unknown" (what an older agent leaves), so upright and known travels as a full turn.
     msg.roll_deg = info.roll_deg == CameraInfoData::kRollUnknown ? 0 : info.roll_deg == 0 ? 360 : info.roll_deg;
+    msg.followed_epoch = info.followed_epoch;
+    msg.dropped_before_seq = info.dropped_before_seq;
     return msg;
 }
 
@@ -256,6 +264,8 @@ StatusOr<CameraInfoData> fromMessage(const facescan_wire_CameraInfo& msg) {
                                "another version; run facescan-agent --roll auto|0|90|180|270");
     }
     info.roll_deg = msg.roll_deg == 0 ? CameraInfoData::kRollUnknown : msg.roll_deg % 360;
+    info.followed_epoch = msg.followed_epoch;
+    info.dropped_before_seq = msg.dropped_before_seq;
     RETURN_IF_ERROR(info.validate());
     return info;
 }

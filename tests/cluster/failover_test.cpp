@@ -173,6 +173,10 @@ TEST(Failover, KilledOwnerMidRecordingLosesNoFrameAndMatchesAnUninterruptedRun) 
     EXPECT_GE(std::stoi(kept), std::stoi(kept_base) - 1) << taker_log;  // a view near a threshold may differ
 }
 
+// A lone server confirms frames from its data dir, and its agent drops them. When it dies, a server that joins
+// afterwards sees the agent but no claim (the owner's went with it): it must not start the scan over from the
+// first frame (the dropped frames would be lost), but leave it to the server holding the copy, here the owner
+// restarted on its data dir.
 TEST(Failover, LoneServerKilledAndRestartedOnItsDataDirResumesWithoutLosingAFrame) {
     ClusterRig rig("restart", 43);
     rig.startServer("solo");
@@ -183,6 +187,11 @@ TEST(Failover, LoneServerKilledAndRestartedOnItsDataDirResumesWithoutLosingAFram
     ASSERT_TRUE(
         waitUntil([&] { return readText(rig.agentLog("rec")).find("waiting for one") != std::string::npos; }, 15s));
     EXPECT_TRUE(fs::exists(dir / "replica.log")) << "no replica in the data dir";
+    rig.startServer("newcomer");
+    ASSERT_TRUE(waitUntil(
+        [&] { return readText(rig.serverLog("newcomer")).find("its agent dropped frames 0-") != std::string::npos; },
+        60s))
+        << readText(rig.serverLog("newcomer")) << readText(rig.agentLog("rec"));
     rig.startServer("solo");  // the same id and data dir, as systemd restarts it
     ASSERT_EQ(rig.agent("rec").wait(120s), 0) << readText(rig.agentLog("rec"));
     const Finished got = finishedSession(dir);

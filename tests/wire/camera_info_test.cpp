@@ -2,7 +2,7 @@
 // CameraInfo (the appended fields zero) and an older server's replica (format 2) read as a Kinect v1; and each
 // description that cannot be right, and depth in the wrong units, is refused with one line saying what to do. The
 // agent's roll hint travels too (0 on the wire, an older agent's, is unknown) and a roll that is no quarter turn is
-// refused.
+// refused; so does a recording's progress (the owner epoch followed, the frames dropped), where it can be.
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -96,6 +96,28 @@ TEST(CameraInfo, ARollThatIsNoQuarterTurnIsRefusedWithOneLine) {
     const Status s = c.validate();
     ASSERT_FALSE(s.isOk());
     EXPECT_NE(s.message().find("0, 90, 180 or 270"), std::string::npos) << s.message();
+}
+
+TEST(CameraInfo, ARecordingsProgressRoundTripsAndAnImpossibleOneIsRefused) {
+    CameraInfoData in = trueDepthCamera();
+    in.every_frame = true;
+    in.followed_epoch = 3;
+    in.dropped_before_seq = 41;
+    ASSERT_TRUE(in.validate().isOk()) << in.validate().toString();
+    const auto out = fromMessage(toMessage(in));
+    ASSERT_TRUE(out.isOk()) << out.status().toString();
+    EXPECT_EQ(out->followed_epoch, 3u);
+    EXPECT_EQ(out->dropped_before_seq, 41u);
+    // Frames dropped by a live scan's agent (it keeps none), or before any owner confirmed them.
+    for (const auto& [every_frame, epoch] : {std::pair{false, 3u}, std::pair{true, 0u}}) {
+        facescan_wire_CameraInfo msg = toMessage(in);
+        msg.every_frame = every_frame;
+        msg.followed_epoch = epoch;
+        const auto bad = fromMessage(msg);
+        ASSERT_FALSE(bad.isOk()) << every_frame << " " << epoch;
+        EXPECT_NE(bad.status().message().find("dropped frames before 41"), std::string::npos) << bad.status().message();
+        EXPECT_EQ(bad.status().message().find('\n'), std::string::npos) << bad.status().message();
+    }
 }
 
 void expectRefused(const CameraInfoData& c, const std::string& says) {

@@ -296,7 +296,10 @@ Status Agent::run(const std::atomic<bool>& external_stop, const std::function<vo
     camera.T_colour_depth = info.colour_registered ? recon::Pose::Identity() : info.T_colour_depth;
     camera.roll_deg = options_.roll_deg;
     RETURN_IF_ERROR(camera.validate());
-    RETURN_IF_ERROR(s.info_writer.write(wire::toMessage(camera)));
+    // Written again as the recording's owners and confirmations change, always with this first timestamp: the
+    // servers order the sessions they place by it.
+    const dds_time_t camera_written_at = dds_time();
+    RETURN_IF_ERROR(s.info_writer.writeAt(wire::toMessage(camera), camera_written_at));
 
     // Nothing is read from the source until a server owns the session, so a recording loses no frame while we wait.
     const std::string where = options_.dds.describe();
@@ -404,6 +407,15 @@ Status Agent::run(const std::atomic<bool>& external_stop, const std::function<vo
         snapshot.kept = st.kept;
         snapshot.waiting = st.waiting;
         snapshot.digest = st.digest;
+        if (every_frame &&
+            (st.followed_epoch != camera.followed_epoch || st.dropped_before != camera.dropped_before_seq)) {
+            // What a server that restarted after the owner's claim went must know (the message's comment).
+            camera.followed_epoch = st.followed_epoch;
+            camera.dropped_before_seq = st.dropped_before;
+            if (const Status w = s.info_writer.writeAt(wire::toMessage(camera), camera_written_at); !w.isOk()) {
+                on_event("WARNING: cannot tell the servers how far session " + session_id_ + " got: " + w.toString());
+            }
+        }
         on_stats(snapshot);
         last_report = now;
         interval_bytes = 0;

@@ -130,7 +130,7 @@ bool SessionStream::follow(const std::atomic<bool>& stop, Clock::time_point dead
     no_server_since_ns_ = 0;
     if (writer_.matchedReaders() == 0) return false;  // the owner's reader is not discovered yet
     const wire::SessionOwnerData& d = o->data;
-    if (every_frame_) kept_.dropBefore(d.confirmed_seq);
+    if (every_frame_) dropConfirmed(d.confirmed_seq);
     state_.kept = kept_.size();
     state_.standby = d.standby_id;
     const bool new_owner = d.owner_id != state_.owner || d.epoch != state_.epoch;
@@ -148,6 +148,7 @@ bool SessionStream::follow(const std::atomic<bool>& stop, Clock::time_point dead
     }
     state_.owner = d.owner_id;
     state_.epoch = d.epoch;
+    state_.followed_epoch = std::max(state_.followed_epoch, d.epoch);
     replay_seen_ = d.replay_request;
     stalled_ = false;
     say("");
@@ -283,7 +284,7 @@ bool SessionStream::waitFinished(const std::atomic<bool>& stop, float timeout_s,
 
 std::vector<wire::EncodedFrame> SessionStream::unconfirmed() {
     link_.poll();
-    if (const std::optional<OwnerInfo>& o = link_.owner()) kept_.dropBefore(o->data.confirmed_seq);
+    if (const std::optional<OwnerInfo>& o = link_.owner()) dropConfirmed(o->data.confirmed_seq);
     std::vector<wire::EncodedFrame> frames;
     kept_.forEachFrom(0, [&](const wire::EncodedFrame& f, bool eos) {
         if (!eos) frames.push_back(f);
@@ -294,5 +295,10 @@ std::vector<wire::EncodedFrame> SessionStream::unconfirmed() {
 }
 
 StreamState SessionStream::state() const { return state_; }
+
+void SessionStream::dropConfirmed(uint32_t confirmed_seq) {
+    kept_.dropBefore(confirmed_seq);
+    if (every_frame_) state_.dropped_before = std::max(state_.dropped_before, confirmed_seq);
+}
 
 }  // namespace facescan::capture

@@ -166,6 +166,12 @@ class Writer {
         const dds_return_t rc = dds_write(entity_.handle(), &sample);
         return rc < 0 ? ddsStatus(rc, std::string("write ") + TopicTraits<T>::name()) : Status::ok();
     }
+    // The same with the source timestamp given: a sample written again keeps the first one's, which readers may
+    // use as an order that every one of them agrees on (a late joiner only ever sees the last sample).
+    Status writeAt(const T& sample, dds_time_t source_timestamp) {
+        const dds_return_t rc = dds_write_ts(entity_.handle(), &sample, source_timestamp);
+        return rc < 0 ? ddsStatus(rc, std::string("write ") + TopicTraits<T>::name()) : Status::ok();
+    }
     // Tells readers this instance (session) is gone for good.
     Status dispose(const T& key_sample) {
         const dds_return_t rc = dds_writedispose(entity_.handle(), &key_sample);

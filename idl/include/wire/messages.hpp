@@ -35,6 +35,10 @@ struct CameraInfoData {
     // 270 degrees, or kRollUnknown for the server to find it from the frames (an older agent sends none).
     static constexpr int kRollUnknown = -1;
     int roll_deg = kRollUnknown;
+    // A recording's progress as its agent last wrote it (the message's comment): the highest owner epoch followed,
+    // and the first frame it still holds (0: none dropped).
+    uint32_t followed_epoch = 0;
+    uint32_t dropped_before_seq = 0;
     const recon::Intrinsics& colourIntrinsics() const {
         return colour_intrinsics.width_px == 0 ? intrinsics : colour_intrinsics;
     }

@@ -246,6 +246,13 @@ int Cluster::othersKnown() const {
     return n;
 }
 
+int Cluster::othersHeardSince(int64_t since_ns) const {
+    std::lock_guard lk(mutex_);
+    int n = 0;
+    for (const auto& [id, p] : peers_) n += id != options_.server_id && p.alive && p.heard_ns >= since_ns ? 1 : 0;
+    return n;
+}
+
 bool Cluster::seesMajority() const {
     std::lock_guard lk(mutex_);
     const int64_t now = steadyNowNs();

@@ -83,6 +83,7 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
         }
         if (owned(id) || resumable_.count(id)) continue;
         if (refuseReusedId(id)) continue;
+        if (view == owners.end() && !placeableAsNew(id, c)) continue;
         const std::string*& first = next_of_writer[c.writer];
         if (!first || c.order_key < candidates_.at(*first).order_key) first = &id;
     }
@@ -132,11 +133,32 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
         o->camera_writer = c.writer;
         const auto before = owners.find(e.session_id);
         const wire::SessionOwnerData previous = before != owners.end() ? before->second.data : wire::SessionOwnerData{};
-        const uint32_t epoch = before != owners.end() ? before->second.data.epoch + 1 : 1;
+        // Above any epoch the agent followed too: a claim from before it that this server never saw may still be
+        // out there (its owner frozen or cut off), and must not win over this one.
+        const uint32_t epoch =
+            std::max(before != owners.end() ? before->second.data.epoch + 1 : 1u, c.camera.followed_epoch + 1);
         if (const Status s = claimSession(e.session_id, epoch, o, previous); !s.isOk()) {
             std::fprintf(stderr, "facescan-server: cannot claim %s: %s\n", e.session_id.c_str(), s.toString().c_str());
         }
     }
+}
+
+bool Server::placeableAsNew(const std::string& session_id, const Candidate& c) {
+    if (c.camera.followed_epoch == 0) return true;  // never owned (or an older agent): a new session
+    // Owned once, and no claim of it in view: this server joined after its owner's claim was gone (a restart), or
+    // its view is still filling in. Two leases after the join a live claim would be in view.
+    if (steadyNowNs() - joined_ns_ < 2 * lease_ns_) return false;
+    if (c.camera.dropped_before_seq == 0) return true;  // the agent still holds every frame: start over safely
+    // The agent dropped frames that an owner had confirmed: only a server holding the copy of them (as standby, or
+    // in its data dir after a restart) can continue the scan. Starting it over from the first frame here would
+    // lose them for good.
+    const std::string why = "session " + session_id + ": its agent dropped frames 0-" +
+                            std::to_string(c.camera.dropped_before_seq - 1) + ", which an owner (epoch " +
+                            std::to_string(c.camera.followed_epoch) +
+                            ") had confirmed, and no claim of it is in view: this server holds no copy of them and "
+                            "leaves the scan to the server that does (a restart of that server resumes it)";
+    if (refusals_logged_.insert(why).second) std::fprintf(stderr, "facescan-server: %s\n", why.c_str());
+    return false;
 }
 
 bool Server::refuseReusedId(const std::string& session_id) {

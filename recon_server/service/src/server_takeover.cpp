@@ -35,7 +35,7 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             continue;
         }
         const int64_t gone_since_ns = owner_gone_since_ns_.try_emplace(id, steadyNowNs()).first->second;
-        if (!witnessed(id, steadyNowNs() - gone_since_ns)) continue;
+        if (!witnessed(id, gone_since_ns)) continue;
         std::optional<wire::ReplicaData> standby;
         if (view.data.standby_id == params_.server_id) standby = replicator_->standbyCopy(id);
         const auto disk = resumable_.find(id);
@@ -43,7 +43,22 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         const bool live = (candidate != candidates_.end() && !candidate->second.camera.every_frame) ||
                           (standby && !standby->camera.every_frame) ||
                           (disk != resumable_.end() && !disk->second.camera.every_frame);
-        const TakeoverChoice choice = chooseTakeover(view.data, standby ? &*standby : nullptr,
+        // The agent's own account counts as much as the claim's: it may have followed a newer owner than this
+        // view shows, or dropped frames that an owner confirmed after the last claim this server saw.
+        wire::SessionOwnerData last = view.data;
+        if (candidate != candidates_.end()) {
+            const wire::CameraInfoData& agent = candidate->second.camera;
+            if (agent.followed_epoch > last.epoch) {
+                const std::string why = "session " + id + ": its agent followed an owner at epoch " +
+                                        std::to_string(agent.followed_epoch) + ", later than the last claim seen ('" +
+                                        last.owner_id + "', epoch " + std::to_string(last.epoch) +
+                                        "): this server's view is behind; it takes nothing over until it catches up";
+                if (refusals_logged_.insert(why).second) std::fprintf(stderr, "facescan-server: %s\n", why.c_str());
+                continue;
+            }
+            last.confirmed_seq = std::max(last.confirmed_seq, agent.dropped_before_seq);
+        }
+        const TakeoverChoice choice = chooseTakeover(last, standby ? &*standby : nullptr,
                                                      disk != resumable_.end() ? &disk->second : nullptr, live);
         if (choice.kind == TakeoverChoice::Kind::kFromFirstFrame) {
             // Nobody holds a replica (the owner died before its first one reached a standby or its disk), and the
@@ -108,11 +123,24 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             }
         }
         if (view == owners.end()) {
+            // The agent's account (the message's comment): the frames it dropped must all be in this copy.
+            const auto agent = candidates_.find(it->first);
+            const uint32_t followed = agent != candidates_.end() ? agent->second.camera.followed_epoch : 0u;
+            const uint32_t dropped = agent != candidates_.end() ? agent->second.camera.dropped_before_seq : 0u;
+            if (it->second.camera.every_frame && it->second.next_seq < dropped) {
+                const std::string why = "session " + it->first + ": the replica in " + params_.data_dir.string() +
+                                        " ends at frame " + std::to_string(it->second.next_seq) +
+                                        " and the agent holds frames only from " + std::to_string(dropped) +
+                                        " on: frames between exist on another server; not resuming from this copy";
+                if (refusals_logged_.insert(why).second) std::fprintf(stderr, "facescan-server: %s\n", why.c_str());
+                ++it;
+                continue;
+            }
             auto o = std::make_shared<OwnedSession>();
             o->takeover_from_ns = steadyNowNs();
             // Above every epoch this session had, including those of the servers that continued it meanwhile.
             const uint32_t epoch =
-                std::max(it->second.epoch, elsewhere != held_elsewhere_.end() ? elsewhere->second : 0u) + 1;
+                std::max({it->second.epoch, elsewhere != held_elsewhere_.end() ? elsewhere->second : 0u, followed}) + 1;
             held_elsewhere_.erase(it->first);
             std::fprintf(stderr, "facescan-server: session %s: resuming from %s at frame %u (epoch %u)\n",
                          it->first.c_str(), params_.data_dir.c_str(), it->second.next_seq, epoch);
@@ -203,24 +231,33 @@ bool Server::rejoining() {
     return now < rejoin_until_ns_;
 }
 
-bool Server::witnessed(const std::string& session_id, int64_t owner_gone_for_ns) const {
+bool Server::witnessed(const std::string& session_id, int64_t owner_gone_since_ns) const {
     // A server cut off from the network sees every other server and every agent go. A takeover on that view would
     // win when the network heals (its epoch is higher) over the owner that went on scanning, and would ask the
     // agent for frames that it dropped once that owner had them confirmed: the scan would stall for good. So a
     // takeover needs a witness that the owner, not this server, is the one gone: most of the servers this one knows
-    // still in view (a server cut off never has that), or else the session's agent still heard half a lease after
-    // the owner's claim lapsed. An agent's lease lapses later than a claim's (its participant goes only once
-    // Cyclone has collected it, slower on a loaded machine); the wait is what a server cut off needs to see it go,
-    // and what a cluster of two, where the survivor never has a majority, pays on every takeover.
+    // heard from since the owner's claim lapsed (a server cut off never has that), or else the session's agent
+    // still in view half a lease after the lapse. An agent's lease lapses later than a claim's (its participant goes
+    // only once Cyclone has collected it, slower on a loaded machine); the wait is what a server cut off needs to
+    // see it go, and what a cluster of two, where the survivor never has a majority, pays on every takeover.
+    //
+    // Heard, not merely alive: the peers' leases lapse one by one in the eyes of a server cut off, the owner's first
+    // as often as not, and in the moment between the two the others still look alive. A takeover then split scans
+    // in chaos runs, and worse, was made on the claim as it stood when the cut began: frames the owner had
+    // confirmed since (the agent dropped them) were nowhere in the new owner's reach. An announcement that arrived
+    // after the lapse proves that the network still carries that peer's messages; every server announces at least
+    // once a second, so this costs a takeover about that much.
     //
     // Losing every one of two or more other servers at once is, seen from inside, what a cut-off looks like (two
     // failures at the same moment are rare). The agent then goes from this server's view too, but Cyclone can
-    // take seconds longer to notice it than the claim's lapse (in a chaos run a server cut off took a
-    // session over 2.4 s after the owner's lapse, its agent still in view, and split the scan). So that case waits
-    // two leases for the agent to go; a single lost peer (a cluster of two) keeps the short wait.
-    if (cluster_->seesMajority()) return true;
-    const bool lost_all = cluster_->othersAlive() == 0 && cluster_->othersKnown() >= 2;
-    if (owner_gone_for_ns < (lost_all ? 2 * lease_ns_ : lease_ns_ / 2)) return false;
+    // take seconds longer to notice it than the claim's lapse. So that case waits two leases for the agent to go;
+    // a single lost peer (a cluster of two) keeps the short wait.
+    const int known = 1 + cluster_->othersKnown();
+    const int heard = 1 + cluster_->othersHeardSince(owner_gone_since_ns);
+    if (2 * heard > known) return true;
+    const bool lost_all = heard == 1 && known >= 3;
+    const int64_t gone_for_ns = steadyNowNs() - owner_gone_since_ns;
+    if (gone_for_ns < (lost_all ? 2 * lease_ns_ : lease_ns_ / 2)) return false;
     return agentLives(session_id);
 }
 

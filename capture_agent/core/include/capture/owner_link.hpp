@@ -95,6 +95,8 @@ struct StreamState {
     std::string waiting;                       // why nothing is sent now (empty: streaming)
     int servers = 0;                           // servers alive on the domain
     uint64_t digest = wire::kFrameDigestSeed;  // of every frame sent (the first time), as the server digests them
+    uint32_t followed_epoch = 0;               // the highest owner epoch streamed to
+    uint32_t dropped_before = 0;               // recordings: frames before it were confirmed and dropped
 };
 
 // How long the agent's frame writes may block before they look at `stop` and the owner again. The writer's
@@ -147,6 +149,7 @@ class SessionStream {
     // The claim now names another owner or epoch than the one the stream follows.
     bool ownerChanged() const;
     void say(const std::string& waiting);
+    void dropConfirmed(uint32_t confirmed_seq);  // a recording's frames before it: an owner has them
 
     OwnerLink link_;
     wire::Writer<facescan_wire_RgbdFrame>& writer_;

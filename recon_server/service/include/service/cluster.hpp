@@ -120,6 +120,9 @@ class Cluster {
     bool seesMajority() const;
     int othersAlive() const;  // other servers alive in this server's view
     int othersKnown() const;  // other servers alive, or seen within the last minutes
+    // Other servers alive whose announcement arrived at or after `since_ns` (steady clock): proof that the network
+    // still carries their messages to this server, which a liveliness not yet lapsed is not.
+    int othersHeardSince(int64_t since_ns) const;
     // Live, joined, compatible servers with their load: self included once joined. Open counts come from the
     // claims (the same on every server), capacities and standbys from the announcements.
     std::vector<ServerLoad> liveLoads() const;

@@ -173,13 +173,16 @@ class Server {
     void requestReplays();
     void releaseStale();
     // Whether a takeover may go ahead: most servers still in view, or else the agent still heard half a lease later.
-    bool witnessed(const std::string& session_id, int64_t owner_gone_for_ns) const;
+    bool witnessed(const std::string& session_id, int64_t owner_gone_since_ns) const;
     bool agentLives(const std::string& session_id) const;  // its CameraInfo writer is alive in this view
     // Whether this server is cut off, or back from it and re-observing the cluster before it takes anything over.
     bool rejoining();
     // A new scan under the id of one that finished in this server's data dir: refused with a FINISHED claim (true),
     // so that no server places it and its agent says why.
     bool refuseReusedId(const std::string& session_id);
+    // A recording whose agent followed an owner, with no claim of it in view: whether it may be placed as new (from
+    // the first frame, above the epoch followed), else why not, said once.
+    bool placeableAsNew(const std::string& session_id, const Candidate& c);
     Status claimSession(const std::string& session_id, uint32_t epoch, std::shared_ptr<OwnedSession> owned,
                         const wire::SessionOwnerData& previous);
     void buildEngine(OwnedSession& owned);  // starts the build of owned.engine
