@@ -360,6 +360,17 @@ class ChaosRun {
 
     void checkScans() {
         for (const Scan& s : scans_) {
+            if (!s.recording) {
+                // A live scan's agent ends (Ctrl-C) without waiting for the result: its owner finishes it at a low
+                // priority, which on a loaded machine takes a while.
+                (void)waitUntil(
+                    [&] {
+                        return std::any_of(kServers.begin(), kServers.end(), [&](const std::string& id) {
+                            return fs::exists(rig_.dataDir(id) / s.id / "summary.json");
+                        });
+                    },
+                    60s);
+            }
             std::vector<std::string> wrote;  // the servers with any file of this session
             std::vector<fs::path> summaries;
             for (const std::string& id : kServers) {

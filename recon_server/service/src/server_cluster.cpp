@@ -362,10 +362,27 @@ void Server::yield(const std::string& session_id, const std::string& why, const 
                      session_id.c_str(), why.c_str(), written.c_str());
         return;
     }
+    if (agent_lives) keepCopyInCase(session_id, winner);
     std::fprintf(
         stderr, "facescan-server: session %s: gave it up, %s; nothing written for it here%s\n", session_id.c_str(),
         why.c_str(),
         integrated > 0 ? (" (the " + std::to_string(integrated) + " frames integrated here are dropped)").c_str() : "");
+}
+
+void Server::keepCopyInCase(const std::string& session_id, const OwnerView& winner) {
+    // The new owner may have continued from an older copy than this server's (a standby that missed rounds), and
+    // may die before its own copy reaches anyone: the frames between the two, which the agent dropped once this
+    // server had them confirmed, then exist in this data dir only. So a recording's copy here is kept ready as a
+    // restarted server keeps one (takeOverOrphans continues it if that owner fails too), until the scan finishes.
+    const std::filesystem::path dir = params_.data_dir / session_id;
+    std::error_code ec;
+    if (!std::filesystem::exists(dir / "replica.log", ec)) return;
+    std::string warning;
+    auto copy = loadReplicaLog(dir, &warning);
+    if (!copy.isOk() || copy->session_id != session_id || !copy->camera.every_frame) return;
+    uint32_t& held = held_elsewhere_[session_id];
+    held = std::max(held, winner.data.epoch);
+    resumable_[session_id] = std::move(*copy);
 }
 
 void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_claim) {
