@@ -101,7 +101,9 @@ Status Server::start() {
     ASSIGN_OR_RETURN(cluster_, Cluster::create(p, cluster));
     // A server whose own sessions are held replicates nothing: they may be another server's by now.
     ASSIGN_OR_RETURN(replicator_, Replicator::create(p, params_, *cluster_, [this] {
-                         return ownSessionsFree() ? ownedSessions() : std::vector<std::shared_ptr<OwnedSession>>{};
+                         std::vector<std::shared_ptr<OwnedSession>> free = ownedSessions();
+                         std::erase_if(free, [this](const auto& o) { return !sessionFree(o->recording.load()); });
+                         return free;
                      }));
 
     const dds_entity_t ws = dds_create_waitset(p.handle());
@@ -557,10 +559,9 @@ void Server::snapshotLoop() {
                                                 : std::chrono::duration<double>(0.5);
     auto next = std::chrono::steady_clock::now();
     while (waitForTick(next, period)) {
-        if (!ownSessionsFree()) continue;
         std::vector<std::shared_ptr<Session>> all;
         for (const auto& o : ownedSessions()) {
-            if (o->session) all.push_back(o->session);
+            if (o->session && sessionFree(o->recording.load())) all.push_back(o->session);
         }
         for (auto& s : all) {
             if (auto fin = s->takeFinalSnapshot()) {
@@ -579,8 +580,9 @@ void Server::statusLoop() {
     std::map<std::string, bool> final_sent;  // finished sessions: their FINISHED status went out once
     auto next = std::chrono::steady_clock::now();
     while (waitForTick(next, period)) {
-        if (!ownSessionsFree()) continue;
+        if (!sessionFree(/*recording=*/false)) continue;  // a pause not noticed yet
         std::vector<std::shared_ptr<OwnedSession>> all = ownedSessions();
+        std::erase_if(all, [this](const auto& o) { return !sessionFree(o->recording.load()); });
         std::map<std::string, Refused> refused;
         {
             std::lock_guard lk(sessions_mutex_);
@@ -599,6 +601,17 @@ void Server::statusLoop() {
             if (st.state == SessionState::kFinished) {
                 if (final_sent[st.session_id]) continue;
                 final_sent[st.session_id] = true;
+            } else if (now - s->lastActivityNs() > idle_ns && o->recording && o->agent_alive) {
+                // A recording's agent that lives still holds the frames to come (a takeover, a peer that holds
+                // its writes back): finishing now would make a partial scan of the person for good.
+                if (!o->idle_said) {
+                    std::fprintf(stderr,
+                                 "facescan-server: session %s: no frame for %.0f s, but its agent (a recording) is "
+                                 "still there: waiting for the rest instead of finishing without it (facescan finish "
+                                 "%s ends it now)\n",
+                                 o->id.c_str(), params_.idle_timeout_s, o->id.c_str());
+                    o->idle_said = true;
+                }
             } else if (now - s->lastActivityNs() > idle_ns) {
                 s->requestFinish("idle for " + std::to_string(static_cast<int>(params_.idle_timeout_s)) + " s",
                                  nullptr);

@@ -28,7 +28,10 @@ constexpr int64_t kReplayRepeatNs = 300'000'000;  // at most this often a new re
 
 void Server::clusterTick() {
     int open = 0;
-    for (const auto& o : ownedSessions()) open += o->phase != OwnedSession::Phase::kFinished ? 1 : 0;
+    for (const auto& o : ownedSessions()) {
+        open += o->phase != OwnedSession::Phase::kFinished ? 1 : 0;
+        o->agent_alive = agentLives(o->id);
+    }
     cluster_->announce(open, standbySessions());
     const std::map<std::string, OwnerView> owners = cluster_->owners();
     settleClaims(owners);  // while the view is stale, only to give up what another server owns now
@@ -290,7 +293,9 @@ Status Server::activate(OwnedSession& o) {
         if (wake_.valid()) dds_set_guardcondition(wake_.handle(), true);
     });
     session->setOwnership(params_.server_id, o.epoch);
-    session->setWatch(watchdog_->add("the worker of session " + o.id), [this] { return !ownSessionsFree(); });
+    o.recording = o.restore_from ? o.restore_from->camera.every_frame : !o.camera || o.camera->every_frame;
+    session->setWatch(watchdog_->add("the worker of session " + o.id),
+                      [this, recording = o.recording.load()] { return !sessionFree(recording); });
     SessionEngine engine;
     if (o.engine.valid()) {
         ASSIGN_OR_RETURN(engine, o.engine.get());

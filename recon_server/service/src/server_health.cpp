@@ -51,6 +51,17 @@ bool Server::ownSessionsFree() const {
     return now >= hold_until_ns_.load() && now - watchdog_->lastCheckNs() < lease_ns_ / 2;
 }
 
+bool Server::sessionFree(bool recording) const {
+    // After a pause long enough to lose its claims, only recordings are held. What the hold guards against is a
+    // server that goes on confirming frames of a scan that was taken over meanwhile (its agent then drops frames
+    // the new owner's copy lacks). A live scan's agent keeps no frames, so nothing can be confirmed away: the worst
+    // a live session taken over meanwhile does here is integrate frames that it drops, writing nothing, when it
+    // sees the stronger claim. Held, it would stall the person's scan for two leases after every such pause.
+    const int64_t now = steadyNowNs();
+    if (now - watchdog_->lastCheckNs() >= lease_ns_ / 2) return false;  // the pause is not noticed yet
+    return !recording || now >= hold_until_ns_.load();
+}
+
 void Server::assertProgress(int64_t now_ns) {
     // A few times a lease is enough for the readers' lease, and cheap (one small message per peer). Often enough
     // that a server cut off sees the agents' leases lapse soon after its peers' claims (Server::witnessed).

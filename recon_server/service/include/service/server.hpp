@@ -67,6 +67,9 @@ struct OwnedSession {
     std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames;
     dds_entity_t frame_condition = 0;
     bool ahead = false;  // a recording frame after a gap arrived: the agent must resend
+    std::atomic<bool> recording{true};  // every frame kept by its agent (set by activate(); held after long pauses)
+    std::atomic<bool> agent_alive{false};  // its agent's CameraInfo writer is alive (the intake thread's view)
+    bool idle_said = false;                // status thread: "waiting for the agent" said once
     int64_t last_replay_request_ns = 0;
     int64_t last_reassert_ns = 0;             // the claim last written again because it looked gone (settleClaims)
     dds_instance_handle_t camera_writer = 0;  // the CameraInfo writer (flood control)
@@ -203,6 +206,7 @@ class Server {
     void noticePause(int64_t gap_ns, int64_t now_ns);
     bool viewFresh() const;        // not re-observing the cluster after a pause: it may take over and place
     bool ownSessionsFree() const;  // its own sessions may go on (not held after a pause long enough to lose them)
+    bool sessionFree(bool recording) const;  // a session may: a live scan is not held (server_health.cpp)
     void assertProgress(int64_t now_ns);    // the announcement's and claims' liveliness (wire::withProgressLiveliness)
     void onStall(const std::string& what);  // the watchdog found a loop stuck: say so and exit non-zero
     // Fault injection for the cluster tests, as etcd's gofail or FreeBSD's fail(9): with FACESCAN_FAILPOINT=
