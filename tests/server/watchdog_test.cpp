@@ -49,6 +49,11 @@ TEST(Watchdog, ALoopStuckInOneStepIsReportedByNameAndAWaitingOneIsNot) {
     std::lock_guard lk(mutex);
     ASSERT_EQ(said.size(), 1u);
     EXPECT_NE(said[0].find("the stuck loop has been in one step for"), std::string::npos) << said[0];
+    // A step of several calls names the one it is in.
+    stuck->note("deleting a reader");
+    const std::optional<std::string> doing = watchdog.stalled(steadyNowNs() + 3'000'000'000);
+    ASSERT_TRUE(doing.has_value());
+    EXPECT_NE(doing->find("the stuck loop has been in one step (deleting a reader) for"), std::string::npos) << *doing;
     stuck->end();
     EXPECT_FALSE(watchdog.stalled(steadyNowNs() + 3'000'000'000).has_value());
 }

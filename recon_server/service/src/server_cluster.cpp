@@ -401,11 +401,15 @@ void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_cl
     if (dispose_claim && o->claim) o->claim->release();
     // The replication thread may still hold the OwnedSession for a moment (it copies the list each turn): the
     // retiring thread waits until it holds the last reference, so the endpoints end there and in this order.
-    retirer_->retire([held = o]() mutable {
+    retirer_->retire([this, held = o]() mutable {
+        retirer_->note("waiting for the other threads to let go of a session");
         for (int i = 0; i < 1000 && held.use_count() > 1; ++i)
             std::this_thread::sleep_for(std::chrono::milliseconds(5));
-        held->frames.reset();   // no more frames for this session here
-        held->claim.reset();    // withdrawn (or released above)
+        retirer_->note("deleting a session's frame reader");
+        held->frames.reset();  // no more frames for this session here
+        retirer_->note("deleting a session's claim writer");
+        held->claim.reset();  // withdrawn (or released above)
+        retirer_->note("stopping a session's worker");
         held->session.reset();  // its worker stops; joined here, never on itself
         held.reset();
     });

@@ -12,9 +12,13 @@ namespace facescan::service {
 void Watchdog::Beat::begin() { beginLong(0); }
 void Watchdog::Beat::beginLong(double limit_s) {
     step_limit_s_.store(limit_s, std::memory_order_relaxed);
+    doing_.store(nullptr, std::memory_order_relaxed);
     since_ns_.store(steadyNowNs(), std::memory_order_relaxed);
 }
-void Watchdog::Beat::end() { since_ns_.store(0, std::memory_order_relaxed); }
+void Watchdog::Beat::end() {
+    since_ns_.store(0, std::memory_order_relaxed);
+    doing_.store(nullptr, std::memory_order_relaxed);
+}
 
 Watchdog::Watchdog(Options options, std::function<void(const std::string&)> on_stall,
                    std::function<void(int64_t, int64_t)> on_pause)
@@ -42,9 +46,11 @@ std::optional<std::string> Watchdog::stalled(int64_t now_ns) const {
         since = std::max(since, resumed_ns_.load(std::memory_order_relaxed));
         const double limit_s = beat->limitS() > 0 ? beat->limitS() : options_.stall_limit_s;
         if (now_ns - since <= static_cast<int64_t>(limit_s * 1e9)) continue;
-        char what[256];
-        std::snprintf(what, sizeof what, "%s has been in one step for %.1f s (the limit is %.1f s)",
-                      beat->name().c_str(), static_cast<double>(now_ns - since) * 1e-9, limit_s);
+        char what[320];
+        const char* doing = beat->doing();
+        std::snprintf(what, sizeof what, "%s has been in one step%s%s%s for %.1f s (the limit is %.1f s)",
+                      beat->name().c_str(), doing ? " (" : "", doing ? doing : "", doing ? ")" : "",
+                      static_cast<double>(now_ns - since) * 1e-9, limit_s);
         return std::string(what);
     }
     return std::nullopt;

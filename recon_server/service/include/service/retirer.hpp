@@ -29,6 +29,10 @@ class Retirer {
     // Runs `end` on the retiring thread, after everything handed over before it. `end` and whatever it captured
     // are destroyed there too.
     void retire(std::function<void()> end);
+    // From a job: what it does now (a string literal), named if it hangs (Watchdog::Beat::note).
+    void note(const char* doing) {
+        if (beat_) beat_->note(doing);
+    }
 
  private:
     void loop();

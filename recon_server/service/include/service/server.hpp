@@ -66,8 +66,8 @@ struct OwnedSession {
     uint32_t failovers_before = 0;                  // a takeover from the first frame: the claim's count until then
     std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames;
     dds_entity_t frame_condition = 0;
-    bool ahead = false;  // a recording frame after a gap arrived: the agent must resend
-    std::atomic<bool> recording{true};  // every frame kept by its agent (set by activate(); held after long pauses)
+    bool ahead = false;                    // a recording frame after a gap arrived: the agent must resend
+    std::atomic<bool> recording{true};     // every frame kept by its agent (set by activate(); held after long pauses)
     std::atomic<bool> agent_alive{false};  // its agent's CameraInfo writer is alive (the intake thread's view)
     bool idle_said = false;                // status thread: "waiting for the agent" said once
     int64_t last_replay_request_ns = 0;
@@ -207,8 +207,8 @@ class Server {
     bool viewFresh() const;        // not re-observing the cluster after a pause: it may take over and place
     bool ownSessionsFree() const;  // its own sessions may go on (not held after a pause long enough to lose them)
     bool sessionFree(bool recording) const;  // a session may: a live scan is not held (server_health.cpp)
-    void assertProgress(int64_t now_ns);    // the announcement's and claims' liveliness (wire::withProgressLiveliness)
-    void onStall(const std::string& what);  // the watchdog found a loop stuck: say so and exit non-zero
+    void assertProgress(int64_t now_ns);     // the announcement's and claims' liveliness (wire::withProgressLiveliness)
+    void onStall(const std::string& what);   // the watchdog found a loop stuck: say so and exit non-zero
     // Fault injection for the cluster tests, as etcd's gofail or FreeBSD's fail(9): with FACESCAN_FAILPOINT=
     // intake-stall-when-file:PATH the intake thread stops for good once PATH exists, a real stall of a real
     // thread that the watchdog and the cluster must handle. Unset in production.

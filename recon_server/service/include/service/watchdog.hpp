@@ -28,6 +28,10 @@ class Watchdog {
         // this many seconds instead; the next begin() goes back to the usual limit.
         void beginLong(double limit_s);
         void end();  // back to waiting for work: not expected to progress
+        // Names what the current step is doing now (a string literal, kept by pointer), for the stall's message:
+        // a step of several calls says which one hung. begin() and end() clear it.
+        void note(const char* doing) { doing_.store(doing, std::memory_order_relaxed); }
+        const char* doing() const { return doing_.load(std::memory_order_relaxed); }
         int64_t busySinceNs() const { return since_ns_.load(std::memory_order_relaxed); }
         const std::string& name() const { return name_; }
         // 0: the watchdog's stall limit
@@ -41,6 +45,7 @@ class Watchdog {
         double limit_s_ = 0;
         std::atomic<double> step_limit_s_{0};  // this step's own limit (beginLong); 0: limit_s_
         std::atomic<int64_t> since_ns_{0};     // steady clock; 0 while waiting
+        std::atomic<const char*> doing_{nullptr};
     };
 
     struct Options {
