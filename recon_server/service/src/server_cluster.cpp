@@ -356,6 +356,7 @@ void Server::yield(const std::string& session_id, const std::string& why, const 
     if (o->session) o->session->abandon(/*discard_written=*/agent_lives || superseded);
     retireOwned(o, /*dispose_claim=*/false);
     unlist(session_id);
+    if (!agent_lives && !superseded) given_up_results_[session_id] = {o->epoch, next_seq, steadyNowNs()};
     if (!written.empty() && (agent_lives || superseded)) {
         removeResultFiles(session_id, written, "gave it up, " + why);
         return;

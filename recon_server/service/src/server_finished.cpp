@@ -98,6 +98,31 @@ void Server::dropSupersededResults(const std::map<std::string, OwnerView>& owner
         // The claim (FINISHED, this epoch) goes with the record without disposing: the winner's stays.
     }
     for (const auto& [session_id, winner] : fuller) claimFullerResult(session_id, winner);
+    // Results of sessions given up (yield): written before the yield, or by a finish that was under way then.
+    constexpr int64_t kWatchGivenUpNs = 600'000'000'000;  // a winner that has not finished by then is not waited for
+    for (auto it = given_up_results_.begin(); it != given_up_results_.end();) {
+        const auto view = owners.find(it->first);
+        if (steadyNowNs() - it->second.since_ns > kWatchGivenUpNs) {
+            it = given_up_results_.erase(it);
+            continue;
+        }
+        if (view == owners.end() || !resultSuperseded(view->second, it->second.epoch, it->second.next_seq)) {
+            ++it;
+            continue;
+        }
+        const auto dir = findFinishedSessionDir(params_.data_dir, it->first, params_.server_id);
+        if (!dir) {
+            ++it;  // a finish may still be writing it
+            continue;
+        }
+        const wire::SessionOwnerData& winner = view->second.data;
+        removeResultFiles(it->first, *dir,
+                          "server '" + winner.owner_id + "' finished it too (epoch " + std::to_string(winner.epoch) +
+                              ", " + std::to_string(winner.resume_seq) + " frames; this server gave it up at epoch " +
+                              std::to_string(it->second.epoch) + " with " + std::to_string(it->second.next_seq) +
+                              " frames)");
+        it = given_up_results_.erase(it);
+    }
 }
 
 bool Server::holdsFullerResult(const OwnerView& view, const SessionStats& mine) const {

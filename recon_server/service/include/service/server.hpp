@@ -260,6 +260,15 @@ class Server {
     std::map<std::string, wire::ReplicaData> resumable_;  // from the data dir, waiting for the join to end
     // Of those, the ones another live server continues: the highest epoch seen there, kept for a takeover.
     std::map<std::string, uint32_t> held_elsewhere_;
+    // Sessions given up whose result here stays for now (their agent is gone, so it may hold frames the new owner
+    // never gets) or may still be written by a finish under way: epoch and frames, until the new owner's FINISHED
+    // claim has every one of them (dropSupersededResults removes the files then).
+    struct GivenUpResult {
+        uint32_t epoch = 0;
+        uint32_t next_seq = 0;
+        int64_t since_ns = 0;
+    };
+    std::map<std::string, GivenUpResult> given_up_results_;
     int64_t joined_ns_ = 0;         // steady clock: when the join ended
     int64_t cut_off_since_ns_ = 0;  // steady clock: since when this server sees no other server and no agent
     int64_t rejoin_until_ns_ = 0;   // steady clock: re-observing the cluster until then (rejoining)
