@@ -86,9 +86,10 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         std::fprintf(
             stderr,
             "facescan-server: session %s: owner '%s' is gone; taking over at frame %u (epoch %u, %.0f ms after "
-            "its last sign of life)\n",
+            "its last sign of life, %.0f ms after its claim lapsed here)\n",
             id.c_str(), view.data.owner_id.c_str(), copy->next_seq, epoch,
-            static_cast<double>(steadyNowNs() - o->takeover_from_ns) * 1e-6);
+            static_cast<double>(steadyNowNs() - o->takeover_from_ns) * 1e-6,
+            static_cast<double>(steadyNowNs() - gone_since_ns) * 1e-6);
         o->restore_from = std::move(copy);
         if (const Status s = claimSession(id, epoch, o, view.data); !s.isOk()) {
             std::fprintf(stderr, "facescan-server: cannot take over %s: %s\n", id.c_str(), s.toString().c_str());
