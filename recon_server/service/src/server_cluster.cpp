@@ -86,7 +86,7 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
         }
         if (owned(id) || resumable_.count(id)) continue;
         if (refuseReusedId(id)) continue;
-        if (view == owners.end() && !placeableAsNew(id, c)) continue;
+        if (!placeableAsNew(id, c)) continue;  // no claim in view, or a released one: both start from scratch
         const std::string*& first = next_of_writer[c.writer];
         if (!first || c.order_key < candidates_.at(*first).order_key) first = &id;
     }

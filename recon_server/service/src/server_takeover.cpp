@@ -38,11 +38,15 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         if (!witnessed(id, gone_since_ns)) continue;
         std::optional<wire::ReplicaData> standby;
         if (view.data.standby_id == params_.server_id) standby = replicator_->standbyCopy(id);
+        // A copy taken before the first frame was integrated has no volume yet: nothing to continue from.
+        if (standby && !standby->state.validate().isOk()) standby.reset();
         const auto disk = resumable_.find(id);
         const auto candidate = candidates_.find(id);
-        const bool live = (candidate != candidates_.end() && !candidate->second.camera.every_frame) ||
-                          (standby && !standby->camera.every_frame) ||
-                          (disk != resumable_.end() && !disk->second.camera.every_frame);
+        // Live or a recording: the agent says so itself when it is in view; the copies only otherwise.
+        const bool live = candidate != candidates_.end()
+                              ? !candidate->second.camera.every_frame
+                              : (standby && !standby->camera.every_frame) ||
+                                    (disk != resumable_.end() && !disk->second.camera.every_frame);
         // The agent's own account counts as much as the claim's: it may have followed a newer owner than this
         // view shows, or dropped frames that an owner confirmed after the last claim this server saw.
         wire::SessionOwnerData last = view.data;
@@ -58,8 +62,9 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             }
             last.confirmed_seq = std::max(last.confirmed_seq, agent.dropped_before_seq);
         }
-        const TakeoverChoice choice = chooseTakeover(last, standby ? &*standby : nullptr,
-                                                     disk != resumable_.end() ? &disk->second : nullptr, live);
+        const TakeoverChoice choice = chooseTakeover(
+            last, standby ? &*standby : nullptr,
+            disk != resumable_.end() && disk->second.state.validate().isOk() ? &disk->second : nullptr, live);
         if (choice.kind == TakeoverChoice::Kind::kFromFirstFrame) {
             // Nobody holds a replica (the owner died before its first one reached a standby or its disk), and the
             // agent still keeps every frame from the first: the scan starts over from there and loses nothing. A
@@ -101,8 +106,14 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
     //    a standby, this copy is the only one left of the frames the agent has dropped (a restart of each server in
     //    turn lost them).
     for (auto it = resumable_.begin(); it != resumable_.end();) {
-        const auto view = owners.find(it->first);
+        auto view = owners.find(it->first);
         const auto elsewhere = held_elsewhere_.find(it->first);
+        // A claim released (its server could not start the scan, or no frame came) holds nothing: this copy may be
+        // what the scan continues from, above the released claim's epoch.
+        const uint32_t released_epoch = view != owners.end() && view->second.data.state == wire::OwnerState::kReleased
+                                            ? view->second.data.epoch
+                                            : 0u;
+        if (released_epoch > 0) view = owners.end();
         if (view == owners.end() && cluster_->othersKnown() > 0) {
             // No claim in view, in a cluster. Right after the join the other servers' claims may still be on their
             // way: a resume then would compete with the scan's live owner. And once the agent is gone too, the
@@ -141,7 +152,9 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             o->takeover_from_ns = steadyNowNs();
             // Above every epoch this session had, including those of the servers that continued it meanwhile.
             const uint32_t epoch =
-                std::max({it->second.epoch, elsewhere != held_elsewhere_.end() ? elsewhere->second : 0u, followed}) + 1;
+                std::max({it->second.epoch, elsewhere != held_elsewhere_.end() ? elsewhere->second : 0u, followed,
+                          released_epoch}) +
+                1;
             held_elsewhere_.erase(it->first);
             std::fprintf(stderr, "facescan-server: session %s: resuming from %s at frame %u (epoch %u)\n",
                          it->first.c_str(), params_.data_dir.c_str(), it->second.next_seq, epoch);
