@@ -260,7 +260,7 @@ bool Server::witnessed(const std::string& session_id, int64_t owner_gone_since_n
     // in chaos runs, and worse, was made on the claim as it stood when the cut began: frames the owner had
     // confirmed since (the agent dropped them) were nowhere in the new owner's reach. An announcement that arrived
     // after the lapse proves that the network still carries that peer's messages; every server announces at least
-    // once a second, so this costs a takeover about that much.
+    // twice a second, so this costs a takeover about that much.
     //
     // Losing every one of two or more other servers at once is, seen from inside, what a cut-off looks like (two
     // failures at the same moment are rare). The agent then goes from this server's view too, but Cyclone can

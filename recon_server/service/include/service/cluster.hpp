@@ -1,5 +1,5 @@
 // One server's membership in the cluster (docs/design.md section 8), over DDS only:
-//   - it announces itself on facescan/ServerAnnounce (durable, ~1 Hz and on every change); a killed server's
+//   - it announces itself on facescan/ServerAnnounce (durable, ~2 Hz and on every change); a killed server's
 //     instance loses its liveliness within the profile's lease, so everybody sees who is alive;
 //   - it follows facescan/SessionOwner, where each session's owner holds a claim written with EXCLUSIVE
 //     ownership (Claim): readers only see the strongest live claim of every session, so all of them agree on the
