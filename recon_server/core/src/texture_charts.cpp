@@ -86,6 +86,9 @@ Status TextureParams::validate() const {
         return invalidArgument("occlusion_m and depth_edge_m must be positive metres, edge_band_px at least 0");
     }
     if (!(weight_power >= 1 && weight_power <= 16)) return invalidArgument("weight_power must be in [1, 16]");
+    if (!(pixel_centre_sigma_px >= 0 && pixel_centre_sigma_px <= 10)) {
+        return invalidArgument("pixel_centre_sigma_px must be in [0, 10] pixels (0: off)");
+    }
     if (!(min_mean_luma >= 0 && min_mean_luma < 255)) return invalidArgument("min_mean_luma must be in [0, 255)");
     return Status::ok();
 }
