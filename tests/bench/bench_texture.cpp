@@ -329,7 +329,12 @@ int runTexture(const std::vector<std::string>& args) {
             out.bake_ms = recon::finishCpuNowMs() - bake0;
             out.finish_s = double(std::clock() - cpu0) / CLOCKS_PER_SEC;
             out.ok = report.isOk() && (close != recon::ClosingMode::kWatertight || report->watertight) && baked.isOk();
-            if (!out.ok) return out;
+            if (!out.ok) {
+                out.steps = !report.isOk()  ? report.status().toString()
+                            : !baked.isOk() ? "bake: " + baked.status().toString()
+                                            : "not closed: " + report->summary();
+                return out;
+            }
             out.steps = report->cpuBreakdown();
             char buf[160];
             std::snprintf(buf, sizeof buf, "bake %.0f ms CPU (wall: charts %.0f, visibility %.0f, texels %.0f)",
@@ -382,7 +387,10 @@ int runTexture(const std::vector<std::string>& args) {
         std::printf("    finish (head, watertight, 20,000 triangles, texture): %.2f s CPU%s\n", solid_cpu_s,
                     solid_ok ? "" : " (FAILED)");
         for (const auto* f : {&holes, &solid}) {
-            if (!f->ok) continue;
+            if (!f->ok) {
+                std::printf("      %s FAILED: %s\n", f == &holes ? "holes" : "watertight", f->steps.c_str());
+                continue;
+            }
             std::printf("      %s: %s; %s; writers %.0f ms CPU\n", f == &holes ? "holes" : "watertight",
                         f->steps.c_str(), f->bake_steps.c_str(), f->writers_ms);
         }

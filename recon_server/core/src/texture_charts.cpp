@@ -74,6 +74,10 @@ uint32_t findRoot(std::vector<uint32_t>& parent, uint32_t i) {
 // colours on the face). So the cylinder's triangles claim its texels outermost first (by their distance from the
 // axis: the one the cameras see), and a triangle whose texels are already taken leaves the cylinder for charts of
 // its own.
+// The charts of surface that left the cylinder hold this many texels a side per texel of the rest: on a solid it
+// is mostly surface no camera saw (inside, the back), and at full resolution it tripled the atlas at 1280x720.
+constexpr float kLayerScale = 0.5f;
+
 void splitOverlaps(const IndexedMesh& mesh, const HeadAxes& axes, float texel_m, std::vector<Chart>& charts) {
     Chart& cylinder = charts[0];
     const size_t n = cylinder.triangles.size();
@@ -183,7 +187,7 @@ void splitOverlaps(const IndexedMesh& mesh, const HeadAxes& axes, float texel_m,
             c.triangles.push_back(cylinder.triangles[j]);
             for (int k = 0; k < 3; ++k) {
                 const Eigen::Vector3f d = mesh.positions_m[t[k]] - axes.centre;
-                c.corners_m.emplace_back(d.dot(x_axis), d.dot(y_axis));
+                c.corners_m.emplace_back(kLayerScale * d.dot(x_axis), kLayerScale * d.dot(y_axis));
                 c.wrapped.push_back(0);
             }
         }
