@@ -10,9 +10,13 @@
 
 #include "recon/parallel.hpp"
 #include "recon/texture_atlas.hpp"
+#include "texture_resample.hpp"
 
 namespace facescan::recon {
 namespace {
+
+using texture_detail::bicubic;
+using texture_detail::bilinear;
 
 // Views kept per texel. Eight rather than four: the JPEG noise of the colour frames averages out over more views,
 // and more of them offer a sample near one of their pixel centres (facescan-bench texture at 640x480: +0.14 dB).
@@ -165,60 +169,6 @@ ViewDepth viewDepth(const IndexedMesh& mesh, const TextureView& view, const Text
     cv::meanStdDev(grey, mean, grey_sd, not_edge);
     d.focus = grey_sd[0] > 1e-3 ? static_cast<float>(lap_sd[0] / grey_sd[0]) : 0.0f;
     return d;
-}
-
-Eigen::Vector3f bilinear(const cv::Mat& img, float x, float y) {
-    const int x0 = std::clamp(static_cast<int>(std::floor(x)), 0, img.cols - 2);
-    const int y0 = std::clamp(static_cast<int>(std::floor(y)), 0, img.rows - 2);
-    const float fx = std::clamp(x - x0, 0.0f, 1.0f), fy = std::clamp(y - y0, 0.0f, 1.0f);
-    const cv::Vec3b* r0 = img.ptr<cv::Vec3b>(y0);
-    const cv::Vec3b* r1 = img.ptr<cv::Vec3b>(y0 + 1);
-    Eigen::Vector3f out;
-    for (int c = 0; c < 3; ++c) {
-        const float top = r0[x0][c] * (1 - fx) + r0[x0 + 1][c] * fx;
-        const float bottom = r1[x0][c] * (1 - fx) + r1[x0 + 1][c] * fx;
-        out[c] = top * (1 - fy) + bottom * fy;
-    }
-    return out;
-}
-
-// Keys' cubic convolution (a = -0.5, Catmull-Rom) over the 4 x 4 pixels around (x, y): it keeps more of a
-// pixel's detail than bilinear interpolation when the atlas resamples the colour image finer than its pixels.
-Eigen::Vector3f bicubic(const cv::Mat& img, float x, float y) {
-    const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
-    const float fx = x - static_cast<float>(x0), fy = y - static_cast<float>(y0);
-    auto weights = [](float t, float w[4]) {
-        const float t2 = t * t, t3 = t2 * t;
-        w[0] = -0.5f * t3 + t2 - 0.5f * t;
-        w[1] = 1.5f * t3 - 2.5f * t2 + 1.0f;
-        w[2] = -1.5f * t3 + 2.0f * t2 + 0.5f * t;
-        w[3] = 0.5f * t3 - 0.5f * t2;
-    };
-    float wx[4], wy[4];
-    weights(fx, wx);
-    weights(fy, wy);
-    float b = 0, g = 0, r = 0;
-    if (x0 >= 1 && y0 >= 1 && x0 + 2 < img.cols && y0 + 2 < img.rows) {
-        // Inside the image (nearly always): the 4 x 4 pixels straight from the rows.
-        for (int j = 0; j < 4; ++j) {
-            const uint8_t* p = img.ptr<uint8_t>(y0 - 1 + j) + 3 * (x0 - 1);
-            const float rb = wx[0] * p[0] + wx[1] * p[3] + wx[2] * p[6] + wx[3] * p[9];
-            const float rg = wx[0] * p[1] + wx[1] * p[4] + wx[2] * p[7] + wx[3] * p[10];
-            const float rr = wx[0] * p[2] + wx[1] * p[5] + wx[2] * p[8] + wx[3] * p[11];
-            b += wy[j] * rb, g += wy[j] * rg, r += wy[j] * rr;
-        }
-    } else {
-        for (int j = 0; j < 4; ++j) {
-            const cv::Vec3b* row = img.ptr<cv::Vec3b>(std::clamp(y0 - 1 + j, 0, img.rows - 1));
-            for (int i = 0; i < 4; ++i) {
-                const cv::Vec3b& p = row[std::clamp(x0 - 1 + i, 0, img.cols - 1)];
-                const float w = wx[i] * wy[j];
-                b += w * p[0], g += w * p[1], r += w * p[2];
-            }
-        }
-    }
-    const Eigen::Vector3f out(b, g, r);
-    return out.cwiseMax(0.0f).cwiseMin(255.0f);
 }
 
 // The blend of a texel's samples under per-view gains; false when no view saw it.
