@@ -334,20 +334,22 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
     report.ms_visibility = msSince(t0);
 
     // The views each triangle's texels try: those that may see it (its normal at a corner faces the view, with
-    // some slack as a texel's normal is interpolated, and its corners do not all lie behind the view or on one
-    // side outside its image), at most the kTriangleViews that see it best (cos^2 / z^2 and sharpness at its
-    // corners, as the texels' weights without the edges and pixel centres): a texel then weighs a dozen views
-    // rather than all that face it, and the views it keeps are among them.
+    // some slack as a texel's normal is interpolated, its corners do not all lie behind the view or on one side
+    // outside its image, nor all behind other surface in its z-buffer: inside a solid, the back of the head), at most
+    // the kTriangleViews that see it best (cos^2 / z^2 and sharpness at its corners, as the texels' weights without the
+    // edges and pixel centres): a texel then weighs a dozen views rather than all that face it, and the views it keeps
+    // are among them.
     t0 = std::chrono::steady_clock::now();
     const size_t n_usable = usable.size();
     std::vector<float> triangle_score(m.triangles.size() * n_usable, 0.0f);
     parallelFor(0, static_cast<int>(n_usable), [&](int lo, int hi) {
         std::vector<float> score(m.vertexCount());
-        std::vector<uint8_t> faces(m.vertexCount()), side(m.vertexCount());
+        std::vector<uint8_t> faces(m.vertexCount()), side(m.vertexCount()), hidden(m.vertexCount());
         for (int j = lo; j < hi; ++j) {
             const int v = usable[static_cast<size_t>(j)];
             const TextureView& view = views[static_cast<size_t>(v)];
             const Intrinsics& k = view.colour;
+            const ViewDepth& d = depth[static_cast<size_t>(v)];
             for (size_t i = 0; i < m.vertexCount(); ++i) {
                 const Eigen::Vector3f p_c = view.T_colour_mesh * m.positions_m[i];
                 const bool ahead = p_c.z() > 1e-3f;
@@ -359,13 +361,22 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
                 side[i] = ahead ? static_cast<uint8_t>((px.x() < -1 ? 1 : 0) | (px.x() > float(k.width_px) ? 2 : 0) |
                                                        (px.y() < -1 ? 4 : 0) | (px.y() > float(k.height_px) ? 8 : 0))
                                 : 15;
+                // Behind the view's z-buffer by twice what hides a texel (the texels' own test decides near it).
+                int u = 0, w = 0;
+                float z_view = 0, edge_dist = 0;
+                hidden[i] = 0;
+                if (ahead && k.nearestPixel(px, u, w)) {
+                    d.at(u, w, z_view, edge_dist);
+                    hidden[i] = p_c.z() > z_view + 2 * params.occlusion_m;
+                }
             }
-            const float focus = depth[static_cast<size_t>(v)].focus;
+            const float focus = d.focus;
             for (size_t t = 0; t < m.triangles.size(); ++t) {
                 const Triangle& tri = m.triangles[t];
                 const bool facing = faces[tri[0]] || faces[tri[1]] || faces[tri[2]];
                 const bool outside = (side[tri[0]] & side[tri[1]] & side[tri[2]]) != 0;
-                if (facing && !outside) {
+                const bool behind = hidden[tri[0]] && hidden[tri[1]] && hidden[tri[2]];
+                if (facing && !outside && !behind) {
                     triangle_score[t * n_usable + static_cast<size_t>(j)] =
                         focus * (score[tri[0]] + score[tri[1]] + score[tri[2]]) + 1e-12f;
                 }
