@@ -37,7 +37,8 @@ int usage(std::FILE* out) {
     std::fprintf(
         out,
         "usage: facescan-bench texture [--frames N] [--colour WxH] [--texels-per-pixel R] [--weight-power P]\n"
-        "                              [--bilinear] [--lit] [--stall] [--save DIR] [--json]\n"
+        "                              [--pixel-centre-sigma S] [--bilinear] [--true-poses] [--lit] [--stall]\n"
+        "                              [--save DIR] [--json]\n"
         "  Scans the synthetic Lee Perry-Smith head (N frames, default 300), textures the finished model from\n"
         "  colour keyframes of a WxH colour camera (default: both 1280x720 and 640x480; 2.5 cm beside the\n"
         "  depth camera, the same horizontal field of view) and compares renders of the model with the\n"
@@ -45,8 +46,10 @@ int usage(std::FILE* out) {
         "  full resolution and the texture at 20,000 triangles. --save DIR writes the renders (truth, vertex\n"
         "  colours, texture) side by side per view, and the atlases. --texels-per-pixel R: atlas texels per colour\n"
         "  pixel (the server's texture.texels_per_pixel, default 2). --weight-power P: the views' weights raised\n"
-        "  to P before blending (default 4: the best view dominates). --bilinear: resample the colour images\n"
-        "  bilinearly instead of by cubic convolution.\n"
+        "  to P before blending (default 1). --pixel-centre-sigma S: the spread in pixels of a view's weight\n"
+        "  about its nearest pixel centre (default 0.25; 0 turns it off). --bilinear: resample the colour images\n"
+        "  bilinearly instead of by cubic convolution. --true-poses: bake with the simulator's true poses instead\n"
+        "  of the tracked ones (what the tracking's error costs the texture).\n"
         "  Colour is the head's own, unlit, in the sensor's frames (vertex colours) and the colour camera's\n"
         "  alike, so that both compare with the texture of the truth; --lit lights both as the synthetic Kinect\n"
         "  does (a lamp above-left of the camera), which the unlit truth then differs from everywhere.\n"
@@ -181,7 +184,7 @@ StatusOr<Scan> scan(bench::Sequence& seq) {
 
 int runTexture(const std::vector<std::string>& args) {
     int frames = 300;
-    bool json = false, lit = false, stall = false;
+    bool json = false, lit = false, stall = false, true_poses = false;
     recon::TextureParams texture_params;
     std::string save;
     std::vector<std::pair<int, int>> sizes;
@@ -195,8 +198,12 @@ int runTexture(const std::vector<std::string>& args) {
             texture_params.texels_per_pixel = static_cast<float>(std::atof(args[++i].c_str()));
         } else if (a == "--weight-power" && has_value) {
             texture_params.weight_power = static_cast<float>(std::atof(args[++i].c_str()));
+        } else if (a == "--pixel-centre-sigma" && has_value) {
+            texture_params.pixel_centre_sigma_px = static_cast<float>(std::atof(args[++i].c_str()));
         } else if (a == "--bilinear") {
             texture_params.bicubic = false;
+        } else if (a == "--true-poses") {
+            true_poses = true;
         } else if (a == "--lit") {
             lit = true;
         } else if (a == "--stall") {
@@ -281,7 +288,11 @@ int runTexture(const std::vector<std::string>& args) {
             const eval::ColourRender frame = eval::renderColour(gt, T_colour_head, camera.colour_intrinsics);
             std::vector<uint8_t> jpeg;
             if (!wire::encodeColourJpeg(frame.bgr, wire::ColourJpegParams{}.quality, jpeg).isOk()) continue;
-            keyframes.offer(static_cast<uint32_t>(index), wire::ColourCodecId::kJpeg, jpeg, T_world_depth);
+            // --true-poses: the simulator's pose of the head, brought into the model's frame by the alignment the
+            // comparison uses (what the tracked poses' error costs the texture).
+            const recon::Pose T_world_depth_used =
+                true_poses ? (seq.sim->poseAt(index) * scanned->T_head_model).inverse() : T_world_depth;
+            keyframes.offer(static_cast<uint32_t>(index), wire::ColourCodecId::kJpeg, jpeg, T_world_depth_used);
         }
         std::vector<std::string> notes;
         const std::vector<recon::TextureView> views = keyframes.views(camera, &notes);
@@ -318,7 +329,12 @@ int runTexture(const std::vector<std::string>& args) {
             out.bake_ms = recon::finishCpuNowMs() - bake0;
             out.finish_s = double(std::clock() - cpu0) / CLOCKS_PER_SEC;
             out.ok = report.isOk() && (close != recon::ClosingMode::kWatertight || report->watertight) && baked.isOk();
-            if (!out.ok) return out;
+            if (!out.ok) {
+                out.steps = !report.isOk()  ? report.status().toString()
+                            : !baked.isOk() ? "bake: " + baked.status().toString()
+                                            : "not closed: " + report->summary();
+                return out;
+            }
             out.steps = report->cpuBreakdown();
             char buf[160];
             std::snprintf(buf, sizeof buf, "bake %.0f ms CPU (wall: charts %.0f, visibility %.0f, texels %.0f)",
@@ -371,7 +387,10 @@ int runTexture(const std::vector<std::string>& args) {
         std::printf("    finish (head, watertight, 20,000 triangles, texture): %.2f s CPU%s\n", solid_cpu_s,
                     solid_ok ? "" : " (FAILED)");
         for (const auto* f : {&holes, &solid}) {
-            if (!f->ok) continue;
+            if (!f->ok) {
+                std::printf("      %s FAILED: %s\n", f == &holes ? "holes" : "watertight", f->steps.c_str());
+                continue;
+            }
             std::printf("      %s: %s; %s; writers %.0f ms CPU\n", f == &holes ? "holes" : "watertight",
                         f->steps.c_str(), f->bake_steps.c_str(), f->writers_ms);
         }

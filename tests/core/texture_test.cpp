@@ -176,6 +176,55 @@ TEST(TextureCharts, FaceIsOneSeamlessPieceAndUvsLieInTheAtlas) {
     EXPECT_LT(texels, 3 * 0.126 / 1e-6);
 }
 
+// A surface inside the head (as the carving leaves in a solid closed behind the face) unwraps onto the same place
+// of the cylinder as the head around it: it must get texels of its own, or the bake paints one with the other's
+// colours. Two concentric spheres: no texel centre lies inside two triangles' UVs.
+TEST(TextureCharts, ALayerInsideTheHeadGetsTexelsOfItsOwn) {
+    IndexedMesh mesh = sphere(32, 64);
+    const IndexedMesh inner = sphere(24, 48);
+    const uint32_t base = static_cast<uint32_t>(mesh.vertexCount());
+    for (size_t i = 0; i < inner.vertexCount(); ++i) {
+        mesh.positions_m.push_back(kCentre + 0.5f * (inner.positions_m[i] - kCentre));
+        mesh.normals.push_back(inner.normals[i]);
+        mesh.colours_rgb.push_back(inner.colours_rgb[i]);
+    }
+    for (const Triangle& t : inner.triangles) mesh.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+    TexturedMesh out;
+    auto report = textureCharts(mesh, {}, TextureParams{}, out);
+    ASSERT_TRUE(report.isOk()) << report.status().toString();
+    ASSERT_EQ(out.mesh.triangleCount(), mesh.triangleCount());
+    const int width = out.atlas_bgr.cols, height = out.atlas_bgr.rows;
+    cv::Mat covered(height, width, CV_8U, cv::Scalar(0));
+    int shared = 0, texels = 0;
+    for (const Triangle& t : out.mesh.triangles) {
+        Eigen::Vector2f c[3];
+        for (int k = 0; k < 3; ++k) c[k] = out.uv[t[k]].cwiseProduct(Eigen::Vector2f(width, height));
+        const float area = (c[1] - c[0]).x() * (c[2] - c[0]).y() - (c[1] - c[0]).y() * (c[2] - c[0]).x();
+        ASSERT_GT(std::abs(area), 0.0f);
+        const int x0 = std::max(0, int(std::floor(std::min({c[0].x(), c[1].x(), c[2].x()}))));
+        const int x1 = std::min(width - 1, int(std::ceil(std::max({c[0].x(), c[1].x(), c[2].x()}))));
+        const int y0 = std::max(0, int(std::floor(std::min({c[0].y(), c[1].y(), c[2].y()}))));
+        const int y1 = std::min(height - 1, int(std::ceil(std::max({c[0].y(), c[1].y(), c[2].y()}))));
+        for (int y = y0; y <= y1; ++y) {
+            for (int x = x0; x <= x1; ++x) {
+                const Eigen::Vector2f p(float(x) + 0.5f, float(y) + 0.5f);
+                bool inside = true;
+                for (int k = 0; k < 3; ++k) {
+                    const Eigen::Vector2f& a = c[k];
+                    const Eigen::Vector2f& b = c[(k + 1) % 3];
+                    inside = inside &&
+                             ((b.x() - a.x()) * (p.y() - a.y()) - (b.y() - a.y()) * (p.x() - a.x())) / area > 1e-3f;
+                }
+                if (!inside) continue;
+                ++texels;
+                if (covered.at<uint8_t>(y, x)++ == 1) ++shared;
+            }
+        }
+    }
+    EXPECT_GT(texels, 0.126 * 1.25 / 1e-6 * 0.7);  // both spheres' area at a millimetre a texel, most of it
+    EXPECT_EQ(shared, 0) << "of " << texels << " texels";
+}
+
 TEST(TextureBake, ResolvesWhatVertexColoursBlur) {
     const IndexedMesh mesh = sphere(32, 64);
     TexturedMesh out;

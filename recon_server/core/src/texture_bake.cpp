@@ -10,11 +10,23 @@
 
 #include "recon/parallel.hpp"
 #include "recon/texture_atlas.hpp"
+#include "texture_resample.hpp"
 
 namespace facescan::recon {
 namespace {
 
-constexpr int kTopViews = 4;  // views kept per texel: with weights raised to a power, the rest add nothing visible
+using texture_detail::bicubic;
+using texture_detail::bilinear;
+
+// Views kept per texel. Eight rather than four: the JPEG noise of the colour frames averages out over more views,
+// and more of them offer a sample near one of their pixel centres (facescan-bench texture at 640x480: +0.14 dB).
+constexpr int kTopViews = 8;
+// Views a texel weighs at most: those that see its triangle best (see kTopViews).
+constexpr int kTriangleViews = 12;
+// The exposure gains are estimated from every this many texels (a 640x480 camera's atlas has 200,000 on a face).
+constexpr size_t kGainStride = 4;
+// A view whose weight for a texel is under this share of the best view's is left out of its blend.
+constexpr float kMinShare = 0.01f;
 
 double msSince(std::chrono::steady_clock::time_point t0) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -23,24 +35,45 @@ double msSince(std::chrono::steady_clock::time_point t0) {
 // A texel on the surface: where it is in the atlas and on the mesh.
 struct Texel {
     int x, y;
+    uint32_t triangle;  // of the textured mesh
     Eigen::Vector3f p_m, normal;
     Eigen::Vector3f vertex_bgr;  // the vertex colours there (the fallback), 0-255
 };
 
-// What one view makes of a texel.
+// What one view makes of a texel: the colour in 1/256 steps (the samples of every texel are held at once).
 struct Sample {
-    int view = -1;
+    int16_t view = -1;
+    std::array<uint16_t, 3> bgr256{};
     float weight = 0;
-    Eigen::Vector3f bgr = Eigen::Vector3f::Zero();
+
+    Eigen::Vector3f bgr() const { return Eigen::Vector3f(bgr256[0], bgr256[1], bgr256[2]) * (1.0f / 256); }
+    void setBgr(const Eigen::Vector3f& c) {
+        for (int i = 0; i < 3; ++i)
+            bgr256[static_cast<size_t>(i)] = static_cast<uint16_t>(std::clamp(c[i], 0.0f, 255.0f) * 256 + 0.5f);
+    }
 };
 using TopSamples = std::array<Sample, kTopViews>;
 
 // The mesh as one view sees it: nearest depth per pixel (metres, +inf where nothing) and each pixel's distance to
-// a depth edge (pixels).
+// a depth edge (pixels), held only over the box of the image that the mesh covers (and a pixel around it: outside,
+// nothing is seen and the distance to an edge is 0).
 struct ViewDepth {
-    cv::Mat z_m;        // CV_32F
-    cv::Mat edge_dist;  // CV_32F
-    float focus = 1;    // sharpness relative to the sharpest view, (0, 1]
+    cv::Rect box_px;     // of the colour image
+    cv::Mat z_m;         // CV_32F, box_px's size (while it is built)
+    cv::Mat edge_dist;   // CV_32F, box_px's size (while it is built)
+    cv::Mat z_and_edge;  // CV_32FC2: both, side by side (a texel's lookup touches one cache line, not two)
+    float focus = 1;     // sharpness relative to the sharpest view, (0, 1]
+
+    // The depth (+inf where nothing) and the distance to an edge (0 outside the box) at pixel (u, v).
+    void at(int u, int v, float& z, float& edge) const {
+        u -= box_px.x, v -= box_px.y;
+        if (u < 0 || v < 0 || u >= z_and_edge.cols || v >= z_and_edge.rows) {
+            z = std::numeric_limits<float>::infinity(), edge = 0;
+            return;
+        }
+        const cv::Vec2f& p = z_and_edge.at<cv::Vec2f>(v, u);
+        z = p[0], edge = p[1];
+    }
 };
 
 // Edge functions of a triangle at a point (twice the signed areas).
@@ -72,18 +105,33 @@ void rasterise(const Eigen::Vector2f& a, const Eigen::Vector2f& b, const Eigen::
 ViewDepth viewDepth(const IndexedMesh& mesh, const TextureView& view, const TextureParams& params) {
     const Intrinsics& k = view.colour;
     ViewDepth d;
-    d.z_m = cv::Mat(k.height_px, k.width_px, CV_32F, cv::Scalar(std::numeric_limits<float>::infinity()));
     std::vector<Eigen::Vector3f> p_c(mesh.vertexCount());
     std::vector<Eigen::Vector2f> px(mesh.vertexCount());
+    Eigen::Vector2f lo(std::numeric_limits<float>::max(), std::numeric_limits<float>::max());
+    Eigen::Vector2f hi = -lo;
     for (size_t i = 0; i < mesh.vertexCount(); ++i) {
         p_c[i] = view.T_colour_mesh * mesh.positions_m[i];
         px[i] = p_c[i].z() > 1e-3f ? k.project(p_c[i]) : Eigen::Vector2f(-1e9f, -1e9f);
+        if (p_c[i].z() > 1e-3f) lo = lo.cwiseMin(px[i]), hi = hi.cwiseMax(px[i]);
     }
+    // Only the box the mesh covers, with two pixels around it (so that its edges lie inside): a face fills a
+    // fraction of the frame, and the maps below cost per pixel.
+    const cv::Rect image(0, 0, k.width_px, k.height_px);
+    d.box_px = lo.x() <= hi.x() ? cv::Rect(cv::Point(static_cast<int>(std::floor(std::max(lo.x(), -1e6f))) - 2,
+                                                     static_cast<int>(std::floor(std::max(lo.y(), -1e6f))) - 2),
+                                           cv::Point(static_cast<int>(std::ceil(std::min(hi.x(), 1e6f))) + 3,
+                                                     static_cast<int>(std::ceil(std::min(hi.y(), 1e6f))) + 3)) &
+                                      image
+                                : cv::Rect();
+    if (d.box_px.area() == 0) d.box_px = cv::Rect(0, 0, 1, 1);
+    const int width = d.box_px.width, height = d.box_px.height;
+    const Eigen::Vector2f offset(static_cast<float>(d.box_px.x), static_cast<float>(d.box_px.y));
+    d.z_m = cv::Mat(height, width, CV_32F, cv::Scalar(std::numeric_limits<float>::infinity()));
     for (const Triangle& t : mesh.triangles) {
         if (p_c[t[0]].z() <= 1e-3f || p_c[t[1]].z() <= 1e-3f || p_c[t[2]].z() <= 1e-3f) continue;
         // 1/z is linear in the image: interpolated, it gives the exact depth of the triangle at each pixel.
         const float iz0 = 1 / p_c[t[0]].z(), iz1 = 1 / p_c[t[1]].z(), iz2 = 1 / p_c[t[2]].z();
-        rasterise(px[t[0]], px[t[1]], px[t[2]], k.width_px, k.height_px,
+        rasterise(px[t[0]] - offset, px[t[1]] - offset, px[t[2]] - offset, width, height,
                   [&](int x, int y, float w0, float w1, float w2) {
                       const float z = 1.0f / (w0 * iz0 + w1 * iz1 + w2 * iz2);
                       float& zb = d.z_m.at<float>(y, x);
@@ -91,14 +139,14 @@ ViewDepth viewDepth(const IndexedMesh& mesh, const TextureView& view, const Text
                   });
     }
     // Edges: pixels with nothing, and pixels whose depth jumps against a neighbour.
-    cv::Mat not_edge(k.height_px, k.width_px, CV_8U, cv::Scalar(255));
-    for (int y = 0; y < k.height_px; ++y) {
+    cv::Mat not_edge(height, width, CV_8U, cv::Scalar(255));
+    for (int y = 0; y < height; ++y) {
         const float* row = d.z_m.ptr<float>(y);
-        const float* below = d.z_m.ptr<float>(std::min(y + 1, k.height_px - 1));
+        const float* below = d.z_m.ptr<float>(std::min(y + 1, height - 1));
         uint8_t* out = not_edge.ptr<uint8_t>(y);
-        for (int x = 0; x < k.width_px; ++x) {
+        for (int x = 0; x < width; ++x) {
             const float z = row[x];
-            const float right = row[std::min(x + 1, k.width_px - 1)];
+            const float right = row[std::min(x + 1, width - 1)];
             if (!std::isfinite(z)) {
                 out[x] = 0;
             } else if (!(std::abs(right - z) < params.depth_edge_m) ||
@@ -108,9 +156,12 @@ ViewDepth viewDepth(const IndexedMesh& mesh, const TextureView& view, const Text
         }
     }
     cv::distanceTransform(not_edge, d.edge_dist, cv::DIST_L2, 3);
+    cv::merge(std::vector<cv::Mat>{d.z_m, d.edge_dist}, d.z_and_edge);
+    d.z_m.release();
+    d.edge_dist.release();
     // Sharpness: the spread of the Laplacian over the pixels the mesh covers (motion blur and defocus lower it).
     cv::Mat grey, lap;
-    cv::cvtColor(view.colour_bgr, grey, cv::COLOR_BGR2GRAY);
+    cv::cvtColor(view.colour_bgr(d.box_px), grey, cv::COLOR_BGR2GRAY);
     cv::Laplacian(grey, lap, CV_32F);
     // Relative to the image's own contrast there, so that a darker view is not taken for a blurred one.
     cv::Scalar mean, lap_sd, grey_sd;
@@ -120,56 +171,13 @@ ViewDepth viewDepth(const IndexedMesh& mesh, const TextureView& view, const Text
     return d;
 }
 
-Eigen::Vector3f bilinear(const cv::Mat& img, float x, float y) {
-    const int x0 = std::clamp(static_cast<int>(std::floor(x)), 0, img.cols - 2);
-    const int y0 = std::clamp(static_cast<int>(std::floor(y)), 0, img.rows - 2);
-    const float fx = std::clamp(x - x0, 0.0f, 1.0f), fy = std::clamp(y - y0, 0.0f, 1.0f);
-    const cv::Vec3b* r0 = img.ptr<cv::Vec3b>(y0);
-    const cv::Vec3b* r1 = img.ptr<cv::Vec3b>(y0 + 1);
-    Eigen::Vector3f out;
-    for (int c = 0; c < 3; ++c) {
-        const float top = r0[x0][c] * (1 - fx) + r0[x0 + 1][c] * fx;
-        const float bottom = r1[x0][c] * (1 - fx) + r1[x0 + 1][c] * fx;
-        out[c] = top * (1 - fy) + bottom * fy;
-    }
-    return out;
-}
-
-// Keys' cubic convolution (a = -0.5, Catmull-Rom) over the 4 x 4 pixels around (x, y): it keeps more of a
-// pixel's detail than bilinear interpolation when the atlas resamples the colour image finer than its pixels.
-Eigen::Vector3f bicubic(const cv::Mat& img, float x, float y) {
-    const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
-    const float fx = x - static_cast<float>(x0), fy = y - static_cast<float>(y0);
-    auto weights = [](float t, float w[4]) {
-        const float t2 = t * t, t3 = t2 * t;
-        w[0] = -0.5f * t3 + t2 - 0.5f * t;
-        w[1] = 1.5f * t3 - 2.5f * t2 + 1.0f;
-        w[2] = -1.5f * t3 + 2.0f * t2 + 0.5f * t;
-        w[3] = 0.5f * t3 - 0.5f * t2;
-    };
-    float wx[4], wy[4];
-    weights(fx, wx);
-    weights(fy, wy);
-    Eigen::Vector3f out = Eigen::Vector3f::Zero();
-    for (int j = 0; j < 4; ++j) {
-        const cv::Vec3b* row = img.ptr<cv::Vec3b>(std::clamp(y0 - 1 + j, 0, img.rows - 1));
-        Eigen::Vector3f acc = Eigen::Vector3f::Zero();
-        for (int i = 0; i < 4; ++i) {
-            const cv::Vec3b& p = row[std::clamp(x0 - 1 + i, 0, img.cols - 1)];
-            acc += wx[i] * Eigen::Vector3f(p[0], p[1], p[2]);
-        }
-        out += wy[j] * acc;
-    }
-    return out.cwiseMax(0.0f).cwiseMin(255.0f);
-}
-
 // The blend of a texel's samples under per-view gains; false when no view saw it.
 bool blend(const TopSamples& s, const std::vector<Eigen::Vector3f>& gains, Eigen::Vector3f& out) {
     float w = 0;
     out.setZero();
     for (const Sample& v : s) {
         if (v.view < 0) break;
-        out += v.weight * gains[static_cast<size_t>(v.view)].cwiseProduct(v.bgr);
+        out += v.weight * gains[static_cast<size_t>(v.view)].cwiseProduct(v.bgr());
         w += v.weight;
     }
     if (!(w > 0)) return false;
@@ -221,6 +229,10 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
         return invalidArgument(
             "no colour frames to texture from (the camera sent no colour): the model keeps its "
             "vertex colours");
+    }
+    if (views.size() > static_cast<size_t>(std::numeric_limits<int16_t>::max())) {
+        return invalidArgument("too many colour frames to texture from (" + std::to_string(views.size()) +
+                               "): keep at most " + std::to_string(std::numeric_limits<int16_t>::max()));
     }
     // Bad views are refused before anything is built; dark ones are left out.
     std::vector<int> usable;
@@ -279,7 +291,8 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
     auto t0 = std::chrono::steady_clock::now();
     cv::Mat owner(height, width, CV_32S, cv::Scalar(-1));
     std::vector<Texel> texels;
-    for (const Triangle& t : m.triangles) {
+    for (size_t ti = 0; ti < m.triangles.size(); ++ti) {
+        const Triangle& t = m.triangles[ti];
         const Eigen::Vector2f scale(static_cast<float>(width), static_cast<float>(height));
         const Eigen::Vector2f half(0.5f, 0.5f);
         const Eigen::Vector2f a = out.uv[t[0]].cwiseProduct(scale) - half, b = out.uv[t[1]].cwiseProduct(scale) - half,
@@ -290,6 +303,7 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
             o = static_cast<int>(texels.size());
             Texel tx;
             tx.x = x, tx.y = y;
+            tx.triangle = static_cast<uint32_t>(ti);
             tx.p_m = w0 * m.positions_m[t[0]] + w1 * m.positions_m[t[1]] + w2 * m.positions_m[t[2]];
             tx.normal = (w0 * normals[t[0]] + w1 * normals[t[1]] + w2 * normals[t[2]]).normalized();
             tx.vertex_bgr = Eigen::Vector3f(128, 128, 128);
@@ -319,14 +333,87 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
     }
     report.ms_visibility = msSince(t0);
 
-    // Each texel's best views.
+    // The views each triangle's texels try: those that may see it (its normal at a corner faces the view, with
+    // some slack as a texel's normal is interpolated, its corners do not all lie behind the view or on one side
+    // outside its image, nor all behind other surface in its z-buffer: inside a solid, the back of the head), at most
+    // the kTriangleViews that see it best (cos^2 / z^2 and sharpness at its corners, as the texels' weights without the
+    // edges and pixel centres): a texel then weighs a dozen views rather than all that face it, and the views it keeps
+    // are among them.
     t0 = std::chrono::steady_clock::now();
+    const size_t n_usable = usable.size();
+    std::vector<float> triangle_score(m.triangles.size() * n_usable, 0.0f);
+    parallelFor(0, static_cast<int>(n_usable), [&](int lo, int hi) {
+        std::vector<float> score(m.vertexCount());
+        std::vector<uint8_t> faces(m.vertexCount()), side(m.vertexCount()), hidden(m.vertexCount());
+        for (int j = lo; j < hi; ++j) {
+            const int v = usable[static_cast<size_t>(j)];
+            const TextureView& view = views[static_cast<size_t>(v)];
+            const Intrinsics& k = view.colour;
+            const ViewDepth& d = depth[static_cast<size_t>(v)];
+            for (size_t i = 0; i < m.vertexCount(); ++i) {
+                const Eigen::Vector3f p_c = view.T_colour_mesh * m.positions_m[i];
+                const bool ahead = p_c.z() > 1e-3f;
+                const float cos_view = -(view.T_colour_mesh.linear() * normals[i]).dot(p_c.normalized());
+                faces[i] = ahead && cos_view >= params.min_view_cos - 0.2f;
+                score[i] = ahead && cos_view > 0 ? cos_view * cos_view / (p_c.z() * p_c.z()) : 0.0f;
+                const Eigen::Vector2f px = ahead ? k.project(p_c) : Eigen::Vector2f::Zero();
+                // Outside the image by side (bits: left, right, above, below), or all four when behind the camera.
+                side[i] = ahead ? static_cast<uint8_t>((px.x() < -1 ? 1 : 0) | (px.x() > float(k.width_px) ? 2 : 0) |
+                                                       (px.y() < -1 ? 4 : 0) | (px.y() > float(k.height_px) ? 8 : 0))
+                                : 15;
+                // Behind the view's z-buffer by twice what hides a texel (the texels' own test decides near it).
+                int u = 0, w = 0;
+                float z_view = 0, edge_dist = 0;
+                hidden[i] = 0;
+                if (ahead && k.nearestPixel(px, u, w)) {
+                    d.at(u, w, z_view, edge_dist);
+                    hidden[i] = p_c.z() > z_view + 2 * params.occlusion_m;
+                }
+            }
+            const float focus = d.focus;
+            for (size_t t = 0; t < m.triangles.size(); ++t) {
+                const Triangle& tri = m.triangles[t];
+                const bool facing = faces[tri[0]] || faces[tri[1]] || faces[tri[2]];
+                const bool outside = (side[tri[0]] & side[tri[1]] & side[tri[2]]) != 0;
+                const bool behind = hidden[tri[0]] && hidden[tri[1]] && hidden[tri[2]];
+                if (facing && !outside && !behind) {
+                    triangle_score[t * n_usable + static_cast<size_t>(j)] =
+                        focus * (score[tri[0]] + score[tri[1]] + score[tri[2]]) + 1e-12f;
+                }
+            }
+        }
+    });
+    std::vector<int16_t> triangle_views(m.triangles.size() * kTriangleViews, -1);
+    parallelFor(0, static_cast<int>(m.triangles.size()), [&](int lo, int hi) {
+        std::vector<std::pair<float, int16_t>> ranked;
+        for (int t = lo; t < hi; ++t) {
+            ranked.clear();
+            for (size_t j = 0; j < n_usable; ++j) {
+                const float score = triangle_score[static_cast<size_t>(t) * n_usable + j];
+                if (score > 0) ranked.emplace_back(score, static_cast<int16_t>(j));
+            }
+            const size_t keep = std::min(ranked.size(), static_cast<size_t>(kTriangleViews));
+            std::partial_sort(ranked.begin(), ranked.begin() + static_cast<std::ptrdiff_t>(keep), ranked.end(),
+                              [](const auto& a, const auto& b) { return a.first > b.first; });
+            for (size_t r = 0; r < keep; ++r) {
+                triangle_views[static_cast<size_t>(t) * kTriangleViews + r] = ranked[r].second;
+            }
+        }
+    });
+    // Each texel's best views: weighed first, sampled after (only the kept ones).
     std::vector<TopSamples> samples(texels.size());
+    const float inv_two_sigma2 = params.pixel_centre_sigma_px > 0
+                                     ? 1.0f / (2 * params.pixel_centre_sigma_px * params.pixel_centre_sigma_px)
+                                     : 0.0f;
     parallelFor(0, static_cast<int>(texels.size()), [&](int lo, int hi) {
+        std::array<Eigen::Vector2f, kTopViews> top_px;
         for (int i = lo; i < hi; ++i) {
             const Texel& tx = texels[static_cast<size_t>(i)];
             TopSamples& top = samples[static_cast<size_t>(i)];
-            for (const int v : usable) {
+            const int16_t* candidates = &triangle_views[size_t{tx.triangle} * kTriangleViews];
+            for (size_t c = 0; c < static_cast<size_t>(kTriangleViews) && candidates[c] >= 0; ++c) {
+                const size_t j = static_cast<size_t>(candidates[c]);
+                const int v = usable[j];
                 const TextureView& view = views[static_cast<size_t>(v)];
                 const ViewDepth& d = depth[static_cast<size_t>(v)];
                 const Eigen::Vector3f p_c = view.T_colour_mesh * tx.p_m;
@@ -334,15 +421,29 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
                 const Eigen::Vector2f px = view.colour.project(p_c);
                 int u = 0, w = 0;
                 if (!view.colour.nearestPixel(px, u, w)) continue;
-                if (p_c.z() > d.z_m.at<float>(w, u) + params.occlusion_m) continue;  // hidden from this view
+                float z_view = 0, edge_dist = 0;
+                d.at(u, w, z_view, edge_dist);
+                if (p_c.z() > z_view + params.occlusion_m) continue;  // hidden from this view
                 const float cos_view = -(view.T_colour_mesh.linear() * tx.normal).dot(p_c.normalized());
                 if (cos_view < params.min_view_cos) continue;
-                const float edge_w = params.edge_band_px > 0
-                                         ? std::clamp(d.edge_dist.at<float>(w, u) / params.edge_band_px, 0.02f, 1.0f)
-                                         : 1.0f;
+                const float edge_w =
+                    params.edge_band_px > 0 ? std::clamp(edge_dist / params.edge_band_px, 0.02f, 1.0f) : 1.0f;
                 // cos^2: foreshortening; 1/z^2: pixels per area of surface; scaled so that 1 m is 1.
                 const float base = cos_view * cos_view / (p_c.z() * p_c.z()) * edge_w * d.focus;
-                const float weight = std::pow(base, params.weight_power);
+                float weight = params.weight_power == 1.0f ? base : std::pow(base, params.weight_power);
+                // Near a pixel centre the view holds the point's own colour; between centres only an interpolation
+                // of its neighbours, which blurs. Views see the surface at different sub-pixel offsets, so the
+                // blend leans on those that sampled the point itself (a scattered-data reconstruction from all
+                // views' pixels rather than an average of interpolated ones).
+                if (inv_two_sigma2 > 0) {
+                    const float dx = px.x() - static_cast<float>(u), dy = px.y() - static_cast<float>(w);
+                    // exp(-x) as (1 - x/8)^8, three squarings instead of a call (within 0.02 of it for x in
+                    // [0, 4], where a texel half a pixel's diagonal off a centre lands with sigma 0.25 px)
+                    const float x = std::min((dx * dx + dy * dy) * inv_two_sigma2, 7.9f);
+                    float e = 1.0f - x * 0.125f;
+                    e *= e, e *= e, e *= e;
+                    weight *= e;
+                }
                 if (!(weight > 0)) continue;
                 // Insert into the top list, kept sorted by weight.
                 int slot = kTopViews;
@@ -350,11 +451,22 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
                                     top[static_cast<size_t>(slot - 1)].weight < weight))
                     --slot;
                 if (slot >= kTopViews) continue;
-                for (int s = kTopViews - 1; s > slot; --s)
+                for (int s = kTopViews - 1; s > slot; --s) {
                     top[static_cast<size_t>(s)] = top[static_cast<size_t>(s - 1)];
-                top[static_cast<size_t>(slot)] = Sample{v, weight,
-                                                        params.bicubic ? bicubic(view.colour_bgr, px.x(), px.y())
-                                                                       : bilinear(view.colour_bgr, px.x(), px.y())};
+                    top_px[static_cast<size_t>(s)] = top_px[static_cast<size_t>(s - 1)];
+                }
+                top[static_cast<size_t>(slot)].view = static_cast<int16_t>(v);
+                top[static_cast<size_t>(slot)].weight = weight;
+                top_px[static_cast<size_t>(slot)] = px;
+            }
+            for (size_t s = 0; s < top.size() && top[s].view >= 0; ++s) {
+                if (top[s].weight < kMinShare * top[0].weight) {  // it would not show: not worth its sampling
+                    for (size_t r = s; r < top.size(); ++r) top[r] = Sample{};
+                    break;
+                }
+                const cv::Mat& img = views[static_cast<size_t>(top[s].view)].colour_bgr;
+                const Eigen::Vector2f& px = top_px[s];
+                top[s].setBgr(params.bicubic ? bicubic(img, px.x(), px.y()) : bilinear(img, px.x(), px.y()));
             }
         }
     });
@@ -366,23 +478,31 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
         for (int round = 0; round < 3; ++round) {
             std::vector<Eigen::Vector3d> num_sum(views.size(), Eigen::Vector3d::Zero()),
                 den_sum(views.size(), Eigen::Vector3d::Zero());
-            for (const TopSamples& s : samples) {
+            // Every kGainStride-th texel: a view's gain is a ratio of sums over tens of thousands of texels.
+            for (size_t i = 0; i < samples.size(); i += kGainStride) {
+                const TopSamples& s = samples[i];
                 if (s[1].view < 0) continue;  // only texels that views share
+                // The others' blend is the whole blend less the view's own share.
+                // (in double: where one view dominates, the others' share is a small difference of large sums).
+                Eigen::Vector3d all = Eigen::Vector3d::Zero();
+                double w_all = 0;
+                for (const Sample& o : s) {
+                    if (o.view < 0) break;
+                    all += o.weight * gains[static_cast<size_t>(o.view)].cwiseProduct(o.bgr()).cast<double>();
+                    w_all += o.weight;
+                }
                 for (const Sample& v : s) {
                     if (v.view < 0) break;
-                    Eigen::Vector3f others = Eigen::Vector3f::Zero();
-                    float w_others = 0;
-                    for (const Sample& o : s) {
-                        if (o.view < 0) break;
-                        if (o.view == v.view) continue;
-                        others += o.weight * gains[static_cast<size_t>(o.view)].cwiseProduct(o.bgr);
-                        w_others += o.weight;
-                    }
-                    if (!(w_others > 0)) continue;
+                    const Eigen::Vector3d bgr = v.bgr().cast<double>();
+                    const double w_others = w_all - v.weight;
+                    if (!(w_others > 1e-9 * w_all)) continue;
+                    const Eigen::Vector3d others =
+                        (all - v.weight * gains[static_cast<size_t>(v.view)].cast<double>().cwiseProduct(bgr)) /
+                        w_others;
                     // Where both are well seen: the lesser of the two weights, flattened (every view counts).
-                    const double w = std::sqrt(static_cast<double>(std::min(v.weight, w_others)));
-                    num_sum[static_cast<size_t>(v.view)] += w * (others / w_others).cast<double>();
-                    den_sum[static_cast<size_t>(v.view)] += w * v.bgr.cast<double>();
+                    const double w = std::sqrt(std::min(static_cast<double>(v.weight), w_others));
+                    num_sum[static_cast<size_t>(v.view)] += w * others.cwiseMax(0.0);
+                    den_sum[static_cast<size_t>(v.view)] += w * bgr;
                 }
             }
             std::vector<float> per_channel[3];
@@ -425,31 +545,34 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
         filled.at<uint8_t>(texels[i].y, texels[i].x) = 1;
     }
     for (const uint8_t p : painted_by) report.views_used += p;
+    // Padding, a ring of texels a pass: each empty texel next to a filled one takes their mean. Only the ring is
+    // visited (a dilation of the filled mask finds it), not the whole atlas.
+    const cv::Mat box3 = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
+    std::vector<cv::Point> ring;
     for (int pass = 0; pass < params.padding_px + 1; ++pass) {
-        cv::Mat next = filled.clone();
-        for (int y = 0; y < height; ++y) {
-            for (int x = 0; x < width; ++x) {
-                if (filled.at<uint8_t>(y, x)) continue;
-                Eigen::Vector3f sum = Eigen::Vector3f::Zero();
-                int count = 0;
-                for (int dy = -1; dy <= 1; ++dy) {
-                    for (int dx = -1; dx <= 1; ++dx) {
-                        const int nx = x + dx, ny = y + dy;
-                        if (nx < 0 || ny < 0 || nx >= width || ny >= height || !filled.at<uint8_t>(ny, nx)) continue;
-                        const cv::Vec3b& c = out.atlas_bgr.at<cv::Vec3b>(ny, nx);
-                        sum += Eigen::Vector3f(c[0], c[1], c[2]);
-                        ++count;
-                    }
+        cv::Mat grown;
+        cv::dilate(filled, grown, box3);
+        cv::findNonZero(grown - filled, ring);
+        if (ring.empty()) break;
+        for (const cv::Point& at : ring) {
+            Eigen::Vector3f sum = Eigen::Vector3f::Zero();
+            int count = 0;
+            for (int dy = -1; dy <= 1; ++dy) {
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const int nx = at.x + dx, ny = at.y + dy;
+                    if (nx < 0 || ny < 0 || nx >= width || ny >= height || !filled.at<uint8_t>(ny, nx)) continue;
+                    const cv::Vec3b& c = out.atlas_bgr.at<cv::Vec3b>(ny, nx);
+                    sum += Eigen::Vector3f(c[0], c[1], c[2]);
+                    ++count;
                 }
-                if (count == 0) continue;
-                sum /= static_cast<float>(count);
-                out.atlas_bgr.at<cv::Vec3b>(y, x) =
-                    cv::Vec3b(cv::saturate_cast<uint8_t>(sum[0]), cv::saturate_cast<uint8_t>(sum[1]),
-                              cv::saturate_cast<uint8_t>(sum[2]));
-                next.at<uint8_t>(y, x) = 1;
             }
+            if (count == 0) continue;
+            sum /= static_cast<float>(count);
+            out.atlas_bgr.at<cv::Vec3b>(at) =
+                cv::Vec3b(cv::saturate_cast<uint8_t>(sum[0]), cv::saturate_cast<uint8_t>(sum[1]),
+                          cv::saturate_cast<uint8_t>(sum[2]));
         }
-        filled = next;
+        for (const cv::Point& at : ring) filled.at<uint8_t>(at) = 1;
     }
     report.ms_bake = msSince(t0);
     if (report.texels_surface > 0 && report.texels_unseen * 5 > report.texels_surface) {

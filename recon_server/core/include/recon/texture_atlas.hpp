@@ -12,8 +12,11 @@
 //     faces the camera (cos^2 of the angle), how near it is (1/z^2: texels per pixel), how far it lies from a
 //     depth edge of the view (silhouettes and jumps, where colour and depth disagree most and where the
 //     projector's shadow falls) and how sharp the view is (the Laplacian's spread over
-//     the image's own contrast, so that a dark view is not taken for a blurred one). Weights are raised to a
-//     power, so the best view dominates and the others blend in only where views hand over: no visible seam.
+//     the image's own contrast, so that a dark view is not taken for a blurred one), and by how near the point
+//     lands to one of the view's pixel centres: there the view holds the point's own colour, between centres only
+//     an interpolation of its neighbours, which blurs. The views see the surface at different sub-pixel offsets,
+//     so the blend of a texel's best eight views is a reconstruction from all their pixels, finer than any one
+//     view resampled (and their JPEG noise averages out). Weights change smoothly from view to view: no seam.
 //     Each view's exposure is evened out by a per-view, per-channel gain that matches it to what the other views
 //     saw of the texels they share (three rounds; the median gain is 1, so the odd view is brought to the rest).
 //  3. Texels no view saw take the vertex colours; every chart is padded by a few texels so that filtering and
@@ -49,16 +52,22 @@ struct TextureParams {
     // (facescan-bench texture: +3.1 dB over vertex colours at 1280x720 with 2, +2.8 dB with 1)
     float texels_per_pixel = 2.0f;
     int max_atlas_px = 8192;  // pixels; the atlas side at most (8192^2 RGB is 192 MiB, what a GPU still loads)
-    // bytes the bake may hold at once (the atlas and about 130 bytes a texel of working state); above: an error
+    // bytes the bake may hold at once (the atlas and about 150 bytes a texel of working state); above: an error
     // that names the size, before anything is allocated
     size_t max_memory_bytes = size_t{512} << 20;
-    int padding_px = 4;           // texels each chart is grown by, and kept between charts
-    float cap_cos = 0.8f;         // a triangle whose normal is within acos(cap_cos) of the head's axis is a cap
-    float min_view_cos = 0.2f;    // a view at more than acos(min_view_cos) (78 deg) from the normal is not used
-    float occlusion_m = 0.004f;   // metres; a point this far behind a view's z-buffer is hidden from that view
-    float depth_edge_m = 0.01f;   // metres; a depth jump at least this large between neighbours is an edge
-    float edge_band_px = 12.0f;   // pixels (of the colour image) from an edge over which a view's weight rises
-    float weight_power = 4.0f;    // the views' weights raised to this: the best view dominates
+    int padding_px = 4;          // texels each chart is grown by, and kept between charts
+    float cap_cos = 0.8f;        // a triangle whose normal is within acos(cap_cos) of the head's axis is a cap
+    float min_view_cos = 0.2f;   // a view at more than acos(min_view_cos) (78 deg) from the normal is not used
+    float occlusion_m = 0.004f;  // metres; a point this far behind a view's z-buffer is hidden from that view
+    float depth_edge_m = 0.01f;  // metres; a depth jump at least this large between neighbours is an edge
+    float edge_band_px = 12.0f;  // pixels (of the colour image) from an edge over which a view's weight rises
+    // the views' weights raised to this before blending (1: as they are; 4 lets the best view dominate, which kept
+    // more of the JPEG noise: facescan-bench texture at 640x480, -0.2 dB with the pixel-centre weight below)
+    float weight_power = 1.0f;
+    // pixels; a view's weight for a texel falls off as a Gaussian of this spread with the distance from where the
+    // texel lands in its image to the nearest pixel centre: a view that sampled the point itself counts more than
+    // one that only interpolates between its pixels (which blurs). 0: off
+    float pixel_centre_sigma_px = 0.25f;
     bool even_exposure = true;    // per-view gains matched to the blend (false: colours as captured)
     float min_mean_luma = 10.0f;  // 8-bit luma; a darker view is taken as missing colour (lens cap, no light)
     // resampling of the colour images: Keys' cubic convolution (sharper where the atlas is finer than the
