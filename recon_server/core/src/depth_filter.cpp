@@ -50,31 +50,23 @@ cv::Vec3f vertexAt(const Intrinsics& k, int u, int v, float z) {
 // tap branches. `space` points at the window's centre weight of eq. 4.5 (rows `side` apart), `range` is eq. 4.6's
 // table. The pixels near the ROI's edges (and any radius but the default) take this path; the others go four at a
 // time through bilateral4At(), whose lanes sum the same taps in the same order. Always inlined into the row loop: as
-// a call (two pixels or more a row) the filter measured about 5 % slower. `space_int` (same layout, 0 outside the
-// inner 3x3) is the integration depth's spatial kernel, or nullptr; its result goes to `z_int`.
+// a call (two pixels or more a row) the filter measured about 5 % slower.
 [[gnu::always_inline]] inline float bilateralAt(const cv::Mat& masked, int u, int v, float zc, const float* space,
-                                                const float* space_int, int side, const float* range, float inv_step,
-                                                int beyond, int dv_lo, int dv_hi, int du_lo, int du_hi, float& z_int) {
-    float sum_w = 0.0f, sum_wz = 0.0f, sum_w_int = 0.0f, sum_wz_int = 0.0f;
+                                                int side, const float* range, float inv_step, int beyond, int dv_lo,
+                                                int dv_hi, int du_lo, int du_hi) {
+    float sum_w = 0.0f, sum_wz = 0.0f;
     for (int dv = dv_lo; dv <= dv_hi; ++dv) {
         const float* row = masked.ptr<float>(v + dv) + u;
         const float* space_row = space + dv * side;
         for (int du = du_lo; du <= du_hi; ++du) {
             const float z = row[du];
             const int idx = std::min(static_cast<int>(std::fabs(z - zc) * inv_step + 0.5f), beyond);
-            const float r = z > 0.0f ? range[idx] : 0.0f;
-            const float wgt = space_row[du] * r;
+            const float wgt = z > 0.0f ? space_row[du] * range[idx] : 0.0f;
             sum_w += wgt;
             sum_wz += wgt * z;
-            if (space_int != nullptr && dv >= -1 && dv <= 1 && du >= -1 && du <= 1) {
-                const float wgt_int = space_int[dv * side + du] * r;
-                sum_w_int += wgt_int;
-                sum_wz_int += wgt_int * z;
-            }
         }
     }
-    z_int = sum_wz_int / sum_w_int;  // sum_w_int >= 1 (the centre pixel) when space_int is given
-    return sum_wz / sum_w;           // sum_w >= 1 (the centre pixel)
+    return sum_wz / sum_w;  // sum_w >= 1 (the centre pixel)
 }
 
 // Four neighbouring pixels u..u+3 of row v at once, each over its whole 5x5 window (the caller checks that the
@@ -92,37 +84,26 @@ inline Float4 loadFloat4(const float* p) {
     return x;
 }
 
-// The integration depth's sums (space_int, as in bilateralAt(); nullptr: none) come out in z_int: the same range
-// weight, taken over the inner 3x3 taps only.
-inline Float4 bilateral4At(const cv::Mat& masked, int u, int v, const float* space, const float* space_int,
-                           const float* range, float inv_step, int beyond, Float4& z_int) {
+inline Float4 bilateral4At(const cv::Mat& masked, int u, int v, const float* space, const float* range, float inv_step,
+                           int beyond) {
     const Float4 zc = loadFloat4(masked.ptr<float>(v) + u);
     const Int4 abs_bits = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
-    Float4 sum_w = {0.0f, 0.0f, 0.0f, 0.0f}, sum_wz = sum_w, sum_w_int = sum_w, sum_wz_int = sum_w;
-#pragma GCC unroll 5
+    Float4 sum_w = {0.0f, 0.0f, 0.0f, 0.0f}, sum_wz = sum_w;
     for (int dv = -2; dv <= 2; ++dv) {
         const float* row = masked.ptr<float>(v + dv) + u;
         const float* space_row = space + dv * 5;
-#pragma GCC unroll 5
         for (int du = -2; du <= 2; ++du) {
             const Float4 z = loadFloat4(row + du);
             const Float4 dz = z - zc;
             const Float4 abs_dz = reinterpret_cast<Float4>(reinterpret_cast<Int4>(dz) & abs_bits);  // fabs
             Int4 idx = __builtin_convertvector(abs_dz * inv_step + 0.5f, Int4);  // truncates, like static_cast
             idx = idx < beyond ? idx : beyond;
-            const Float4 r0 = {range[idx[0]], range[idx[1]], range[idx[2]], range[idx[3]]};
-            const Float4 r = reinterpret_cast<Float4>(reinterpret_cast<Int4>(r0) & (z > 0.0f));
-            const Float4 wgt = space_row[du] * r;
+            const Float4 r = {range[idx[0]], range[idx[1]], range[idx[2]], range[idx[3]]};
+            const Float4 wgt = reinterpret_cast<Float4>(reinterpret_cast<Int4>(space_row[du] * r) & (z > 0.0f));
             sum_w += wgt;
             sum_wz += wgt * z;
-            if (space_int != nullptr && dv >= -1 && dv <= 1 && du >= -1 && du <= 1) {
-                const Float4 wgt_int = space_int[dv * 5 + du] * r;
-                sum_w_int += wgt_int;
-                sum_wz_int += wgt_int * z;
-            }
         }
     }
-    z_int = sum_wz_int / sum_w_int;
     return sum_wz / sum_w;
 }
 
@@ -131,8 +112,6 @@ inline Float4 bilateral4At(const cv::Mat& masked, int u, int v, const float* spa
 Status FilterParams::validate() const {
     if (!(sigma_space_px > 0.0f) || !(sigma_depth_m > 0.0f)) return invalidArgument("filter sigmas must be > 0");
     if (radius_px < 0 || radius_px > 4) return invalidArgument("filter radius_px must be in [0, 4]");
-    if (!(integration_sigma_space_px >= 0.0f && integration_sigma_space_px <= 1.0f))
-        return invalidArgument("filter integration_sigma_space_px must be in [0, 1] (0: integrate the filtered depth)");
     if (levels < 1 || levels > kMaxPyramidLevels) return invalidArgument("filter levels must be in [1, 4]");
     if (!(pyramid_max_step_m > 0.0f)) return invalidArgument("pyramid_max_step_m must be > 0");
     if (!(min_depth_m >= 0.0f) || !(max_depth_m > min_depth_m)) return invalidArgument("bad depth range");
@@ -165,17 +144,6 @@ DepthFilter::DepthFilter(const Intrinsics& k, const FilterParams& p) : k_(k), pa
         for (int du = -p.radius_px; du <= p.radius_px; ++du) {
             space_weight_[static_cast<size_t>((dv + p.radius_px) * side + du + p.radius_px)] =
                 std::exp(-static_cast<float>(du * du + dv * dv) / (2.0f * p.sigma_space_px * p.sigma_space_px));
-        }
-    }
-    if (p.integration_sigma_space_px > 0.0f) {
-        integration_space_weight_.assign(space_weight_.size(), 0.0f);
-        const int r = std::min(1, p.radius_px);
-        for (int dv = -r; dv <= r; ++dv) {
-            for (int du = -r; du <= r; ++du) {
-                integration_space_weight_[static_cast<size_t>((dv + p.radius_px) * side + du + p.radius_px)] =
-                    std::exp(-static_cast<float>(du * du + dv * dv) /
-                             (2.0f * p.integration_sigma_space_px * p.integration_sigma_space_px));
-            }
         }
     }
     // kRangeSteps entries up to 3 sigma, then one 0: the filter clamps its index to it (no branch per tap).
@@ -246,35 +214,23 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
     const float inv_step = 1.0f / range_step_m_;
     constexpr int kBeyond = static_cast<int>(kRangeSteps);  // index of the table's trailing 0
     const float* space = &space_weight_[static_cast<size_t>(radius * side + radius)];  // the window's centre
-    // The integration depth, from the same taps (allocated on the first frame).
-    const float* space_int = nullptr;
-    if (integration_space_weight_.empty()) {
-        l0.integration_depth_m.release();
-    } else {
-        if (l0.integration_depth_m.size() != l0.depth_m.size())
-            l0.integration_depth_m.create(l0.depth_m.size(), CV_32F);
-        space_int = &integration_space_weight_[static_cast<size_t>(radius * side + radius)];
-    }
     // The level's vertex map (eq. 4.9) and the count of valid pixels come out of the same pass.
     std::atomic<int> valid{0};
     parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
         int valid_here = 0;
         for (int v = v_lo; v < v_hi; ++v) {
             float* dst = l0.depth_m.ptr<float>(v);
-            float* dst_int = space_int != nullptr ? l0.integration_depth_m.ptr<float>(v) : nullptr;
             auto* vertex = l0.vertex.ptr<cv::Vec3f>(v);
             const float* centre_row = masked_.ptr<float>(v);
             const int dv_lo = std::max(-radius, roi.y - v), dv_hi = std::min(radius, roi.y + roi.height - 1 - v);
             // One output pixel: the filtered depth and its vertex, or invalid where the centre has no depth.
-            auto put = [&](int u, float z_filtered, float z_integrate) {
+            auto put = [&](int u, float z_filtered) {
                 if (centre_row[u] <= 0.0f) {
                     dst[u] = 0.0f;
-                    if (dst_int != nullptr) dst_int[u] = 0.0f;
                     vertex[u] = cv::Vec3f(kNaN, kNaN, kNaN);
                     return;
                 }
                 dst[u] = z_filtered;
-                if (dst_int != nullptr) dst_int[u] = z_integrate;
                 vertex[u] = vertexAt(l0.k, u, v, z_filtered);
                 ++valid_here;
             };
@@ -283,22 +239,18 @@ int DepthFilter::filter(const cv::Mat& depth_m, const cv::Mat& mask, SurfacePyra
             const int u_quad_end = roi.x + roi.width - 2 - 3;  // a quad at u needs u + 3 + 2 inside
             for (int u = roi.x; u < roi.x + roi.width; ++u) {
                 if (rows_inside && u - 2 >= roi.x && u < u_quad_end) {
-                    Float4 z4_int;
-                    const Float4 z4 =
-                        bilateral4At(masked_, u, v, space, space_int, range_lut_.data(), inv_step, kBeyond, z4_int);
-                    for (int i = 0; i < 4; ++i) put(u + i, z4[i], z4_int[i]);
+                    const Float4 z4 = bilateral4At(masked_, u, v, space, range_lut_.data(), inv_step, kBeyond);
+                    for (int i = 0; i < 4; ++i) put(u + i, z4[i]);
                     u += 3;  // and the loop's ++u
                     continue;
                 }
                 if (centre_row[u] <= 0.0f) {
-                    put(u, 0.0f, 0.0f);
+                    put(u, 0.0f);
                     continue;
                 }
                 const int du_lo = std::max(-radius, roi.x - u), du_hi = std::min(radius, roi.x + roi.width - 1 - u);
-                float z_int = 0.0f;
-                const float z = bilateralAt(masked_, u, v, centre_row[u], space, space_int, side, range_lut_.data(),
-                                            inv_step, kBeyond, dv_lo, dv_hi, du_lo, du_hi, z_int);
-                put(u, z, z_int);
+                put(u, bilateralAt(masked_, u, v, centre_row[u], space, side, range_lut_.data(), inv_step, kBeyond,
+                                   dv_lo, dv_hi, du_lo, du_hi));
             }
         }
         valid.fetch_add(valid_here, std::memory_order_relaxed);

@@ -135,7 +135,6 @@ int rejectOccludingDepth(SurfacePyramid& pyramid, const SurfaceLevel& model, con
             SurfaceLevel& lv = pyramid.levels[l];
             const int u = p.u >> (l - level), v = p.v >> (l - level);
             lv.depth_m.ptr<float>(v)[u] = 0.0f;
-            if (!lv.integration_depth_m.empty()) lv.integration_depth_m.ptr<float>(v)[u] = 0.0f;
             lv.vertex.ptr<cv::Vec3f>(v)[u] = cv::Vec3f(kNaN, kNaN, kNaN);
             lv.normal.ptr<cv::Vec3f>(v)[u] = cv::Vec3f(kNaN, kNaN, kNaN);
         }

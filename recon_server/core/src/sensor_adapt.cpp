@@ -72,14 +72,6 @@ void adaptToSensor(const SensorModel& sensor, const Intrinsics& depth, ReconPara
                 static_cast<int>(std::lround(static_cast<float>(recon.tsdf.max_blocks) * area * area));
             recon.tsdf.resolution_vox = resolution;
             recon.tsdf.trunc_dist_m = std::max(recon.tsdf.trunc_dist_m * noise_ratio, 2.0f * recon.tsdf.voxelSizeM());
-            // The lightly filtered integration depth and the band behind the surface were measured on Meyer's
-            // volume only, where mu spans about 4 pixel footprints: there they keep the face's folds and the model
-            // improves in every motion. With the narrowed band they moved the model by up to +0.2 mm (the
-            // near-range camera's wide turn 0.206 against 0.168 mm, the active-stereo camera's gentle turn 0.093
-            // against 0.048 mm; facescan-bench recon, the per-sensor table's command), so such a camera integrates
-            // the registration's depth as before.
-            recon.filter.integration_sigma_space_px = 0.0f;
-            recon.tsdf.behind_band_px = 0.0f;
         }
     }
 }

@@ -15,7 +15,6 @@ struct VoxelUpdate {
     float fx, fy, cx, cy;                   // pixels; intrinsics (eq. 4.8)
     int u0, v0, u1, v1;                     // pixels; the frame's ROI, half-open
     float mu, inv_mu, max_w;                // metres, 1/metres, weight
-    float behind_per_m;                     // the band behind the surface grows by this per metre of range
     int width;                              // pixels per row of the frame (and of the maps below, continuous)
     const float* rw;                        // per pixel: range along the ray (metres), weight; 2 floats
     const uint8_t* colour;                  // BGR per pixel, or nullptr
@@ -61,9 +60,8 @@ inline void integrateBlock(const VoxelUpdate& c, const Eigen::Vector3f& corner_c
                 if (!(w > 0.0f)) continue;
                 // Eq. 4.24: distance to the surface along the ray minus the distance to the voxel.
                 const float d = pix[0] - dist[ix];
-                // Far behind the surface: zero weight (Algorithm 3), beyond mu plus the band for the depth's noise.
-                if (d < -(up.mu + up.behind_per_m * pix[0])) continue;
-                const float sdf = std::max(-1.0f, std::min(1.0f, d * up.inv_mu));  // truncated, in units of mu
+                if (d < -up.mu) continue;                         // far behind the surface: zero weight (Algorithm 3)
+                const float sdf = std::min(1.0f, d * up.inv_mu);  // truncated, in units of mu
                 Voxel& vx = vrow[ix];
                 const float w_sum = vx.weight + w;
                 // Eq. 4.22 as a step towards the measurement, (W D + w sdf) / (W + w) = D + a (sdf - D) with
@@ -94,8 +92,6 @@ Status TsdfParams::validate() const {
         return invalidArgument("tsdf weight sigmas must be > 0");
     if (!(min_cos_angle >= 0.0f && min_cos_angle < 1.0f)) return invalidArgument("tsdf min_cos_angle in [0, 1)");
     if (!(edge_weight >= 0.0f && edge_weight <= 1.0f)) return invalidArgument("tsdf edge_weight in [0, 1]");
-    if (!(behind_band_px >= 0.0f && behind_band_px <= 16.0f))
-        return invalidArgument("tsdf behind_band_px must be in [0, 16] pixels");
     if (max_blocks < 1) return invalidArgument("tsdf max_blocks must be >= 1");
     if (!std::isfinite(centre_behind_surface_m)) return invalidArgument("tsdf centre_behind_surface_m not finite");
     return Status::ok();
@@ -256,12 +252,9 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
     const float inv_two_depth_var = 1.0f / (2.0f * params_.weight_depth_sigma_m * params_.weight_depth_sigma_m);
     const float min_cos = params_.min_cos_angle;
     pixel_range_weight_.create(frame.depth_m.size(), CV_32FC2);  // allocates on the first frame only
-    // The depth the model integrates is the lightly filtered one (FilterParams::integration_sigma_space_px); the
-    // normals of the angle term stay those of the registration's depth (smoother, valid at the same pixels).
-    const cv::Mat& depth = frame.depthToIntegrate();
     parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
         for (int v = v_lo; v < v_hi; ++v) {
-            const float* z = depth.ptr<float>(v);
+            const float* z = frame.depth_m.ptr<float>(v);
             const auto* nrm = frame.normal.ptr<cv::Vec3f>(v);
             auto* rw = pixel_range_weight_.ptr<cv::Vec2f>(v);
             for (int u = roi.x; u < roi.x + roi.width; ++u) rw[u] = cv::Vec2f(0.0f, 0.0f);
@@ -304,7 +297,6 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
     up.u0 = roi.x, up.v0 = roi.y, up.u1 = roi.x + roi.width, up.v1 = roi.y + roi.height;
     up.mu = mu;
     up.inv_mu = 1.0f / mu;
-    up.behind_per_m = params_.behind_band_px * 2.0f / (k.fx_px + k.fy_px);
     up.max_w = params_.max_weight;
     up.width = frame.depth_m.cols;
     up.rw = pixel_range_weight_.ptr<float>(0);

@@ -23,11 +23,6 @@ struct FilterParams {
                                        // left out of the coarser pixel, so edges do not blend foreground/background
     float min_depth_m = 0.3f;          // metres; measurements nearer than this are treated as invalid
     float max_depth_m = 3.0f;          // metres; and further than this
-    // The depth the model integrates is filtered less than the depth registration reads: eq. 4.4 with this spatial
-    // sigma over the window's inner 3x3 (the same range kernel, in the same pass). At 1 px the filter bridges the
-    // face's folds 2-4 mm wide (lip line, nostrils, inner eye corners) before they reach the volume; unfiltered,
-    // the model is noisier and its pose worse. 0: integrate the registration's depth.
-    float integration_sigma_space_px = 0.5f;  // pixels; in [0, 1]
     Status validate() const;
 };
 
@@ -38,10 +33,6 @@ struct SurfaceLevel {
     cv::Mat vertex;   // CV_32FC3, camera frame metres, NaN x = invalid (thesis eq. 4.9)
     cv::Mat normal;   // CV_32FC3, unit normals facing the camera, NaN x = invalid (thesis eq. 4.10)
     cv::Rect roi;     // where valid pixels may be; outside it everything is invalid
-    // Level 0 only: the depth the model integrates (FilterParams::integration_sigma_space_px), valid exactly where
-    // depth_m is; empty: integrate depth_m.
-    cv::Mat integration_depth_m;  // CV_32F, metres, 0 = invalid
-    const cv::Mat& depthToIntegrate() const { return integration_depth_m.empty() ? depth_m : integration_depth_m; }
 };
 
 // The filtered, masked frame at every pyramid level; all images are allocated once by allocate().
@@ -75,8 +66,6 @@ class DepthFilter {
     FilterParams params_;
     cv::Mat masked_;                   // CV_32F, the input after masking and range checks
     std::vector<float> space_weight_;  // exp(-(du^2 + dv^2) / 2 sigma_c^2) over the window, row-major (eq. 4.5)
-    // The same with integration_sigma_space_px over the window's inner 3x3 (0 outside it); empty when that is 0.
-    std::vector<float> integration_space_weight_;
     static constexpr size_t kRangeSteps = 512;
     // exp(-dz^2 / 2 sigma_s^2) indexed by |dz| / range_step_m_ up to 3 sigma, then 0 (eq. 4.6)
     std::array<float, kRangeSteps + 1> range_lut_{};

@@ -32,14 +32,7 @@ struct TsdfParams {
     // A measurement next to a depth edge (one of the four pixel squares around it has no eq. 4.10 normal) gets this
     // share of its weight: the mixed, noisy depths there would thicken the model, but a model of a few frames needs
     // its rim to align the next frames after a gap.
-    float edge_weight = 0.05f;  // dimensionless, in [0, 1]
-    // How far behind the measured surface a measurement still updates a voxel: mu plus this many of the pixel's
-    // footprints (range / focal length), the SDF clamped to -mu there. Algorithm 3 stops at mu, so the noise of
-    // the integrated depth decided which measurements counted: a sample measured too near fell behind a voxel's
-    // band and was dropped while one too far was kept (clamped at +mu in front), and the model came out thin
-    // (-0.35 mm with the unfiltered depth on the Kinect). On a surface at 45 degrees a pixel of lateral error is a
-    // footprint of depth error, so the margin is counted in footprints.
-    float behind_band_px = 0.5f;            // pixels of footprint; in [0, 16]
+    float edge_weight = 0.05f;              // dimensionless, in [0, 1]
     int max_blocks = 8192;                  // count; block pool reserved up front (8192 x 512 voxels x 12 B = 48 MB)
     float centre_behind_surface_m = 0.07f;  // metres; the cube's centre is placed this far behind the centroid of
                                             // the first frame's head points, along the view ray (a head's depth)
