@@ -393,7 +393,10 @@ wire::Writer<facescan_wire_ReplicaAck>* Replicator::ackWriter(const std::string&
 std::optional<wire::ReplicaData> Replicator::standbyCopy(const std::string& session_id) const {
     std::lock_guard lk(mutex_);
     const auto it = incoming_.find(session_id);
-    if (it == incoming_.end() || it->second.copy.round == 0) return std::nullopt;
+    // A copy taken before the first frame was integrated has no volume yet: nothing to continue from.
+    if (it == incoming_.end() || it->second.copy.round == 0 || !it->second.copy.state.validate().isOk()) {
+        return std::nullopt;
+    }
     return it->second.copy;
 }
 

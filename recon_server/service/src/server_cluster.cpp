@@ -160,8 +160,12 @@ bool Server::placeableAsNew(const std::string& session_id, const Candidate& c) {
                             std::to_string(c.camera.followed_epoch) +
                             ") had confirmed, and no claim of it is in view: this server holds no copy of them and "
                             "leaves the scan to the server that does (a restart of that server resumes it)";
-    if (refusals_logged_.insert(why).second) std::fprintf(stderr, "facescan-server: %s\n", why.c_str());
+    sayOnce(why);
     return false;
+}
+
+void Server::sayOnce(const std::string& line) {
+    if (refusals_logged_.insert(line).second) std::fprintf(stderr, "facescan-server: %s\n", line.c_str());
 }
 
 bool Server::refuseReusedId(const std::string& session_id) {
@@ -386,6 +390,7 @@ void Server::keepCopyInCase(const std::string& session_id, const OwnerView& winn
     std::string warning;
     auto copy = loadReplicaLog(dir, &warning);
     if (!copy.isOk() || copy->session_id != session_id || !copy->camera.every_frame) return;
+    if (!copy->state.validate().isOk()) return;  // taken before the first frame: nothing to continue from
     uint32_t& held = held_elsewhere_[session_id];
     held = std::max(held, winner.data.epoch);
     resumable_[session_id] = std::move(*copy);
@@ -479,6 +484,13 @@ void Server::loadResumable() {
         if (!replica.isOk()) {
             std::fprintf(stderr, "facescan-server: cannot resume from %s: %s\n", entry.path().c_str(),
                          replica.status().message().c_str());
+            continue;
+        }
+        if (!replica->state.validate().isOk()) {
+            // Written before the first frame was integrated: nothing to continue from, and nothing was confirmed
+            // from it (its agent still holds every frame).
+            std::fprintf(stderr, "facescan-server: %s holds no frame yet: nothing to resume from it\n",
+                         entry.path().c_str());
             continue;
         }
         std::fprintf(stderr, "facescan-server: found session %s in %s (frame %u, %u frames integrated)\n",

@@ -46,10 +46,7 @@ bool Server::viewFresh() const {
     return now >= view_stale_until_ns_.load() && now - watchdog_->lastCheckNs() < lease_ns_ / 2;
 }
 
-bool Server::ownSessionsFree() const {
-    const int64_t now = steadyNowNs();
-    return now >= hold_until_ns_.load() && now - watchdog_->lastCheckNs() < lease_ns_ / 2;
-}
+bool Server::ownSessionsFree() const { return sessionFree(/*recording=*/true); }
 
 bool Server::sessionFree(bool recording) const {
     // After a pause long enough to lose its claims, only recordings are held. What the hold guards against is a

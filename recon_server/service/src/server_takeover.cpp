@@ -38,8 +38,6 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         if (!witnessed(id, gone_since_ns)) continue;
         std::optional<wire::ReplicaData> standby;
         if (view.data.standby_id == params_.server_id) standby = replicator_->standbyCopy(id);
-        // A copy taken before the first frame was integrated has no volume yet: nothing to continue from.
-        if (standby && !standby->state.validate().isOk()) standby.reset();
         const auto disk = resumable_.find(id);
         const auto candidate = candidates_.find(id);
         // Live or a recording: the agent says so itself when it is in view; the copies only otherwise.
@@ -57,14 +55,13 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                                         std::to_string(agent.followed_epoch) + ", later than the last claim seen ('" +
                                         last.owner_id + "', epoch " + std::to_string(last.epoch) +
                                         "): this server's view is behind; it takes nothing over until it catches up";
-                if (refusals_logged_.insert(why).second) std::fprintf(stderr, "facescan-server: %s\n", why.c_str());
+                sayOnce(why);
                 continue;
             }
             last.confirmed_seq = std::max(last.confirmed_seq, agent.dropped_before_seq);
         }
-        const TakeoverChoice choice = chooseTakeover(
-            last, standby ? &*standby : nullptr,
-            disk != resumable_.end() && disk->second.state.validate().isOk() ? &disk->second : nullptr, live);
+        const TakeoverChoice choice = chooseTakeover(last, standby ? &*standby : nullptr,
+                                                     disk != resumable_.end() ? &disk->second : nullptr, live);
         if (choice.kind == TakeoverChoice::Kind::kFromFirstFrame) {
             // Nobody holds a replica (the owner died before its first one reached a standby or its disk), and the
             // agent still keeps every frame from the first: the scan starts over from there and loses nothing. A
@@ -73,9 +70,7 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
             continue;
         }
         if (choice.kind == TakeoverChoice::Kind::kRefuse) {
-            if (refusals_logged_.insert(id + ":" + choice.why).second) {
-                std::fprintf(stderr, "facescan-server: %s\n", choice.why.c_str());
-            }
+            sayOnce(choice.why);
             continue;
         }
         if (choice.kind == TakeoverChoice::Kind::kWait) continue;  // a server that has its replica continues it
@@ -144,7 +139,7 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                                         " ends at frame " + std::to_string(it->second.next_seq) +
                                         " and the agent holds frames only from " + std::to_string(dropped) +
                                         " on: frames between exist on another server; not resuming from this copy";
-                if (refusals_logged_.insert(why).second) std::fprintf(stderr, "facescan-server: %s\n", why.c_str());
+                sayOnce(why);
                 ++it;
                 continue;
             }

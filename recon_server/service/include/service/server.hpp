@@ -186,6 +186,8 @@ class Server {
     // A recording whose agent followed an owner, with no claim of it in view: whether it may be placed as new (from
     // the first frame, above the epoch followed), else why not, said once.
     bool placeableAsNew(const std::string& session_id, const Candidate& c);
+    // A refusal that holds until the view changes (re-checked every turn): logged the first time only.
+    void sayOnce(const std::string& line);
     Status claimSession(const std::string& session_id, uint32_t epoch, std::shared_ptr<OwnedSession> owned,
                         const wire::SessionOwnerData& previous);
     void buildEngine(OwnedSession& owned);  // starts the build of owned.engine
