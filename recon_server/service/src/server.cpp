@@ -601,20 +601,8 @@ void Server::statusLoop() {
             if (st.state == SessionState::kFinished) {
                 if (final_sent[st.session_id]) continue;
                 final_sent[st.session_id] = true;
-            } else if (now - s->lastActivityNs() > idle_ns && o->recording && o->agent_alive) {
-                // A recording's agent that lives still holds the frames to come (a takeover, a peer that holds
-                // its writes back): finishing now would make a partial scan of the person for good.
-                if (!o->idle_said) {
-                    std::fprintf(stderr,
-                                 "facescan-server: session %s: no frame for %.0f s, but its agent (a recording) is "
-                                 "still there: waiting for the rest instead of finishing without it (facescan finish "
-                                 "%s ends it now)\n",
-                                 o->id.c_str(), params_.idle_timeout_s, o->id.c_str());
-                    o->idle_said = true;
-                }
             } else if (now - s->lastActivityNs() > idle_ns) {
-                s->requestFinish("idle for " + std::to_string(static_cast<int>(params_.idle_timeout_s)) + " s",
-                                 nullptr);
+                finishIdle(*o);
             }
             publishStatus(st);
         }

@@ -59,6 +59,23 @@ bool Server::sessionFree(bool recording) const {
     return !recording || now >= hold_until_ns_.load();
 }
 
+void Server::finishIdle(OwnedSession& o) {
+    if (o.recording && o.agent_alive) {
+        // A recording's agent that lives still holds the frames to come (a takeover, a peer that holds its writes
+        // back): finishing now would make a partial scan of the person for good.
+        if (!o.idle_said) {
+            std::fprintf(stderr,
+                         "facescan-server: session %s: no frame for %.0f s, but its agent (a recording) is still "
+                         "there: waiting for the rest instead of finishing without it (facescan finish %s ends it "
+                         "now)\n",
+                         o.id.c_str(), params_.idle_timeout_s, o.id.c_str());
+            o.idle_said = true;
+        }
+        return;
+    }
+    o.session->requestFinish("idle for " + std::to_string(static_cast<int>(params_.idle_timeout_s)) + " s", nullptr);
+}
+
 void Server::assertProgress(int64_t now_ns) {
     // A few times a lease is enough for the readers' lease, and cheap (one small message per peer). Often enough
     // that a server cut off sees the agents' leases lapse soon after its peers' claims (Server::witnessed).

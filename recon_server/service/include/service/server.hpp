@@ -209,8 +209,10 @@ class Server {
     bool viewFresh() const;        // not re-observing the cluster after a pause: it may take over and place
     bool ownSessionsFree() const;  // its own sessions may go on (not held after a pause long enough to lose them)
     bool sessionFree(bool recording) const;  // a session may: a live scan is not held (server_health.cpp)
-    void assertProgress(int64_t now_ns);     // the announcement's and claims' liveliness (wire::withProgressLiveliness)
-    void onStall(const std::string& what);   // the watchdog found a loop stuck: say so and exit non-zero
+    // Status thread: a session without frames for idle_timeout_s is finished, but a recording whose agent lives.
+    void finishIdle(OwnedSession& o);
+    void assertProgress(int64_t now_ns);    // the announcement's and claims' liveliness (wire::withProgressLiveliness)
+    void onStall(const std::string& what);  // the watchdog found a loop stuck: say so and exit non-zero
     // Fault injection for the cluster tests, as etcd's gofail or FreeBSD's fail(9): with FACESCAN_FAILPOINT=
     // intake-stall-when-file:PATH the intake thread stops for good once PATH exists, a real stall of a real
     // thread that the watchdog and the cluster must handle. Unset in production.
