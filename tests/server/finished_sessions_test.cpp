@@ -113,7 +113,18 @@ TEST(ServerMemory, ScansOneAfterAnotherLeaveNoSessionInMemoryAndTheHeapFlat) {
             return s.session_id == session && s.state == SessionState::kFinished;
         })) << "the newest finished scan is listed";
         EXPECT_TRUE(std::filesystem::exists(params.data_dir / session / "summary.json"));
-        const size_t bytes = heapBytesInUse();
+        // Some of a scan's memory is let go on other threads after it is listed finished (the retiring thread
+        // deletes its DDS endpoints; the last snapshot reaches the test's client late on a loaded machine): past the
+        // baseline, the heap gets a few seconds to come back under its bound. A scan that stayed never does.
+        size_t bytes = heapBytesInUse();
+        if (i > kBaseline) {
+            (void)eventually(
+                [&] {
+                    bytes = heapBytesInUse();
+                    return static_cast<double>(bytes) < static_cast<double>(baseline_bytes) + 2e6;
+                },
+                10s);
+        }
         const double resident = residentBytes();
         std::printf("after scan %d: %.1f MB in use, %.1f MB resident, %zu listed\n", i,
                     static_cast<double>(bytes) * 1e-6, resident * 1e-6, listed.size());

@@ -100,6 +100,9 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
     }
     if (!unclaimed) return;
     const std::vector<ServerLoad> loads = cluster_->liveLoads();
+    // No server in view, not even this one (its own announcement lapsed in its view for a moment on a loaded
+    // machine): nothing can be placed, and nothing is full either. The next tick places it.
+    if (loads.empty()) return;
     // A chosen server that lives claims within three leases: it may have stalled for up to one (longer, and its
     // liveliness lapses: it leaves the view, and its sessions are placed again without it at once), then it
     // re-observes the cluster for two before it places anything. Only past that is it passed over: sooner, a
