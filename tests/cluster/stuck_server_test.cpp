@@ -124,6 +124,24 @@ TEST(StuckServer, AnOwnerWhoseIntakeStallsIsEndedByItsWatchdogAndTheScanFinishes
     expectFinishedOnceWhole(rig, "rec", other);
 }
 
+// A finish runs below the sessions still scanning: on a saturated machine each of its steps (closing, encoding,
+// the texture's bake) can take longer than the stall limit, and that is a slow server, not a stuck one. The
+// failpoint makes the texture step take 9 s against a limit of 4 s; a server that counted it as a stall would exit
+// with status 70 before it wrote the scan.
+TEST(StuckServer, AFinishSlowerThanTheStallLimitIsNotAStall) {
+    ClusterRig rig("slowfinish", 65);
+    ::setenv("FACESCAN_FAILPOINT", "finish-step-sleep-s:9", 1);
+    rig.startServer("srv-a", {"--set", "stall_limit_s=4"});
+    ::unsetenv("FACESCAN_FAILPOINT");
+    ASSERT_TRUE(rig.waitForServers(1, 30s));
+    rig.startAgent("rec", kFrames, "max", ",period=900");
+    ASSERT_EQ(rig.agent("rec").wait(180s), 0) << readText(rig.agentLog("rec")) << readText(rig.serverLog("srv-a"));
+    expectFinishedOnceWhole(rig, "rec", "srv-a");
+    const std::string log = readText(rig.serverLog("srv-a"));
+    EXPECT_EQ(log.find("stuck:"), std::string::npos) << log;
+    EXPECT_TRUE(processRuns(rig.server("srv-a").pid()));
+}
+
 // What an operator sees of a stuck server: `facescan servers` keeps listing it, as not responding, while its
 // process is there (its DDS threads still answer discovery) but its liveliness has lapsed; the healthy one is
 // listed as responding. Dropping it from the list would hide the one server that needs attention.

@@ -2,9 +2,12 @@
 // last preview, and the files in the data dir (session_store.hpp). Runs on the session's worker (or on the caller's
 // thread when the session never had a worker), never on the intake thread.
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
+#include <string>
 #include <thread>
 
 #include "service/session.hpp"
@@ -14,7 +17,19 @@
 namespace facescan::service {
 namespace {
 
-constexpr double kFinishStepLimitS = 60.0;  // seconds the finished model (closing, budget) may take on a busy machine
+constexpr double kFinishStepLimitS = 60.0;  // seconds one step of the finish may take on a busy machine
+
+// FACESCAN_FAILPOINT=finish-step-sleep-s:N (fault injection for tests): the texture step of every finish takes N s
+// more, as it does on a saturated machine, where it runs below the sessions still scanning.
+void finishStepFailpoint() {
+    static const double sleep_s = [] {
+        const char* fp = std::getenv("FACESCAN_FAILPOINT");
+        const std::string key = "finish-step-sleep-s:";
+        if (fp == nullptr || std::string(fp).rfind(key, 0) != 0) return 0.0;
+        return std::atof(fp + key.size());
+    }();
+    if (sleep_s > 0) std::this_thread::sleep_for(std::chrono::duration<double>(sleep_s));
+}
 
 std::string num(double v) {
     std::ostringstream o;
@@ -98,11 +113,13 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         // the intake or another session's worker. Its params were validated at start, so it cannot refuse; its
         // notes (a budget not reached, holes left) go to the log and summary.json.
         const recon::HeadRegion region = rec->headRegion();
-        // Seconds of CPU with closing and a budget, at a lower priority than the sessions still scanning
-        // (leaveToFinish): on a saturated machine that is tens of seconds of wall time, and not a stuck server.
-        nextWatchedStep(std::max(kFinishStepLimitS, 4.0 * params_.stall_limit_s));
+        // Seconds of CPU with closing, a budget and the texture, at a lower priority than the sessions still
+        // scanning (leaveToFinish): on a saturated machine each step is tens of seconds of wall time, and not a
+        // stuck server. Every step of the finish has the longer limit (the texture's bake took over 10 s at load 18).
+        const double finish_step_limit_s = std::max(kFinishStepLimitS, 4.0 * params_.stall_limit_s);
+        nextWatchedStep(finish_step_limit_s);
         auto finished = recon::finishMesh(extracted, params_.finish, &region, &grid);
-        nextWatchedStep();
+        nextWatchedStep(finish_step_limit_s);
         if (finished.isOk()) {
             finish_report = *finished;
             finish_json = finish_report.json();
@@ -123,8 +140,10 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
         // The texture of the mesh as encoded (cleaned on Draco's grid): the textured files and textured.drc are
         // the model of mesh.ply and mesh.drc, triangle for triangle, split only where the charts meet.
         if (status.isOk() && !mesh.triangles.empty()) {
+            nextWatchedStep(finish_step_limit_s);
+            finishStepFailpoint();
             texture_json = bakeFinishedTexture(mesh, textured);
-            nextWatchedStep();
+            nextWatchedStep(finish_step_limit_s);
         }
         if (textured.valid()) {
             // For clients that ask for the texture (textured.drc). Normals go with it: its vertices are split where
@@ -143,11 +162,12 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
                              "facescan-server: session %s: the textured model cannot be encoded for clients: %s\n",
                              id_.c_str(), s.toString().c_str());
             }
-            nextWatchedStep();
+            nextWatchedStep(finish_step_limit_s);
         }
         cv::Mat shaded;
         rec->renderPreview(pose, shaded);
         if (!shaded.empty()) cv::imencode(".png", shaded, png);
+        nextWatchedStep();
     }
     SessionStats s = stats();
     {
