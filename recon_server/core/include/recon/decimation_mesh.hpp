@@ -192,14 +192,17 @@ class LazyFlipDecimater : public OpenMesh::Decimater::BaseDecimaterT<MeshT> {
     }
 
     // Keys v by its best legal collapse (the quadric's priority; with `check`, only those that turn no face over).
+    // The priority is tested before the legality: both are pure tests, so the same collapse is chosen, but the
+    // legality (the link condition over two one-rings, and the decimater's search for an edge vl-vr) is the dearer
+    // one and now runs only for a collapse that would beat the best so far.
     void heapVertex(VertexHandle v, bool check) {
         float best = FLT_MAX;
         HalfedgeHandle target;
         for (const auto heh : mesh_.voh_range(v)) {
             CollapseInfo ci(mesh_, heh);
-            if (!this->is_collapse_legal(ci)) continue;
             const float prio = this->collapse_priority(ci);
             if (!(prio >= 0.0f && prio < best)) continue;
+            if (!this->is_collapse_legal(ci)) continue;
             if (check && turnsAFaceOver(ci)) continue;
             best = prio;
             target = heh;
