@@ -48,6 +48,9 @@ for i in $(seq 1 "$scans"); do
         --source "synthetic:frames=$frames,subject=builtin,seed=$i" >"$work/agent.log" 2>&1; then
         echo "memory.sh: the agent of $session failed:" >&2
         tail -5 "$work/agent.log" >&2
+        # The work folder goes on exit: the server's side of it is printed here.
+        echo "memory.sh: the server's log ends:" >&2
+        grep -v "replication:" "$work/server.log" | tail -15 >&2
         exit 1
     fi
     for _ in $(seq 1 100); do [ -f "$work/data/$session/summary.json" ] && break; sleep 0.1; done
