@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "recon/parallel.hpp"
+#include "service/failpoint.hpp"
 #include "service/frame_load.hpp"
 #include "service/replication.hpp"
 #include "service/session_store.hpp"
@@ -71,9 +72,7 @@ Status Server::start() {
         lease_ns_ = static_cast<int64_t>(wire::profileLeaseS(*xml) * 1e9);
     }
     if (const char* fp = std::getenv("FACESCAN_FAILPOINT")) {
-        const std::string spec = fp;
-        const std::string stall = "intake-stall-when-file:";
-        if (spec.rfind(stall, 0) == 0) stall_file_ = spec.substr(stall.size());
+        if (auto file = failpointArg("intake-stall-when-file")) stall_file_ = *file;
         std::fprintf(stderr, "facescan-server: FACESCAN_FAILPOINT=%s (fault injection for tests)\n", fp);
     }
     Watchdog::Options watch;

@@ -10,6 +10,7 @@
 #include <string>
 #include <thread>
 
+#include "service/failpoint.hpp"
 #include "service/session.hpp"
 #include "service/session_store.hpp"
 #include "wire/mesh_codec.hpp"
@@ -19,14 +20,12 @@ namespace {
 
 constexpr double kFinishStepLimitS = 60.0;  // seconds one step of the finish may take on a busy machine
 
-// FACESCAN_FAILPOINT=finish-step-sleep-s:N (fault injection for tests): the texture step of every finish takes N s
-// more, as it does on a saturated machine, where it runs below the sessions still scanning.
+// FACESCAN_FAILPOINT=finish-step-sleep-s:N (failpoint.hpp): the texture step of every finish takes N s more, as
+// it does on a saturated machine, where it runs below the sessions still scanning.
 void finishStepFailpoint() {
     static const double sleep_s = [] {
-        const char* fp = std::getenv("FACESCAN_FAILPOINT");
-        const std::string key = "finish-step-sleep-s:";
-        if (fp == nullptr || std::string(fp).rfind(key, 0) != 0) return 0.0;
-        return std::atof(fp + key.size());
+        const auto arg = failpointArg("finish-step-sleep-s");
+        return arg ? std::atof(arg->c_str()) : 0.0;
     }();
     if (sleep_s > 0) std::this_thread::sleep_for(std::chrono::duration<double>(sleep_s));
 }

@@ -213,9 +213,9 @@ class Server {
     void finishIdle(OwnedSession& o);
     void assertProgress(int64_t now_ns);    // the announcement's and claims' liveliness (wire::withProgressLiveliness)
     void onStall(const std::string& what);  // the watchdog found a loop stuck: say so and exit non-zero
-    // Fault injection for the cluster tests, as etcd's gofail or FreeBSD's fail(9): with FACESCAN_FAILPOINT=
-    // intake-stall-when-file:PATH the intake thread stops for good once PATH exists, a real stall of a real
-    // thread that the watchdog and the cluster must handle. Unset in production.
+    // Fault injection for the cluster tests (failpoint.hpp): with FACESCAN_FAILPOINT=intake-stall-when-file:PATH
+    // the intake thread stops for good once PATH exists, a real stall of a real thread that the watchdog and the
+    // cluster must handle. Unset in production.
     void failpoint();
     void loadResumable();
     std::shared_ptr<OwnedSession> owned(const std::string& session_id) const;
