@@ -235,5 +235,47 @@ TEST(AzureKinectCalibration, RefusesWhatIsNoCalibration) {
     EXPECT_FALSE(parseAzureKinectCalibration("[1, 2, 3]", 640, 576, 0, 0).isOk());
 }
 
+// A calibration in the layout of the fixture's attachment; the tests below change one value at a time.
+std::string calibrationJson(const std::string& depth_fx = "0.493", const std::string& colour_rotation_00 = "0.99999922",
+                            const std::string& colour_translation_x = "-0.0321") {
+    return R"({"CalibrationInformation":{"Cameras":[{"Intrinsics":{"ModelParameterCount":14,"ModelParameters":)"
+           R"([0.513,0.517,)" +
+           depth_fx +
+           R"(,0.493,0.548,-0.021,-0.0027,0.89,0.086,-0.014,0,0,-7.2E-5,2.1E-5],)"
+           R"("ModelType":"CALIBRATION_LensDistortionModelBrownConrady"},)"
+           R"("Purpose":"CALIBRATION_CameraPurposeDepth","Rt":{"Rotation":[1,0,0,0,1,0,0,0,1],"Translation":[0,0,0]},)"
+           R"("SensorHeight":1024,"SensorWidth":1024},{"Intrinsics":{"ModelParameterCount":14,"ModelParameters":)"
+           R"([0.4998,0.5066,0.478,0.637,0.33,-2.49,1.45,0.209,-2.30,1.375,0,0,-1.3E-4,-1.6E-4],)"
+           R"("ModelType":"CALIBRATION_LensDistortionModelBrownConrady"},)"
+           R"("Purpose":"CALIBRATION_CameraPurposePhotoVideo","Rt":{"Rotation":[)" +
+           colour_rotation_00 +
+           R"(,0.00118,-0.000448,-0.001139,0.99628,0.08616,0.000548,-0.08616,0.99628],"Translation":[)" +
+           colour_translation_x + R"(,-0.0022,0.0039]},"SensorHeight":3072,"SensorWidth":4096}]}})";
+}
+
+TEST(AzureKinectCalibration, ReadsAWellFormedCalibration) {
+    const auto parsed = parseAzureKinectCalibration(calibrationJson(), 640, 576, 1280, 720);
+    ASSERT_TRUE(parsed.isOk()) << parsed.status().message();
+    EXPECT_NEAR(parsed->depth.intrinsics.fx_px, 0.493f * 1024, 1e-2f);
+    EXPECT_NEAR(parsed->colour.intrinsics.fx_px, 0.478f * 1280, 1e-2f);
+    EXPECT_NEAR(parsed->T_colour_depth.translation().x(), -0.0321f, 1e-6f);
+}
+
+// Finite numbers in the file can still make an unusable camera: a normalised focal length of 1e300 overflows the
+// float pixel value, a negative one is no pinhole, and a "rotation" of scale 1e20 (or a mirror) makes the
+// depth-to-colour transform meaningless. Each is refused with a line that names the camera.
+TEST(AzureKinectCalibration, RefusesFiniteValuesThatMakeNoCamera) {
+    const auto refusal = [](const std::string& json) {
+        const auto parsed = parseAzureKinectCalibration(json, 640, 576, 1280, 720);
+        return parsed.isOk() ? std::string() : parsed.status().message();
+    };
+    EXPECT_NE(refusal(calibrationJson("1e300")).find("depth camera's pinhole"), std::string::npos);
+    EXPECT_NE(refusal(calibrationJson("-0.493")).find("depth camera's pinhole"), std::string::npos);
+    EXPECT_NE(refusal(calibrationJson("0.493", "1e20")).find("colour camera's Rt rotation"), std::string::npos);
+    EXPECT_NE(refusal(calibrationJson("0.493", "-0.99999922")).find("colour camera's Rt rotation"), std::string::npos);
+    EXPECT_NE(refusal(calibrationJson("0.493", "0.99999922", "3e30")).find("translation is over 10 m"),
+              std::string::npos);
+}
+
 }  // namespace
 }  // namespace facescan::capture

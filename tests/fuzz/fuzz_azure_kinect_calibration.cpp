@@ -1,6 +1,7 @@
 // libFuzzer target: the Azure Kinect calibration.json of .mkv recordings (parseAzureKinectCalibration), read for
 // the depth and colour modes a recording can hold. Whatever it accepts must be usable: finite pinholes of the
-// mode's size, eight distortion coefficients, and a finite rigid depth-to-colour transform.
+// mode's size with positive focal lengths, eight distortion coefficients, and a finite rigid depth-to-colour
+// transform.
 #include <cmath>
 #include <string>
 
@@ -25,7 +26,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
             const auto& k = cam.intrinsics;
             if (k.width_px != w || k.height_px != h) __builtin_trap();
             if (!std::isfinite(k.fx_px) || !std::isfinite(k.fy_px) || !std::isfinite(k.cx_px) ||
-                !std::isfinite(k.cy_px))
+                !std::isfinite(k.cy_px) || !(k.fx_px > 0.0f) || !(k.fy_px > 0.0f))
                 __builtin_trap();
             if (cam.distortion.size() != 8) __builtin_trap();
         };

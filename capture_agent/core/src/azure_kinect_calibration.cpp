@@ -64,12 +64,21 @@ StatusOr<RawCamera> readCamera(const cv::FileNode& cam, const std::string& purpo
     for (int i = 0; i < 9; ++i) raw.R(i / 3, i % 3) = static_cast<float>(static_cast<double>(rot[i]));
     for (int i = 0; i < 3; ++i) raw.t[i] = static_cast<float>(static_cast<double>(trans[i]));
     if (!raw.R.allFinite() || !raw.t.allFinite()) return dataLoss("the " + purpose + " camera's Rt is not finite");
+    // A rotation has orthonormal rows and determinant 1; anything else (a scale of 1e30, a mirror) would turn the
+    // depth-to-colour transform into garbage or infinities. Camera rigs are centimetres apart, never kilometres.
+    if ((raw.R * raw.R.transpose() - Eigen::Matrix3f::Identity()).cwiseAbs().maxCoeff() > 1e-2f ||
+        raw.R.determinant() < 0.0f) {
+        return dataLoss("the " + purpose + " camera's Rt rotation is not a rotation");
+    }
+    if (raw.t.norm() > 10.0f) return dataLoss("the " + purpose + " camera's Rt translation is over 10 m");
     return raw;
 }
 
 // The SDK's mode-specific calibration: normalised, corner-origin parameters times the binned size, minus the crop,
-// minus half a pixel for OpenCV's centre-origin convention.
-AzureKinectCamera toMode(const RawCamera& raw, const ModeGeometry& g, int w, int h) {
+// minus half a pixel for OpenCV's centre-origin convention. Finite normalised parameters can still overflow a float
+// pixel value (1e300 times the width), and a zero or negative focal length is no pinhole, so the result is checked.
+StatusOr<AzureKinectCamera> toMode(const RawCamera& raw, const ModeGeometry& g, int w, int h,
+                                   const std::string& purpose) {
     AzureKinectCamera cam;
     const auto& p = raw.params;
     cam.intrinsics.width_px = w;
@@ -81,6 +90,12 @@ AzureKinectCamera toMode(const RawCamera& raw, const ModeGeometry& g, int w, int
     // OpenCV's rational model (k1 k2 p1 p2 k3 k4 k5 k6); the SDK stores p2 before p1. The centre of distortion
     // (codx, cody) is zero in the Brown-Conrady calibrations the devices ship, so it is not modelled.
     cam.distortion = {p[4], p[5], p[13], p[12], p[6], p[7], p[8], p[9]};
+    const auto& k = cam.intrinsics;
+    if (!std::isfinite(k.cx_px) || !std::isfinite(k.cy_px) || !std::isfinite(k.fx_px) || !std::isfinite(k.fy_px) ||
+        !(k.fx_px > 0.0f) || !(k.fy_px > 0.0f)) {
+        return dataLoss("the " + purpose + " camera's pinhole in the " + std::to_string(w) + "x" + std::to_string(h) +
+                        " mode is not usable (a focal length that is not positive, or a value out of range)");
+    }
     return cam;
 }
 
@@ -113,7 +128,7 @@ StatusOr<AzureKinectCalibration> parseAzureKinectCalibration(const std::string& 
         if (!depth.isOk()) return depth.status();
         AzureKinectCalibration out;
         ASSIGN_OR_RETURN(const ModeGeometry depth_mode, depthMode(depth_width, depth_height));
-        out.depth = toMode(*depth, depth_mode, depth_width, depth_height);
+        ASSIGN_OR_RETURN(out.depth, toMode(*depth, depth_mode, depth_width, depth_height, "depth"));
         out.colour.intrinsics = recon::Intrinsics{0, 0, 0.0f, 0.0f, 0.0f, 0.0f};
         out.T_colour_depth = recon::Pose::Identity();
         if (colour_width == 0 && colour_height == 0) return out;
@@ -127,17 +142,15 @@ StatusOr<AzureKinectCalibration> parseAzureKinectCalibration(const std::string& 
             return dataLoss("colour images of " + std::to_string(colour_width) + "x" + std::to_string(colour_height) +
                             " are no Azure Kinect colour mode");
         }
-        out.colour = toMode(*colour, ModeGeometry{colour_width, binned_h, 0, (binned_h - colour_height) / 2},
-                            colour_width, colour_height);
+        ASSIGN_OR_RETURN(out.colour,
+                         toMode(*colour, ModeGeometry{colour_width, binned_h, 0, (binned_h - colour_height) / 2},
+                                colour_width, colour_height, "colour"));
         // Each camera's Rt maps the calibration's reference frame (the depth camera) into that camera.
         recon::Pose T_depth_ref = recon::Pose::Identity(), T_colour_ref = recon::Pose::Identity();
         T_depth_ref.linear() = depth->R;
         T_depth_ref.translation() = depth->t;
         T_colour_ref.linear() = colour->R;
         T_colour_ref.translation() = colour->t;
-        if (std::abs(depth->R.determinant() - 1.0f) > 1e-2f) {
-            return dataLoss("the depth camera's rotation is not a rotation");
-        }
         out.T_colour_depth = T_colour_ref * T_depth_ref.inverse();
         return out;
     } catch (const cv::Exception& e) {
