@@ -1,7 +1,8 @@
 // Bad input to a cluster member, over real DDS with the service in process:
 //   - replicas that are truncated, corrupt, of another format version or out of order are refused, with a
 //     reason, and a full replica is requested; good ones are acknowledged round by round;
-//   - a flood of bogus session ids cannot take a real scan's place, and --max-sessions holds throughout.
+//   - a flood of bogus session ids cannot take a real scan's place, and --max-sessions holds throughout;
+//   - a session announced but never fed is released, and leaves no status behind that would list it for ever.
 #include <gtest/gtest.h>
 
 #include <random>
@@ -193,6 +194,43 @@ TEST(FloodInput, BogusSessionIdsCannotStarveARealScanAndMaxSessionsHolds) {
     int bogus_held = 0;
     for (const SessionStats& s : (*server)->sessions()) bogus_held += s.session_id.rfind("bogus-", 0) == 0 ? 1 : 0;
     EXPECT_LE(bogus_held, 1);
+    std::filesystem::remove_all(params.data_dir);
+}
+
+// An agent that announces a scan and goes before its first frame: the server releases the session, and its last
+// status ("waiting for frames") must leave the server's history with it. Otherwise `facescan sessions` lists the
+// scan on this server for as long as it runs, even after another server has finished it.
+TEST(FloodInput, ASessionReleasedForWantOfFramesIsNoLongerListed) {
+    const uint32_t domain = privateDomain(53);
+    ServerParams params = inputParams(domain, "releasing");
+    params.first_frame_timeout_s = 1.0f;
+    auto server = Server::create(params);
+    ASSERT_TRUE(server.isOk()) << server.status().toString();
+    auto client = testing::TestClient::create(domain);
+    ASSERT_TRUE(client.isOk());
+    {
+        const testing::EncodedSequence seq = testing::renderSequence(1);
+        auto agent = testing::TestAgent::create(domain, "silent", seq.intrinsics, /*every_frame=*/false);
+        ASSERT_TRUE(agent.isOk());
+        ASSERT_TRUE((*agent)->waitForServer(10s));
+        ASSERT_TRUE((*agent)->sendCamera().isOk());
+        ASSERT_TRUE((*agent)->waitForOwner(20s)) << "the announced scan got no server";
+        const auto waiting = (*client)->waitForStatus(
+            "silent", [](const testing::StatusCopy& s) { return s.state == facescan_wire_STATE_WAITING; }, 10s);
+        ASSERT_TRUE(waiting) << "the server never said it waits for frames";
+    }  // the agent goes without a frame
+    const auto deadline = std::chrono::steady_clock::now() + 20s;
+    while ((*server)->openSessions() > 0 && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(50ms);
+    ASSERT_EQ((*server)->openSessions(), 0) << "the session was never released";
+    // A client that subscribes now gets what the server's status writer still holds: nothing for this scan.
+    auto late = testing::TestClient::create(domain);
+    ASSERT_TRUE(late.isOk());
+    ASSERT_TRUE((*late)->waitForServer(10s));
+    const auto stale = (*late)->waitForStatus(
+        "silent", [](const testing::StatusCopy&) { return true; }, 3s);
+    EXPECT_FALSE(stale) << "a released session is still listed: state " << (stale ? stale->state : 0) << ", "
+                        << (stale ? stale->detail : "");
     std::filesystem::remove_all(params.data_dir);
 }
 

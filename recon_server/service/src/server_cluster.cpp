@@ -451,6 +451,9 @@ void Server::releaseStale() {
             std::fprintf(stderr, "facescan-server: session %s: released, no frame came within %.0f s\n", o->id.c_str(),
                          static_cast<double>(params_.first_frame_timeout_s));
             retireOwned(o, /*dispose_claim=*/true);
+            // Its last status ("waiting for frames") would stay in this server's history for as long as it runs:
+            // `facescan sessions` would list the scan here for ever, even once another server has finished it.
+            unlist(o->id);
             continue;
         }
         if (o->phase != OwnedSession::Phase::kFinished && o->session && o->session->finished()) {
