@@ -99,24 +99,9 @@ Voxel* voxelAt(VoxelBlockGrid& g, int x, int y, int z) {
 // in a vertex. The positions of such vertices (on an edge not shared by exactly two triangles, or whose
 // triangles form more than one fan); empty for a closed manifold.
 std::vector<Eigen::Vector3f> pinches(const IndexedMesh& mesh) {
-    // Edges as sorted keys (lower vertex in the high half): a run of equal keys is one edge and its triangles.
-    std::vector<uint64_t> edges;
-    edges.reserve(mesh.triangleCount() * 3);
-    for (const Triangle& t : mesh.triangles) {
-        for (int k = 0; k < 3; ++k) {
-            const uint32_t a = std::min(t[k], t[(k + 1) % 3]), b = std::max(t[k], t[(k + 1) % 3]);
-            edges.push_back(static_cast<uint64_t>(a) << 32 | b);
-        }
-    }
-    std::sort(edges.begin(), edges.end());
-    std::vector<uint8_t> bad(mesh.vertexCount(), 0);
-    for (size_t i = 0; i < edges.size();) {
-        size_t j = i + 1;
-        while (j < edges.size() && edges[j] == edges[i]) ++j;
-        if (j - i != 2) bad[edges[i] >> 32] = bad[edges[i] & 0xffffffffu] = 1;
-        i = j;
-    }
-    // Fans: per vertex, its triangles joined where two share a second vertex.
+    // Per vertex, its triangles (a CSR), and the other two vertices of each as (other, triangle) pairs sorted by
+    // the other: a run of equal others is one edge at the vertex and its triangles, and joins them into a fan. One
+    // pass of small sorts, not a sort of every edge of the solid.
     std::vector<uint32_t> start(mesh.vertexCount() + 1, 0), incident(mesh.triangleCount() * 3);
     for (const Triangle& t : mesh.triangles) ++start[t[0] + 1], ++start[t[1] + 1], ++start[t[2] + 1];
     std::partial_sum(start.begin(), start.end(), start.begin());
@@ -124,7 +109,9 @@ std::vector<Eigen::Vector3f> pinches(const IndexedMesh& mesh) {
     for (uint32_t f = 0; f < mesh.triangleCount(); ++f) {
         for (const uint32_t v : mesh.triangles[f]) incident[fill[v]++] = f;
     }
+    std::vector<uint8_t> bad(mesh.vertexCount(), 0);
     std::vector<int> parent;
+    std::vector<std::pair<uint32_t, int>> others;
     for (uint32_t v = 0; v < mesh.vertexCount(); ++v) {
         const uint32_t n = start[v + 1] - start[v];
         parent.resize(n);
@@ -133,17 +120,28 @@ std::vector<Eigen::Vector3f> pinches(const IndexedMesh& mesh) {
             while (parent[i] != i) i = parent[i] = parent[parent[i]];
             return i;
         };
+        others.clear();
         for (uint32_t i = 0; i < n; ++i) {
-            for (uint32_t j = i + 1; j < n; ++j) {
-                const Triangle &a = mesh.triangles[incident[start[v] + i]], &b = mesh.triangles[incident[start[v] + j]];
-                bool share = false;
-                for (const uint32_t wa : a)
-                    for (const uint32_t wb : b) share |= wa == wb && wa != v;
-                if (share) parent[root(static_cast<int>(i))] = root(static_cast<int>(j));
+            const Triangle& t = mesh.triangles[incident[start[v] + i]];
+            if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) bad[v] = 1;  // a triangle without area
+            for (const uint32_t w : t) {
+                if (w != v) others.emplace_back(w, static_cast<int>(i));
             }
         }
-        int fans = 0;
-        for (uint32_t i = 0; i < n; ++i) fans += root(static_cast<int>(i)) == static_cast<int>(i);
+        for (size_t i = 1; i < others.size(); ++i) {  // insertion sort: a dozen pairs
+            for (size_t j = i; j > 0 && others[j] < others[j - 1]; --j) std::swap(others[j], others[j - 1]);
+        }
+        int fans = static_cast<int>(n);
+        for (size_t i = 0; i < others.size();) {
+            size_t j = i + 1;
+            while (j < others.size() && others[j].first == others[i].first) ++j;
+            if (j - i != 2) bad[v] = 1;  // an edge not shared by exactly two triangles (its other end sees it too)
+            for (size_t k = i + 1; k < j; ++k) {
+                const int a = root(others[i].second), b = root(others[k].second);
+                if (a != b) parent[a] = b, --fans;
+            }
+            i = j;
+        }
         if (fans > 1) bad[v] = 1;
     }
     std::vector<Eigen::Vector3f> out;
@@ -171,7 +169,7 @@ VoxelBlockGrid meshVolume(const IndexedMesh& mesh, float voxel_m, const VoxelBlo
     // Per voxel within the band: the distance to the nearest triangle, signed by its side of that triangle. A
     // voxel beside the rim (its nearest point on a boundary edge, off the triangle's normal) stays unobserved:
     // there the side is not known, and the carving decides.
-    const float band_m = g.trunc_dist_m;
+    const float band_m = g.trunc_dist_m, band_sq = band_m * band_m;
     std::vector<float> best(g.voxels.size(), std::numeric_limits<float>::infinity());
     for (const Triangle& t : mesh.triangles) {
         const Eigen::Vector3f &a = mesh.positions_m[t[0]], &b = mesh.positions_m[t[1]], &c = mesh.positions_m[t[2]];
@@ -195,9 +193,13 @@ VoxelBlockGrid meshVolume(const IndexedMesh& mesh, float voxel_m, const VoxelBlo
                     // closest point.
                     const float to_plane = std::abs((p - a).dot(n));
                     if (to_plane >= band_m) continue;
+                    // So does the distance to the triangle's box (the box's corners beside the triangle), with
+                    // 0.01 % to spare for the closest point's rounding.
+                    const float box_sq = (tb.min() - p).cwiseMax(p - tb.max()).cwiseMax(0.0f).squaredNorm() * 0.9999f;
+                    if (box_sq >= band_sq) continue;
                     Voxel* v = voxelAt(g, x, y, z);
                     const size_t i = static_cast<size_t>(v - g.voxels.data());
-                    if (to_plane >= best[i]) continue;
+                    if (to_plane >= best[i] || box_sq >= best[i] * best[i]) continue;
                     const Eigen::Vector3f q = closestPointOnTriangle(p, a, b, c);
                     const float dist = (p - q).norm();
                     if (dist >= band_m || dist >= best[i]) continue;
