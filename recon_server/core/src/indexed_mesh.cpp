@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cstring>
 #include <numeric>
-#include <unordered_map>
 
 namespace facescan::recon {
 namespace {
@@ -141,8 +140,10 @@ MeshDefects countDefects(const IndexedMesh& mesh) {
     const std::vector<uint32_t> canonical = canonicalByPosition(mesh);
     std::vector<char> used(mesh.vertexCount(), 0);
     TriangleSet seen(mesh.triangleCount());
-    std::unordered_map<uint64_t, uint32_t> edge_faces;
-    edge_faces.reserve(mesh.triangleCount() * 2);
+    // The good triangles' edges as keys, sorted: a run of equal keys is one edge and its triangles (a sort of a
+    // flat array, not a hash map: a watertight head's check holds 400,000 edges).
+    std::vector<uint64_t> edge_keys;
+    edge_keys.reserve(mesh.triangleCount() * 3);
     std::vector<Triangle> good;  // canonical, non-degenerate, first copies
     good.reserve(mesh.triangleCount());
     for (const Triangle& t : mesh.triangles) {
@@ -157,12 +158,16 @@ MeshDefects countDefects(const IndexedMesh& mesh) {
             continue;
         }
         good.push_back(c);
-        for (int i = 0; i < 3; ++i) ++edge_faces[edgeKey(c[i], c[(i + 1) % 3])];
+        for (int i = 0; i < 3; ++i) edge_keys.push_back(edgeKey(c[i], c[(i + 1) % 3]));
     }
     d.unreferenced_vertices = static_cast<size_t>(std::count(used.begin(), used.end(), 0));
-    for (const auto& [edge, faces] : edge_faces) {
-        if (faces > 2) ++d.non_manifold_edges;
-        if (faces == 1) ++d.boundary_edges;
+    std::sort(edge_keys.begin(), edge_keys.end());
+    for (size_t i = 0; i < edge_keys.size();) {
+        size_t j = i + 1;
+        while (j < edge_keys.size() && edge_keys[j] == edge_keys[i]) ++j;
+        if (j - i > 2) ++d.non_manifold_edges;
+        if (j - i == 1) ++d.boundary_edges;
+        i = j;
     }
     // Fans: around each vertex, its triangles joined through the edges they share there (vertex -> other end).
     std::vector<uint32_t> first(mesh.vertexCount() + 1, 0);
@@ -176,22 +181,25 @@ MeshDefects countDefects(const IndexedMesh& mesh) {
         for (const uint32_t v : good[f]) incident[fill[v]++] = f;
     }
     std::vector<uint32_t> parent;
-    std::unordered_map<uint32_t, uint32_t> by_other;
+    // (other end, triangle of the fan) sorted by the other end: the triangles of a run share the edge v-other.
+    std::vector<std::pair<uint32_t, uint32_t>> by_other;
     for (uint32_t v = 0; v < mesh.vertexCount(); ++v) {
         const uint32_t k = first[v + 1] - first[v];
         if (k < 2) continue;
         parent.resize(k);
         std::iota(parent.begin(), parent.end(), 0u);
         by_other.clear();
-        uint32_t pieces = k;
         for (uint32_t i = 0; i < k; ++i) {
             for (const uint32_t o : good[incident[first[v] + i]]) {
-                if (o == v) continue;
-                auto [it, inserted] = by_other.try_emplace(o, i);
-                if (inserted) continue;
-                const int ra = findRoot(parent, it->second), rb = findRoot(parent, i);
-                if (ra != rb) parent[rb] = static_cast<uint32_t>(ra), --pieces;
+                if (o != v) by_other.emplace_back(o, i);
             }
+        }
+        std::sort(by_other.begin(), by_other.end());
+        uint32_t pieces = k;
+        for (size_t i = 1; i < by_other.size(); ++i) {
+            if (by_other[i].first != by_other[i - 1].first) continue;
+            const int ra = findRoot(parent, by_other[i - 1].second), rb = findRoot(parent, by_other[i].second);
+            if (ra != rb) parent[rb] = static_cast<uint32_t>(ra), --pieces;
         }
         if (pieces > 1) ++d.non_manifold_vertices;
     }

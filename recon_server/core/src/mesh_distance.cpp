@@ -34,6 +34,9 @@ Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const V
 namespace {
 // The grid never gets more cells than this per axis (a 0.4 m head at 2 mm cells is 200).
 constexpr int kMaxCellsPerAxis = 256;
+// Share of a cell by which a cell's box is grown when it is skipped for lying farther than the best triangle found:
+// the cells' bounds are computed in floats, as are the triangles' cells.
+constexpr float kCellPad = 1e-3f;
 }  // namespace
 
 TriangleGrid::TriangleGrid(const IndexedMesh& mesh) : positions_m_(mesh.positions_m) {
@@ -113,6 +116,21 @@ float TriangleGrid::distance(const Vec3& p) const {
                 for (int x = x0; x <= x1; x += step) {
                     if (!shell_zy && std::abs(x - c.x()) != r) continue;
                     const size_t cell = (static_cast<size_t>(z) * dims_.y() + y) * dims_.x() + x;
+                    if (cell_start_[cell] == cell_start_[cell + 1]) continue;
+                    // A cell's triangles are no nearer than its box (grown a little against rounding; the outer
+                    // cells open outwards, as the grid clamps onto them): a point on the surface has its answer
+                    // from one or two cells, not from all 27 around it.
+                    const Eigen::Vector3i at(x, y, z);
+                    float gap_sq = 0;
+                    for (int a = 0; a < 3; ++a) {
+                        const float cell_lo = origin_m_[a] + (static_cast<float>(at[a]) - kCellPad) * cell_m_;
+                        const float cell_hi = origin_m_[a] + (static_cast<float>(at[a]) + 1 + kCellPad) * cell_m_;
+                        const float gap = at[a] > 0 && p[a] < cell_lo              ? cell_lo - p[a]
+                                          : at[a] + 1 < dims_[a] && p[a] > cell_hi ? p[a] - cell_hi
+                                                                                   : 0.0f;
+                        gap_sq += gap * gap;
+                    }
+                    if (gap_sq > best_sq) continue;
                     for (uint32_t k = cell_start_[cell]; k < cell_start_[cell + 1]; ++k) {
                         const Triangle& t = triangles_[cell_triangles_[k]];
                         const Vec3 q =

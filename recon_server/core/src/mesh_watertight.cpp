@@ -15,6 +15,7 @@
 // Only the largest closed piece is kept (the head; an unseen bubble inside it would be a second piece).
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -24,9 +25,14 @@
 #include "recon/marching_cubes.hpp"
 #include "recon/mesh_distance.hpp"
 #include "recon/parallel.hpp"
+#include "watertight_views.hpp"
 
 namespace facescan::recon {
 namespace {
+
+using watertight_detail::DepthView;
+using watertight_detail::fibonacciDirection;
+using watertight_detail::renderView;
 
 constexpr int kViewDirections = 48;  // count; directions tried, evenly spread over the sphere (about 30 degrees apart)
 constexpr float kMinFrontShare = 0.9f;  // ratio; a view is used when front faces fill this share of what it sees
@@ -35,120 +41,6 @@ constexpr int kMarginVox = 3;           // voxels; lattice layers beyond the mod
 // alone (brows to chin, cheek to cheek) about 200 cm^2.
 constexpr double kMinSeenAreaM2 = 0.015;
 constexpr float kMinDepthM = 0.04f;  // metres; nor when the surface is flatter than this along its mean normal
-
-// An orthographic depth map of the model seen along `dir`.
-struct DepthView {
-    Eigen::Vector3f dir, u, v;  // dir looks into the scene; u, v span the image plane
-    float u0 = 0, v0 = 0;       // metres; the image plane position of pixel (0, 0)'s corner
-    float pixel_m = 0;
-    int width = 0, height = 0;
-    // metres along dir of the first surface; +inf: nothing (free); -inf: an enclosed gap in the surface (a hole
-    // the model did not close: covered, so that no view carves a tunnel through the solid)
-    std::vector<float> depth;
-    std::vector<uint8_t> front;  // per pixel, the first surface faces the view
-
-    bool freeAt(const Eigen::Vector3f& p, float margin_m) const {
-        const int px = static_cast<int>(std::floor((p.dot(u) - u0) / pixel_m));
-        const int py = static_cast<int>(std::floor((p.dot(v) - v0) / pixel_m));
-        if (px < 0 || py < 0 || px >= width || py >= height) return true;
-        return p.dot(dir) < depth[static_cast<size_t>(py) * width + px] - margin_m;
-    }
-};
-
-Eigen::Vector3f fibonacciDirection(int i, int n) {
-    const float golden = static_cast<float>(M_PI) * (3.0f - std::sqrt(5.0f));
-    const float y = 1.0f - 2.0f * (static_cast<float>(i) + 0.5f) / static_cast<float>(n);
-    const float r = std::sqrt(std::max(0.0f, 1.0f - y * y));
-    const float phi = golden * static_cast<float>(i);
-    return {r * std::cos(phi), y, r * std::sin(phi)};
-}
-
-// Rasterises the mesh along `dir` (pixel centres inside a triangle, and every vertex's own pixel, so that
-// triangles smaller than a pixel leave no gaps), then marks the empty pixels that the image border cannot reach
-// through empty pixels as enclosed gaps. Returns the share of the seen pixels whose first surface faces the view.
-float renderView(const IndexedMesh& mesh, const std::vector<Eigen::Vector3f>& face_normals, const Eigen::Vector3f& dir,
-                 float pixel_m, DepthView& view) {
-    view.dir = dir.normalized();
-    view.u = view.dir.unitOrthogonal();
-    view.v = view.dir.cross(view.u);
-    // Each vertex projected once (u, v, depth along dir), not once per triangle that holds it.
-    std::vector<Eigen::Vector3f> projected(mesh.positions_m.size());
-    float u_min = std::numeric_limits<float>::max(), v_min = u_min, u_max = -u_min, v_max = -u_min;
-    for (size_t i = 0; i < mesh.positions_m.size(); ++i) {
-        const Eigen::Vector3f& p = mesh.positions_m[i];
-        projected[i] = {p.dot(view.u), p.dot(view.v), p.dot(view.dir)};
-        u_min = std::min(u_min, projected[i].x()), u_max = std::max(u_max, projected[i].x());
-        v_min = std::min(v_min, projected[i].y()), v_max = std::max(v_max, projected[i].y());
-    }
-    view.pixel_m = pixel_m;
-    view.u0 = u_min - 2 * pixel_m;
-    view.v0 = v_min - 2 * pixel_m;
-    view.width = static_cast<int>(std::ceil((u_max - u_min) / pixel_m)) + 4;
-    view.height = static_cast<int>(std::ceil((v_max - v_min) / pixel_m)) + 4;
-    const size_t n = static_cast<size_t>(view.width) * view.height;
-    view.depth.assign(n, std::numeric_limits<float>::infinity());
-    view.front.assign(n, 0);
-    auto put = [&view](int px, int py, float d, bool front) {
-        if (px < 0 || py < 0 || px >= view.width || py >= view.height) return;
-        const size_t i = static_cast<size_t>(py) * view.width + px;
-        if (d < view.depth[i]) view.depth[i] = d, view.front[i] = front;
-    };
-    for (size_t f = 0; f < mesh.triangles.size(); ++f) {
-        const Triangle& t = mesh.triangles[f];
-        const bool front = face_normals[f].dot(view.dir) < 0.0f;
-        Eigen::Vector2f q[3];
-        float d[3];
-        for (int k = 0; k < 3; ++k) {
-            const Eigen::Vector3f& p = projected[t[k]];
-            q[k] = {(p.x() - view.u0) / pixel_m, (p.y() - view.v0) / pixel_m};
-            d[k] = p.z();
-            put(static_cast<int>(q[k].x()), static_cast<int>(q[k].y()), d[k], front);
-        }
-        const float area = (q[1] - q[0]).x() * (q[2] - q[0]).y() - (q[1] - q[0]).y() * (q[2] - q[0]).x();
-        if (std::abs(area) < 1e-12f) continue;
-        // The pixels whose centres (px + 0.5) lie in the triangle's box: a triangle about a pixel wide has one or
-        // two, where the box of whole pixels it touches has up to nine.
-        const int x0 = static_cast<int>(std::ceil(std::min({q[0].x(), q[1].x(), q[2].x()}) - 0.5f));
-        const int x1 = static_cast<int>(std::floor(std::max({q[0].x(), q[1].x(), q[2].x()}) - 0.5f));
-        const int y0 = static_cast<int>(std::ceil(std::min({q[0].y(), q[1].y(), q[2].y()}) - 0.5f));
-        const int y1 = static_cast<int>(std::floor(std::max({q[0].y(), q[1].y(), q[2].y()}) - 0.5f));
-        for (int py = y0; py <= y1; ++py) {
-            for (int px = x0; px <= x1; ++px) {
-                const Eigen::Vector2f c(static_cast<float>(px) + 0.5f, static_cast<float>(py) + 0.5f);
-                auto edge = [&](int a, int b) {
-                    return ((q[b] - q[a]).x() * (c - q[a]).y() - (q[b] - q[a]).y() * (c - q[a]).x()) / area;
-                };
-                const float w0 = edge(1, 2), w1 = edge(2, 0), w2 = edge(0, 1);
-                if (w0 < 0 || w1 < 0 || w2 < 0) continue;
-                put(px, py, w0 * d[0] + w1 * d[1] + w2 * d[2], front);
-            }
-        }
-    }
-    // Empty pixels reachable from the border through empty pixels are free; the rest are gaps in the surface.
-    std::vector<uint8_t> reached(n, 0);
-    std::vector<int> stack;
-    auto seed = [&](int px, int py) {
-        const size_t i = static_cast<size_t>(py) * view.width + px;
-        if (!reached[i] && std::isinf(view.depth[i])) reached[i] = 1, stack.push_back(static_cast<int>(i));
-    };
-    for (int px = 0; px < view.width; ++px) seed(px, 0), seed(px, view.height - 1);
-    for (int py = 0; py < view.height; ++py) seed(0, py), seed(view.width - 1, py);
-    while (!stack.empty()) {
-        const int i = stack.back();
-        stack.pop_back();
-        const int px = i % view.width, py = i / view.width;
-        if (px > 0) seed(px - 1, py);
-        if (px + 1 < view.width) seed(px + 1, py);
-        if (py > 0) seed(px, py - 1);
-        if (py + 1 < view.height) seed(px, py + 1);
-    }
-    size_t seen = 0, front_seen = 0;
-    for (size_t i = 0; i < n; ++i) {
-        if (std::isinf(view.depth[i]) && !reached[i]) view.depth[i] = -std::numeric_limits<float>::infinity();
-        if (std::isfinite(view.depth[i])) ++seen, front_seen += view.front[i];
-    }
-    return seen == 0 ? 0.0f : static_cast<float>(front_seen) / static_cast<float>(seen);
-}
 
 double surfaceArea(const IndexedMesh& mesh, Eigen::Vector3f* mean_normal) {
     double area = 0;
@@ -207,24 +99,9 @@ Voxel* voxelAt(VoxelBlockGrid& g, int x, int y, int z) {
 // in a vertex. The positions of such vertices (on an edge not shared by exactly two triangles, or whose
 // triangles form more than one fan); empty for a closed manifold.
 std::vector<Eigen::Vector3f> pinches(const IndexedMesh& mesh) {
-    // Edges as sorted keys (lower vertex in the high half): a run of equal keys is one edge and its triangles.
-    std::vector<uint64_t> edges;
-    edges.reserve(mesh.triangleCount() * 3);
-    for (const Triangle& t : mesh.triangles) {
-        for (int k = 0; k < 3; ++k) {
-            const uint32_t a = std::min(t[k], t[(k + 1) % 3]), b = std::max(t[k], t[(k + 1) % 3]);
-            edges.push_back(static_cast<uint64_t>(a) << 32 | b);
-        }
-    }
-    std::sort(edges.begin(), edges.end());
-    std::vector<uint8_t> bad(mesh.vertexCount(), 0);
-    for (size_t i = 0; i < edges.size();) {
-        size_t j = i + 1;
-        while (j < edges.size() && edges[j] == edges[i]) ++j;
-        if (j - i != 2) bad[edges[i] >> 32] = bad[edges[i] & 0xffffffffu] = 1;
-        i = j;
-    }
-    // Fans: per vertex, its triangles joined where two share a second vertex.
+    // Per vertex, its triangles (a CSR), and the other two vertices of each as (other, triangle) pairs sorted by
+    // the other: a run of equal others is one edge at the vertex and its triangles, and joins them into a fan. One
+    // pass of small sorts, not a sort of every edge of the solid.
     std::vector<uint32_t> start(mesh.vertexCount() + 1, 0), incident(mesh.triangleCount() * 3);
     for (const Triangle& t : mesh.triangles) ++start[t[0] + 1], ++start[t[1] + 1], ++start[t[2] + 1];
     std::partial_sum(start.begin(), start.end(), start.begin());
@@ -232,7 +109,9 @@ std::vector<Eigen::Vector3f> pinches(const IndexedMesh& mesh) {
     for (uint32_t f = 0; f < mesh.triangleCount(); ++f) {
         for (const uint32_t v : mesh.triangles[f]) incident[fill[v]++] = f;
     }
+    std::vector<uint8_t> bad(mesh.vertexCount(), 0);
     std::vector<int> parent;
+    std::vector<std::pair<uint32_t, int>> others;
     for (uint32_t v = 0; v < mesh.vertexCount(); ++v) {
         const uint32_t n = start[v + 1] - start[v];
         parent.resize(n);
@@ -241,17 +120,28 @@ std::vector<Eigen::Vector3f> pinches(const IndexedMesh& mesh) {
             while (parent[i] != i) i = parent[i] = parent[parent[i]];
             return i;
         };
+        others.clear();
         for (uint32_t i = 0; i < n; ++i) {
-            for (uint32_t j = i + 1; j < n; ++j) {
-                const Triangle &a = mesh.triangles[incident[start[v] + i]], &b = mesh.triangles[incident[start[v] + j]];
-                bool share = false;
-                for (const uint32_t wa : a)
-                    for (const uint32_t wb : b) share |= wa == wb && wa != v;
-                if (share) parent[root(static_cast<int>(i))] = root(static_cast<int>(j));
+            const Triangle& t = mesh.triangles[incident[start[v] + i]];
+            if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) bad[v] = 1;  // a triangle without area
+            for (const uint32_t w : t) {
+                if (w != v) others.emplace_back(w, static_cast<int>(i));
             }
         }
-        int fans = 0;
-        for (uint32_t i = 0; i < n; ++i) fans += root(static_cast<int>(i)) == static_cast<int>(i);
+        for (size_t i = 1; i < others.size(); ++i) {  // insertion sort: a dozen pairs
+            for (size_t j = i; j > 0 && others[j] < others[j - 1]; --j) std::swap(others[j], others[j - 1]);
+        }
+        int fans = static_cast<int>(n);
+        for (size_t i = 0; i < others.size();) {
+            size_t j = i + 1;
+            while (j < others.size() && others[j].first == others[i].first) ++j;
+            if (j - i != 2) bad[v] = 1;  // an edge not shared by exactly two triangles (its other end sees it too)
+            for (size_t k = i + 1; k < j; ++k) {
+                const int a = root(others[i].second), b = root(others[k].second);
+                if (a != b) parent[a] = b, --fans;
+            }
+            i = j;
+        }
         if (fans > 1) bad[v] = 1;
     }
     std::vector<Eigen::Vector3f> out;
@@ -279,7 +169,7 @@ VoxelBlockGrid meshVolume(const IndexedMesh& mesh, float voxel_m, const VoxelBlo
     // Per voxel within the band: the distance to the nearest triangle, signed by its side of that triangle. A
     // voxel beside the rim (its nearest point on a boundary edge, off the triangle's normal) stays unobserved:
     // there the side is not known, and the carving decides.
-    const float band_m = g.trunc_dist_m;
+    const float band_m = g.trunc_dist_m, band_sq = band_m * band_m;
     std::vector<float> best(g.voxels.size(), std::numeric_limits<float>::infinity());
     for (const Triangle& t : mesh.triangles) {
         const Eigen::Vector3f &a = mesh.positions_m[t[0]], &b = mesh.positions_m[t[1]], &c = mesh.positions_m[t[2]];
@@ -303,9 +193,13 @@ VoxelBlockGrid meshVolume(const IndexedMesh& mesh, float voxel_m, const VoxelBlo
                     // closest point.
                     const float to_plane = std::abs((p - a).dot(n));
                     if (to_plane >= band_m) continue;
+                    // So does the distance to the triangle's box (the box's corners beside the triangle), with
+                    // 0.01 % to spare for the closest point's rounding.
+                    const float box_sq = (tb.min() - p).cwiseMax(p - tb.max()).cwiseMax(0.0f).squaredNorm() * 0.9999f;
+                    if (box_sq >= band_sq) continue;
                     Voxel* v = voxelAt(g, x, y, z);
                     const size_t i = static_cast<size_t>(v - g.voxels.data());
-                    if (to_plane >= best[i]) continue;
+                    if (to_plane >= best[i] || box_sq >= best[i] * best[i]) continue;
                     const Eigen::Vector3f q = closestPointOnTriangle(p, a, b, c);
                     const float dist = (p - q).norm();
                     if (dist >= band_m || dist >= best[i]) continue;
@@ -401,6 +295,9 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
     }
     candidates.clear();
     if (views.empty()) return tooLittle("no direction shows its outside");
+    parallelFor(0, static_cast<int>(views.size()), [&](int lo, int hi) {
+        for (int i = lo; i < hi; ++i) views[static_cast<size_t>(i)].buildTiles();
+    });
 
     // The field.
     Eigen::AlignedBox3f box;
@@ -468,7 +365,46 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
         });
         behind.swap(pass);
     }
+    // The voxels deep inside the solid are the dearest to carve: every view is asked before they are found
+    // inside. A block of the lattice that every view has wholly behind its surface is inside at once (the same
+    // answer as each of its voxels would get, see DepthView::hiddenBox).
+    const Eigen::Vector3i blocks = (dims.array() + kBlockSide - 1) / kBlockSide;
+    std::vector<uint8_t> block_hidden(static_cast<size_t>(blocks.prod()), 0);
+    auto blockOf = [&blocks](int x, int y, int z) {
+        return (static_cast<size_t>(z / kBlockSide) * blocks.y() + static_cast<size_t>(y / kBlockSide)) * blocks.x() +
+               static_cast<size_t>(x / kBlockSide);
+    };
+    parallelFor(0, blocks.z(), [&](int bz_lo, int bz_hi) {
+        std::array<Eigen::Vector3f, 8> corners;
+        for (int bz = bz_lo; bz < bz_hi; ++bz) {
+            for (int by = 0; by < blocks.y(); ++by) {
+                for (int bx = 0; bx < blocks.x(); ++bx) {
+                    const Eigen::Vector3i lo(bx * kBlockSide, by * kBlockSide, bz * kBlockSide);
+                    const Eigen::Vector3i hi = (lo.array() + (kBlockSide - 1)).min(dims.array() - 1);
+                    for (int c = 0; c < 8; ++c) {
+                        corners[static_cast<size_t>(c)] = solid.toWorld(Eigen::Vector3f(
+                            static_cast<float>(c & 1 ? hi.x() : lo.x()), static_cast<float>(c & 2 ? hi.y() : lo.y()),
+                            static_cast<float>(c & 4 ? hi.z() : lo.z())));
+                    }
+                    block_hidden[blockOf(lo.x(), lo.y(), lo.z())] = std::all_of(
+                        views.begin(), views.end(), [&](const DepthView& v) { return v.hiddenBox(corners, h); });
+                }
+            }
+        }
+    });
     parallelFor(0, dims.z(), [&](int z_lo, int z_hi) {
+        // The view that found the last voxel free is asked first: its neighbour is most often free in it too.
+        size_t last_free = 0;
+        auto anyFree = [&](const Eigen::Vector3f& p) {
+            if (views[last_free].freeAt(p, h)) return true;
+            for (size_t i = 0; i < views.size(); ++i) {
+                if (i != last_free && views[i].freeAt(p, h)) {
+                    last_free = i;
+                    return true;
+                }
+            }
+            return false;
+        };
         for (int z = z_lo; z < z_hi; ++z) {
             for (int y = 0; y < dims.y(); ++y) {
                 for (int x = 0; x < dims.x(); ++x) {
@@ -488,9 +424,7 @@ bool closeWatertight(IndexedMesh& mesh, const VoxelBlockGrid& observed, const He
                         value = in->tsdf;
                         out->b = in->b, out->g = in->g, out->r = in->r;
                     } else {
-                        const bool free =
-                            !behind[at(x, y, z)] &&
-                            std::any_of(views.begin(), views.end(), [&](const DepthView& v) { return v.freeAt(p, h); });
+                        const bool free = !behind[at(x, y, z)] && !block_hidden[blockOf(x, y, z)] && anyFree(p);
                         value = free ? 1.0f : -1.0f;
                     }
                     // The cuts (chin plane, head sphere, crop box) as the intersection of two solids: the larger

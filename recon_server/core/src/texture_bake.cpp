@@ -291,6 +291,9 @@ StatusOr<TextureReport> bakeTexture(const IndexedMesh& mesh, const std::vector<T
     auto t0 = std::chrono::steady_clock::now();
     cv::Mat owner(height, width, CV_32S, cv::Scalar(-1));
     std::vector<Texel> texels;
+    // As many as the atlas has texels at most (the memory bound above counts them): the vector is not copied as it
+    // grows, and the pages past the texels that come are never touched.
+    texels.reserve(static_cast<size_t>(width) * static_cast<size_t>(height));
     for (size_t ti = 0; ti < m.triangles.size(); ++ti) {
         const Triangle& t = m.triangles[ti];
         const Eigen::Vector2f scale(static_cast<float>(width), static_cast<float>(height));

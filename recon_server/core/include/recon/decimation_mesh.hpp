@@ -192,20 +192,32 @@ class LazyFlipDecimater : public OpenMesh::Decimater::BaseDecimaterT<MeshT> {
     }
 
     // Keys v by its best legal collapse (the quadric's priority; with `check`, only those that turn no face over).
-    // The priority is tested before the legality: both are pure tests, so the same collapse is chosen, but the
-    // legality (the link condition over two one-rings, and the decimater's search for an edge vl-vr) is the dearer
-    // one and now runs only for a collapse that would beat the best so far.
+    // The priorities first, then the legality from the best priority down, until one is legal: both are pure
+    // tests, so this is the collapse a scan in the one-ring's order would keep (the lowest priority that is legal,
+    // the first in that order among equals), but the legality (the link condition over two one-rings, and the
+    // decimater's search for an edge vl-vr), the dearer test, runs about once a vertex instead of once for each
+    // collapse that beats the best so far.
     void heapVertex(VertexHandle v, bool check) {
         float best = FLT_MAX;
         HalfedgeHandle target;
+        ranked_.clear();
         for (const auto heh : mesh_.voh_range(v)) {
+            const float prio = this->collapse_priority(CollapseInfo(mesh_, heh));
+            if (prio >= 0.0f && prio < FLT_MAX) ranked_.emplace_back(prio, heh);
+        }
+        // Insertion sort, stable (a one-ring holds about six; std::stable_sort would allocate a buffer each call).
+        for (size_t i = 1; i < ranked_.size(); ++i) {
+            for (size_t j = i; j > 0 && ranked_[j].first < ranked_[j - 1].first; --j) {
+                std::swap(ranked_[j], ranked_[j - 1]);
+            }
+        }
+        for (const auto& [prio, heh] : ranked_) {
             CollapseInfo ci(mesh_, heh);
-            const float prio = this->collapse_priority(ci);
-            if (!(prio >= 0.0f && prio < best)) continue;
             if (!this->is_collapse_legal(ci)) continue;
             if (check && turnsAFaceOver(ci)) continue;
             best = prio;
             target = heh;
+            break;
         }
         if (unchecked_.size() < mesh_.n_vertices()) unchecked_.resize(mesh_.n_vertices(), 0);
         unchecked_[v.idx()] = !check;
@@ -227,7 +239,8 @@ class LazyFlipDecimater : public OpenMesh::Decimater::BaseDecimaterT<MeshT> {
     OpenMesh::VPropHandleT<HalfedgeHandle> target_;
     OpenMesh::VPropHandleT<float> priority_;
     OpenMesh::VPropHandleT<int> position_;
-    std::vector<uint8_t> unchecked_;  // per vertex: keyed without the test
+    std::vector<uint8_t> unchecked_;                        // per vertex: keyed without the test
+    std::vector<std::pair<float, HalfedgeHandle>> ranked_;  // heapVertex's candidates (kept for their capacity)
     std::unique_ptr<Heap> heap_;
 };
 
