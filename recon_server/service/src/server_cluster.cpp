@@ -362,7 +362,6 @@ void Server::yield(const std::string& session_id, const std::string& why, const 
     // A finish still writing decides as written files do below, once its files are there (Session::abandon).
     if (o->session) o->session->abandon(/*discard_written=*/agent_lives || superseded);
     retireOwned(o, /*dispose_claim=*/false);
-    unlist(session_id);
     if (!agent_lives && !superseded) given_up_results_[session_id] = {o->epoch, next_seq, steadyNowNs()};
     if (!written.empty() && (agent_lives || superseded)) {
         removeResultFiles(session_id, written, "gave it up, " + why);
@@ -408,6 +407,10 @@ void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_cl
     if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
     o->frame_condition = 0;
     if (dispose_claim && o->claim) o->claim->release();
+    // Its last status and mesh from here leave the writers' histories: a session given up (yielded, released for
+    // want of frames, or unable to start) would otherwise stay listed on this server for as long as it runs, as a
+    // stale "waiting for frames" or "scanning" beside the owner's own statuses.
+    unlist(o->id);
     // The replication thread may still hold the OwnedSession for a moment (it copies the list each turn): the
     // retiring thread waits until it holds the last reference, so the endpoints end there and in this order.
     retirer_->retire([this, held = o]() mutable {
@@ -451,9 +454,6 @@ void Server::releaseStale() {
             std::fprintf(stderr, "facescan-server: session %s: released, no frame came within %.0f s\n", o->id.c_str(),
                          static_cast<double>(params_.first_frame_timeout_s));
             retireOwned(o, /*dispose_claim=*/true);
-            // Its last status ("waiting for frames") would stay in this server's history for as long as it runs:
-            // `facescan sessions` would list the scan here for ever, even once another server has finished it.
-            unlist(o->id);
             continue;
         }
         if (o->phase != OwnedSession::Phase::kFinished && o->session && o->session->finished()) {

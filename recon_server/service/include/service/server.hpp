@@ -195,8 +195,9 @@ class Server {
     void yield(const std::string& session_id, const std::string& why, const OwnerView& winner);
     // After a yield: this server's copy of a recording in its data dir, kept ready in case the new owner fails too.
     void keepCopyInCase(const std::string& session_id, const OwnerView& winner);
-    // The one way a session's endpoints end: out of owned_, its frame reader's condition off the waitset (both here,
-    // on the intake thread), then reader, claim and session ended in that order on the retiring thread.
+    // The one way a session's endpoints end: out of owned_, its frame reader's condition off the waitset and its
+    // status unlisted (all here, on the intake thread), then reader, claim and session ended in that order on the
+    // retiring thread.
     // `dispose_claim`: the claim says RELEASED first (nobody owns the session); else it is withdrawn, as if this
     // server had died, and a stronger claim stays the only one.
     void retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_claim);
