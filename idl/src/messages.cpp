@@ -198,6 +198,7 @@ facescan_wire_CameraInfo toMessage(const CameraInfoData& info) {
     msg.roll_deg = info.roll_deg == CameraInfoData::kRollUnknown ? 0 : info.roll_deg == 0 ? 360 : info.roll_deg;
     msg.followed_epoch = info.followed_epoch;
     msg.dropped_before_seq = info.dropped_before_seq;
+    msg.serving_epoch = info.serving_epoch;
     return msg;
 }
 
@@ -266,6 +267,7 @@ StatusOr<CameraInfoData> fromMessage(const facescan_wire_CameraInfo& msg) {
     info.roll_deg = msg.roll_deg == 0 ? CameraInfoData::kRollUnknown : msg.roll_deg % 360;
     info.followed_epoch = msg.followed_epoch;
     info.dropped_before_seq = msg.dropped_before_seq;
+    info.serving_epoch = msg.serving_epoch;
     RETURN_IF_ERROR(info.validate());
     return info;
 }

@@ -103,11 +103,13 @@ TEST(CameraInfo, ARecordingsProgressRoundTripsAndAnImpossibleOneIsRefused) {
     in.every_frame = true;
     in.followed_epoch = 3;
     in.dropped_before_seq = 41;
+    in.serving_epoch = 3;
     ASSERT_TRUE(in.validate().isOk()) << in.validate().toString();
     const auto out = fromMessage(toMessage(in));
     ASSERT_TRUE(out.isOk()) << out.status().toString();
     EXPECT_EQ(out->followed_epoch, 3u);
     EXPECT_EQ(out->dropped_before_seq, 41u);
+    EXPECT_EQ(out->serving_epoch, 3u);
     // Frames dropped by a live scan's agent (it keeps none), or before any owner confirmed them.
     for (const auto& [every_frame, epoch] : {std::pair{false, 3u}, std::pair{true, 0u}}) {
         facescan_wire_CameraInfo msg = toMessage(in);

@@ -300,6 +300,17 @@ Status Agent::run(const std::atomic<bool>& external_stop, const std::function<vo
     // servers order the sessions they place by it.
     const dds_time_t camera_written_at = dds_time();
     RETURN_IF_ERROR(s.info_writer.writeAt(wire::toMessage(camera), camera_written_at));
+    // Written again every second: a server takes a scan over on this agent's word only when it has heard from the
+    // agent since the owner's lease lapsed (a server cut off from the network still sees every writer alive until
+    // Cyclone's lease on its participant lapses, seconds later under load), and a server that hears from no agent
+    // and no peer knows it is cut off.
+    auto last_announced = Clock::now();
+    auto announce = [&] {
+        last_announced = Clock::now();
+        if (const Status w = s.info_writer.writeAt(wire::toMessage(camera), camera_written_at); !w.isOk()) {
+            on_event("WARNING: cannot tell the servers how far session " + session_id_ + " got: " + w.toString());
+        }
+    };
 
     // Nothing is read from the source until a server owns the session, so a recording loses no frame while we wait.
     const std::string where = options_.dds.describe();
@@ -307,6 +318,9 @@ Status Agent::run(const std::atomic<bool>& external_stop, const std::function<vo
                          static_cast<size_t>(options_.keep_frames), options_.stalled_after_s, where, on_event);
     // After a moment with no server at all, say why none may answer (a secured domain, most often).
     stream.onNoServer([&] { return wire::noPeerHint(options_.dds, s.participant.otherParticipants()); });
+    stream.onWait([&] {
+        if (Clock::now() - last_announced >= 1s) announce();
+    });
     if (const Status served = stream.waitUntilServed(stop, options_.wait_for_server_s); !served.isOk()) {
         if (served.code() != StatusCode::kDeadlineExceeded) return served;
         char seconds[32];
@@ -385,6 +399,12 @@ Status Agent::run(const std::atomic<bool>& external_stop, const std::function<vo
     uint32_t interval_frames = 0;
     auto last_report = Clock::now();
     auto report = [&](bool force) {
+        // An owner that stops serving (or a new one) is told at once, not at the next second: a server weighs the
+        // agent's word before it takes the scan over, and would wait for it.
+        if (const uint32_t serving = stream.state().serving_epoch; serving != camera.serving_epoch) {
+            camera.serving_epoch = serving;
+            announce();
+        }
         const auto now = Clock::now();
         const double dt = std::chrono::duration<double>(now - last_report).count();
         if (!force && dt < 1.0) return;
@@ -407,15 +427,12 @@ Status Agent::run(const std::atomic<bool>& external_stop, const std::function<vo
         snapshot.kept = st.kept;
         snapshot.waiting = st.waiting;
         snapshot.digest = st.digest;
-        if (every_frame &&
-            (st.followed_epoch != camera.followed_epoch || st.dropped_before != camera.dropped_before_seq)) {
+        if (every_frame) {
             // What a server that restarted after the owner's claim went must know (the message's comment).
             camera.followed_epoch = st.followed_epoch;
             camera.dropped_before_seq = st.dropped_before;
-            if (const Status w = s.info_writer.writeAt(wire::toMessage(camera), camera_written_at); !w.isOk()) {
-                on_event("WARNING: cannot tell the servers how far session " + session_id_ + " got: " + w.toString());
-            }
         }
+        announce();
         on_stats(snapshot);
         last_report = now;
         interval_bytes = 0;

@@ -294,7 +294,12 @@ std::vector<wire::EncodedFrame> SessionStream::unconfirmed() {
     return frames;
 }
 
-StreamState SessionStream::state() const { return state_; }
+StreamState SessionStream::state() const {
+    StreamState st = state_;
+    const std::optional<OwnerInfo>& o = link_.owner();
+    st.serving_epoch = o && o->serving() ? o->data.epoch : 0u;
+    return st;
+}
 
 void SessionStream::dropConfirmed(uint32_t confirmed_seq) {
     kept_.dropBefore(confirmed_seq);

@@ -39,6 +39,9 @@ struct CameraInfoData {
     // and the first frame it still holds (0: none dropped).
     uint32_t followed_epoch = 0;
     uint32_t dropped_before_seq = 0;
+    // The epoch of the owner serving the session in the agent's view, live or recording (0: none; the message's
+    // comment).
+    uint32_t serving_epoch = 0;
     const recon::Intrinsics& colourIntrinsics() const {
         return colour_intrinsics.width_px == 0 ? intrinsics : colour_intrinsics;
     }

@@ -97,6 +97,7 @@ struct StreamState {
     uint64_t digest = wire::kFrameDigestSeed;  // of every frame sent (the first time), as the server digests them
     uint32_t followed_epoch = 0;               // the highest owner epoch streamed to
     uint32_t dropped_before = 0;               // recordings: frames before it were confirmed and dropped
+    uint32_t serving_epoch = 0;                // the epoch of the owner serving the session now (0: none)
 };
 
 // How long the agent's frame writes may block before they look at `stop` and the owner again. The writer's
