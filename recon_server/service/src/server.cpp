@@ -300,6 +300,7 @@ void Server::takeCameraInfos() {
             c.camera = std::move(*camera);
             c.writer = info.publication_handle;
             c.order_key = info.source_timestamp;
+            c.heard_ns = steadyNowNs();
             c.writer_alive = true;
         },
         256);

@@ -50,9 +50,21 @@ void Server::clusterTick() {
 }
 
 void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
-    // Agents that are gone take their candidates with them.
+    // Agents that are gone take their candidates with them; what they had dropped stays (bounded).
+    constexpr size_t kMaxGoneAgents = 4096;
     for (auto it = candidates_.begin(); it != candidates_.end();) {
-        it = it->second.writer_alive ? std::next(it) : candidates_.erase(it);
+        if (it->second.writer_alive) {
+            ++it;
+            continue;
+        }
+        if (it->second.camera.dropped_before_seq > 0) {
+            if (gone_agents_dropped_before_.size() >= kMaxGoneAgents) {
+                gone_agents_dropped_before_.erase(gone_agents_dropped_before_.begin());
+            }
+            uint32_t& dropped = gone_agents_dropped_before_[it->first];
+            dropped = std::max(dropped, it->second.camera.dropped_before_seq);
+        }
+        it = candidates_.erase(it);
     }
     std::erase_if(tombstones_, [&](const auto& t) { return !candidates_.count(t.first); });
     // Flood control: one agent writer (a CameraInfo publication) gets one session placed at a time; its next one
@@ -150,6 +162,15 @@ void Server::placeNewSessions(const std::map<std::string, OwnerView>& owners) {
 }
 
 bool Server::placeableAsNew(const std::string& session_id, const Candidate& c) {
+    if (c.camera.serving_epoch > 0) {
+        // The agent streams to an owner whose claim this server does not see: a cut between the servers (or a view
+        // still filling in). A claim here would take the scan from that owner.
+        sayOnce("session " + session_id + ": its agent streams to an owner (epoch " +
+                std::to_string(c.camera.serving_epoch) +
+                ") whose claim this server does not see (a cut between the servers, or its view still filling in): "
+                "not placed here");
+        return false;
+    }
     if (c.camera.followed_epoch == 0) return true;  // never owned (or an older agent): a new session
     // Owned once, and no claim of it in view: this server joined after its owner's claim was gone (a restart), or
     // its view is still filling in. Two leases after the join a live claim would be in view.

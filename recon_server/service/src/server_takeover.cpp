@@ -36,6 +36,15 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         }
         const int64_t gone_since_ns = owner_gone_since_ns_.try_emplace(id, steadyNowNs()).first->second;
         if (!witnessed(id, gone_since_ns)) continue;
+        if (agentStillServed(id, view.data.epoch)) {
+            // Witnessed, and yet the agent, heard from within the lease, still streams to that owner (or to a newer
+            // one). The witnesses can be wrong for a moment: when a cut between the servers heals, the other
+            // servers' announcements arrive before the owner's claim is rediscovered, and a takeover then took a
+            // live scan from its owner. The agent tells at once when its owner stops serving.
+            sayOnce("session " + id + ": owner '" + view.data.owner_id +
+                    "' looks gone here, but its agent still streams to it: nothing is taken over");
+            continue;
+        }
         std::optional<wire::ReplicaData> standby;
         if (view.data.standby_id == params_.server_id) standby = replicator_->standbyCopy(id);
         const auto disk = resumable_.find(id);
@@ -59,6 +68,11 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                 continue;
             }
             last.confirmed_seq = std::max(last.confirmed_seq, agent.dropped_before_seq);
+        } else if (const auto left = gone_agents_dropped_before_.find(id); left != gone_agents_dropped_before_.end()) {
+            // The agent left after dropping these frames (its owner had them confirmed, perhaps on its disk alone
+            // behind a cut): a copy without them would be finished as a partial scan, and a second result beside
+            // the owner's whole one when that owner finished it unseen.
+            last.confirmed_seq = std::max(last.confirmed_seq, left->second);
         }
         const TakeoverChoice choice = chooseTakeover(last, standby ? &*standby : nullptr,
                                                      disk != resumable_.end() ? &disk->second : nullptr, live);
@@ -223,8 +237,10 @@ bool Server::rejoining() {
     // sessions over.)
     const int64_t now = steadyNowNs();
     const int others = cluster_->othersAlive();
+    // Agents heard from, not merely alive: Cyclone keeps a writer alive until the lease of its participant lapses,
+    // which on a loaded machine came seconds after the peers' (every agent repeats its CameraInfo each second).
     bool agents = false;
-    for (const auto& [id, c] : candidates_) agents = agents || c.writer_alive;
+    for (const auto& [id, c] : candidates_) agents = agents || (c.writer_alive && now - c.heard_ns < lease_ns_);
     if (others > 0) had_peers_ = true;
     if (had_peers_ && others == 0 && !agents) {
         if (cut_off_since_ns_ == 0) cut_off_since_ns_ = now;
@@ -267,12 +283,31 @@ bool Server::witnessed(const std::string& session_id, int64_t owner_gone_since_n
     const bool lost_all = heard == 1 && known >= 3;
     const int64_t gone_for_ns = steadyNowNs() - owner_gone_since_ns;
     if (gone_for_ns < (lost_all ? 2 * lease_ns_ : lease_ns_ / 2)) return false;
-    return agentLives(session_id);
+    // Heard from since the lapse, not merely alive: an agent's writer stays alive in the view of a server cut off
+    // until its participant's lease lapses there, which under load came after this wait, and a server cut off took
+    // over a scan that its owner went on to finish (a split). Its CameraInfo, repeated every second, proves the path.
+    if (!agentHeardSince(session_id, owner_gone_since_ns)) return false;
+    // And the agent no longer sees an owner serve the scan: one that does is on the other side of a cut between the
+    // servers, alive, and this server, cut from it, would take its scan away (chaos soaks: a server cut from the
+    // other servers but not from the agents took their live scans over, and a recording lost the frames its owner
+    // confirmed meanwhile).
+    return candidates_.at(session_id).camera.serving_epoch == 0;
 }
 
 bool Server::agentLives(const std::string& session_id) const {
     const auto agent = candidates_.find(session_id);
     return agent != candidates_.end() && agent->second.writer_alive;
+}
+
+bool Server::agentStillServed(const std::string& session_id, uint32_t epoch) const {
+    const auto agent = candidates_.find(session_id);
+    return agent != candidates_.end() && agent->second.writer_alive &&
+           steadyNowNs() - agent->second.heard_ns < lease_ns_ && agent->second.camera.serving_epoch >= epoch;
+}
+
+bool Server::agentHeardSince(const std::string& session_id, int64_t since_ns) const {
+    const auto agent = candidates_.find(session_id);
+    return agent != candidates_.end() && agent->second.writer_alive && agent->second.heard_ns >= since_ns;
 }
 
 void Server::takeOverFromFirstFrame(const std::string& session_id, const OwnerView& view) {

@@ -111,6 +111,7 @@ class Server {
         dds_instance_handle_t writer = 0;  // its publication handle: flood control per agent writer
         int64_t order_key = 0;             // source timestamp: the same on every server
         int64_t first_seen_ns = 0;         // steady clock
+        int64_t heard_ns = 0;              // steady clock: its last CameraInfo (an agent repeats it every second)
         bool writer_alive = true;
     };
     struct Refused {
@@ -178,6 +179,9 @@ class Server {
     // Whether a takeover may go ahead: most servers still in view, or else the agent still heard half a lease later.
     bool witnessed(const std::string& session_id, int64_t owner_gone_since_ns) const;
     bool agentLives(const std::string& session_id) const;  // its CameraInfo writer is alive in this view
+    bool agentHeardSince(const std::string& session_id, int64_t since_ns) const;  // a CameraInfo came since then
+    // Its agent, heard from within the lease, says that an owner at `epoch` or later serves it.
+    bool agentStillServed(const std::string& session_id, uint32_t epoch) const;
     // Whether this server is cut off, or back from it and re-observing the cluster before it takes anything over.
     bool rejoining();
     // A new scan under the id of one that finished in this server's data dir: refused with a FINISHED claim (true),
@@ -262,6 +266,9 @@ class Server {
 
     // Intake thread only.
     std::map<std::string, Candidate> candidates_;
+    // What the agents that are gone last said they had dropped (frames confirmed before this one): a copy that
+    // ends earlier lacks frames nobody can send any more, so a takeover from it would be a partial scan.
+    std::map<std::string, uint32_t> gone_agents_dropped_before_;
     std::map<std::string, wire::ReplicaData> resumable_;  // from the data dir, waiting for the join to end
     // Of those, the ones another live server continues: the highest epoch seen there, kept for a takeover.
     std::map<std::string, uint32_t> held_elsewhere_;
