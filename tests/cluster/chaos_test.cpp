@@ -26,6 +26,7 @@
 #include <csignal>
 #include <cstdio>
 
+#include "chaos_memory.hpp"
 #include "eval/accuracy.hpp"
 #include "eval/mesh_io.hpp"
 
@@ -51,12 +52,13 @@ const std::vector<std::string> kServers = {"s1", "s2", "s3"};
 const std::vector<std::string> kServerFlags = {"--set", "status_hz=10"};  // progress seen to 0.1 s
 
 struct Plan {
-    int faults = 0;         // the CI test: this many faults
-    double minutes = 0;     // the soak: faults for this long
-    int recordings = 3;     // recordings streaming at once
-    int frames = 120;       // frames per recording
-    int lives = 2;          // live scans streaming at once
-    double live_for_s = 0;  // a live scan is ended and a new one started after this long (0: one for the run)
+    int faults = 0;             // the CI test: this many faults
+    double minutes = 0;         // the soak: faults for this long
+    int recordings = 3;         // recordings streaming at once
+    int frames = 120;           // frames per recording
+    int lives = 2;              // live scans streaming at once
+    double live_for_s = 0;      // a live scan is ended and a new one started after this long (0: one for the run)
+    double settle_every_s = 0;  // the soak: every this long, no new scan and no fault until every server is idle
 };
 
 struct Scan {
@@ -72,13 +74,6 @@ struct FaultDone {
     Fault fault;
     int64_t at_ns = 0;
     double at_s = 0;  // since the run began
-};
-
-struct MemorySample {
-    double at_s = 0;
-    std::string server;
-    pid_t pid = 0;
-    long rss_kb = 0;
 };
 
 double meanMeshDistanceMm(const fs::path& mesh_path, const fs::path& reference_path) {
@@ -127,12 +122,24 @@ class ChaosRun {
         double heal_s = 0;
         bool active = false;
         double next_sample_s = 0;
+        double next_settle_s = plan_.settle_every_s;
         Fault current;
         for (;;) {
             watch_.poll(100ms);
             const double now = elapsed();
+            // The soak's minutes are minutes of faults: its idle checkpoints come on top.
             const bool more_faults =
-                plan_.minutes > 0 ? now < plan_.minutes * 60 : faults_.size() < size_t(plan_.faults);
+                plan_.minutes > 0 ? now - settled_s_ < plan_.minutes * 60 : faults_.size() < size_t(plan_.faults);
+            if (!active && more_faults && plan_.settle_every_s > 0 && now >= next_settle_s) {
+                const double before_s = elapsed();
+                settle();
+                settled_s_ += elapsed() - before_s;
+                for (int i = 0; i < plan_.recordings; ++i) startRecording();
+                for (int i = 0; i < plan_.lives; ++i) startLive();
+                next_fault_s = elapsed() + 10;
+                next_settle_s = elapsed() + plan_.settle_every_s;
+                continue;
+            }
             if (!active && more_faults && now >= next_fault_s) {
                 current = schedule_.next();
                 apply(current);
@@ -157,6 +164,7 @@ class ChaosRun {
         for (Scan& s : scans_) {
             if (!s.recording && s.ended_ns == 0) stopLive(s);
         }
+        if (plan_.settle_every_s > 0) settle();  // the last idle checkpoint
     }
 
     void check() {
@@ -200,7 +208,11 @@ class ChaosRun {
             "%zu over the %.0f s target)\n",
             quantile(resumes_s_, 0.5), quantile(resumes_s_, 0.95), quantile(resumes_s_, 1.0), resumes_s_.size(),
             resumeBoundS(), static_cast<size_t>(missed), kResumeTargetS);
-        if (!memory_.empty()) reportMemory();
+        if (!memory_.empty()) {
+            const double under_load = reportMemoryUnderLoad(memory_, kServers);
+            const double idle = reportIdleMemory(memory_, idle_memory_);
+            memory_growth_ = idle_memory_.empty() ? under_load : idle;
+        }
     }
 
     double memoryGrowthAfterFiveMinutes() const { return memory_growth_; }
@@ -293,69 +305,53 @@ class ChaosRun {
         }
     }
 
+    // An idle checkpoint: no new scan and no fault until every recording has ended and every server holds no open
+    // session, then each server's resident memory. Under load a server's memory follows the sessions and copies it
+    // holds at that instant (twofold from minute to minute); idle, it is what stays behind after the scans, so the
+    // checkpoints compare like with like and show a leak as growth.
+    void settle() {
+        std::printf("chaos %6.1f s: settling: no new scan and no fault until every server is idle\n", elapsed());
+        std::fflush(stdout);
+        for (Scan& s : scans_) {
+            if (!s.recording && s.ended_ns == 0) stopLive(s);
+        }
+        const double began_s = elapsed();
+        const auto idle = [&] {
+            watch_.poll(100ms);
+            reapRecordings(false);
+            restartExitedServers("");
+            if (runningRecordings() > 0) return false;
+            const std::string servers = rig_.cli("servers --json").out;
+            int n = 0;
+            for (size_t at = servers.find("\"open_sessions\":0,"); at != std::string::npos;
+                 at = servers.find("\"open_sessions\":0,", at + 1)) {
+                ++n;
+            }
+            return n == static_cast<int>(kServers.size());
+        };
+        if (!waitUntil(idle, 300s)) {
+            std::printf("chaos %6.1f s: the servers did not become idle within 300 s: no checkpoint\n", elapsed());
+            return;
+        }
+        // Finished sessions leave memory on the status thread's next turns (retireFinished), then malloc_trim.
+        std::this_thread::sleep_for(10s);
+        std::string line;
+        for (const std::string& id : kServers) {
+            const pid_t pid = rig_.server(id).pid();
+            if (pid <= 0) continue;
+            idle_memory_.push_back({elapsed(), id, pid, rssKb(pid)});
+            line += " " + id + " " + std::to_string(idle_memory_.back().rss_kb / 1024) + " MB";
+        }
+        std::printf("chaos %6.1f s: idle after %.0f s:%s\n", elapsed(), elapsed() - began_s, line.c_str());
+        std::fflush(stdout);
+    }
+
     void sampleMemory(double now) {
         for (const std::string& id : kServers) {
             const pid_t pid = rig_.server(id).pid();
             if (pid > 0) memory_.push_back({now, id, pid, rssKb(pid)});
         }
     }
-    void reportMemory() {
-        std::printf("  server resident memory (VmRSS, MB) each minute:\n    min ");
-        for (const std::string& id : kServers) std::printf(" %12s", id.c_str());
-        std::printf("\n");
-        for (int minute = 0;; ++minute) {
-            bool any = false;
-            std::string row;
-            for (const std::string& id : kServers) {
-                const MemorySample* best = nullptr;
-                for (const MemorySample& m : memory_) {
-                    if (m.server == id && m.at_s <= minute * 60 + 14 && m.at_s >= minute * 60 - 1) best = &m;
-                }
-                char cell[40];
-                std::snprintf(
-                    cell, sizeof(cell), " %12s",
-                    best ? (std::to_string(best->rss_kb / 1024) + " (" + std::to_string(best->pid % 100000) + ")")
-                               .c_str()
-                         : "-");
-                row += cell;
-                any = any || best != nullptr;
-            }
-            if (!any) break;
-            std::printf("    %3d %s\n", minute, row.c_str());
-        }
-        // Growth of each server process that lived for more than 10 minutes (s1 is never killed by the schedule,
-        // but a server that exits by itself is restarted), from 5 min after its start on. Its resident memory at an
-        // instant is mostly the sessions and copies it holds then (a volume each), which the schedule varies from
-        // minute to minute by a factor of two; a leak is a trend under that. So the mean of the last third of its
-        // samples is compared with the mean of the first third (each a few dozen samples, 15 s apart).
-        std::map<pid_t, std::vector<const MemorySample*>> by_pid;
-        for (const MemorySample& m : memory_) by_pid[m.pid].push_back(&m);
-        for (const auto& [pid, samples] : by_pid) {
-            const double start = samples.front()->at_s;
-            if (samples.back()->at_s - start < 600) continue;
-            std::vector<long> after5;
-            long highest = 0;
-            for (const MemorySample* m : samples) {
-                if (m->at_s - start < 300) continue;
-                after5.push_back(m->rss_kb);
-                highest = std::max(highest, m->rss_kb);
-            }
-            const size_t third = std::max<size_t>(1, after5.size() / 3);
-            double first_kb = 0, last_kb = 0;
-            for (size_t i = 0; i < third; ++i) {
-                first_kb += static_cast<double>(after5[i]) / static_cast<double>(third);
-                last_kb += static_cast<double>(after5[after5.size() - third + i]) / static_cast<double>(third);
-            }
-            const double growth = (last_kb - first_kb) / std::max(1.0, first_kb);
-            memory_growth_ = std::max(memory_growth_, growth);
-            std::printf(
-                "  %s (pid %d, %.0f to %.0f s): mean %.0f MB over the first third after 5 min, %.0f MB over the last "
-                "third (highest %ld MB): growth %.1f %%\n",
-                samples.front()->server.c_str(), static_cast<int>(pid), start, samples.back()->at_s, first_kb / 1024,
-                last_kb / 1024, highest / 1024, 100 * growth);
-        }
-    }
-
     void checkAgents() {
         for (Scan& s : scans_) {
             if (s.ended_ns == 0) {
@@ -488,9 +484,11 @@ class ChaosRun {
     std::vector<Scan> scans_;
     std::vector<FaultDone> faults_;
     std::vector<MemorySample> memory_;
+    std::vector<MemorySample> idle_memory_;  // the soak's idle checkpoints (settle)
     std::vector<double> resumes_s_;
     std::vector<std::string> exits_;
     double last_heal_s_ = 0;
+    double settled_s_ = 0;  // seconds spent in idle checkpoints
     double memory_growth_ = 0;
     int counter_ = 0;
     int recordings_done_ = 0, recordings_failed_ = 0, lives_done_ = 0, frames_lost_ = 0;
@@ -527,6 +525,7 @@ TEST(ChaosSoak, TheSameFaultsForMinutes) {
     Plan plan;
     plan.minutes = std::stod(minutes);
     plan.live_for_s = 120;
+    plan.settle_every_s = 300;
     ClusterRig base("chaos-soak-baseline", 73);
     const fs::path reference = undisturbedMesh(base, plan.frames);
     ClusterRig rig("chaos-soak", 74);
