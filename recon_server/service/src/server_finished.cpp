@@ -1,6 +1,5 @@
 // Finished sessions leave the server's memory (finished_sessions.hpp): the status thread retires each one once it
 // is done with, and its commands are answered from its files in the data dir from then on.
-#include <malloc.h>
 
 #include <set>
 
@@ -56,14 +55,10 @@ void Server::retireFinished(std::map<std::string, bool>& final_sent) {
     }
     if (!retired) return;
     // The retired sessions leave memory on the retiring thread, in the order of everything else given up there, and
-    // never on a session's own worker (a Session's destructor joins its worker). A session's buffers were allocated
-    // by its worker, in that thread's malloc arena; freed, they stay in the process (resident) until trimmed, and
-    // the next session's worker may get another arena: without the trim the server's resident memory grew by tens
-    // of megabytes a scan although the bytes in use stayed flat.
-    retirer_->retire([gone = std::move(gone)]() mutable {
-        gone.clear();
-        malloc_trim(0);
-    });
+    // never on a session's own worker (a Session's destructor joins its worker). The retirer trims the heap once
+    // its queue is drained (retirer.cpp): without the trim the server's resident memory grew by tens of megabytes
+    // a scan although the bytes in use stayed flat.
+    retirer_->retire([gone = std::move(gone)]() mutable { gone.clear(); });
 }
 
 void Server::forgetFinished(const FinishedSession& f) { unlist(f.stats.session_id); }
