@@ -26,7 +26,9 @@ inline double reportMemoryUnderLoad(const std::vector<MemorySample>& per_15s, co
     std::printf("  server resident memory (VmRSS, MB) each minute:\n    min ");
     for (const std::string& id : servers) std::printf(" %12s", id.c_str());
     std::printf("\n");
-    for (int minute = 0;; ++minute) {
+    double last_s = 0;
+    for (const MemorySample& m : per_15s) last_s = std::max(last_s, m.at_s);
+    for (int minute = 0; minute * 60 <= last_s + 1; ++minute) {
         bool any = false;
         std::string row;
         for (const std::string& id : servers) {
@@ -42,7 +44,7 @@ inline double reportMemoryUnderLoad(const std::vector<MemorySample>& per_15s, co
             row += cell;
             any = any || best != nullptr;
         }
-        if (!any) break;
+        if (!any) continue;  // an idle checkpoint: no sample
         std::printf("    %3d %s\n", minute, row.c_str());
     }
     // Growth of each server process that lived for more than 10 minutes (s1 is never killed by the schedule,
