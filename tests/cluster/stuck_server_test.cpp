@@ -178,6 +178,16 @@ TEST(StuckServer, AServerWhoseIntakeStallsIsListedAsNotResponding) {
     EXPECT_NE(table.out.find("NOT RESPONDING"), std::string::npos) << table.out;
 }
 
+// True once the agent has dropped frames its owner confirmed (its standby then holds a copy), within 60 s.
+bool standbyHoldsACopy(const ClusterRig& rig, const std::string& session) {
+    return waitUntil(
+        [&] {
+            const std::string kept = lastMatch(readText(rig.agentLog(session)), "\\| kept ([0-9]+)");
+            return !kept.empty() && std::stoi(kept) < rig.published(session);
+        },
+        60s);
+}
+
 // Three servers and a 400-frame recording whose owner is then cut off from the other two, but not from its agent,
 // once the standby holds a copy (the agent has dropped confirmed frames): without one the others would have nothing
 // to continue from. The recording is long enough that the agent still streams when the others take over.
@@ -191,13 +201,7 @@ void startAndCutTheOwner(ClusterRig& rig, Partitioner& net, CutOwner& cut, const
     rig.startAgent("rec", kLongFrames, "max", ",period=900");
     cut.owner = rig.waitForOwner("rec", 30s);
     ASSERT_FALSE(cut.owner.empty()) << readText(rig.agentLog("rec"));
-    ASSERT_TRUE(waitUntil(
-        [&] {
-            const std::string kept = lastMatch(readText(rig.agentLog("rec")), "\\| kept ([0-9]+)");
-            return !kept.empty() && std::stoi(kept) < rig.published("rec");
-        },
-        60s))
-        << readText(rig.agentLog("rec"));
+    ASSERT_TRUE(standbyHoldsACopy(rig, "rec")) << readText(rig.agentLog("rec"));
     std::vector<pid_t> others;
     for (const std::string& id : cut.ids) {
         if (id != cut.owner) others.push_back(rig.server(id).pid());
@@ -344,13 +348,7 @@ TEST(StuckServer, AnAgentHeldAliveButSilentIsNoWitnessForATakeover) {
     ASSERT_EQ(owner, "srv-b") << readText(rig.agentLog("rec"));
     const std::string other = "srv-a";
     // The standby holds a copy once the agent has dropped confirmed frames.
-    ASSERT_TRUE(waitUntil(
-        [&] {
-            const std::string kept = lastMatch(readText(rig.agentLog("rec")), "\\| kept ([0-9]+)");
-            return !kept.empty() && std::stoi(kept) < rig.published("rec");
-        },
-        60s))
-        << readText(rig.agentLog("rec"));
+    ASSERT_TRUE(standbyHoldsACopy(rig, "rec")) << readText(rig.agentLog("rec"));
     rig.agent("rec").signal(SIGSTOP);
     rig.server(owner).kill9();
     const std::string taking_over = "session rec: owner '" + owner + "' is gone; taking over";
