@@ -89,6 +89,16 @@ double meanMeshDistanceMm(const fs::path& mesh_path, const fs::path& reference_p
     return sum_m / static_cast<double>(mesh->n_vertices()) * 1e3;
 }
 
+// The servers that `facescan servers --json` lists with no open session.
+int idleServers(const std::string& servers_json) {
+    int n = 0;
+    for (size_t at = servers_json.find("\"open_sessions\":0,"); at != std::string::npos;
+         at = servers_json.find("\"open_sessions\":0,", at + 1)) {
+        ++n;
+    }
+    return n;
+}
+
 // Every server log of the run (a restarted server's logs are server-ID.log.2, .3, ...).
 std::vector<fs::path> serverLogs(const ClusterRig& rig) {
     std::vector<fs::path> logs;
@@ -321,13 +331,7 @@ class ChaosRun {
             reapRecordings(false);
             restartExitedServers("");
             if (runningRecordings() > 0) return false;
-            const std::string servers = rig_.cli("servers --json").out;
-            int n = 0;
-            for (size_t at = servers.find("\"open_sessions\":0,"); at != std::string::npos;
-                 at = servers.find("\"open_sessions\":0,", at + 1)) {
-                ++n;
-            }
-            return n == static_cast<int>(kServers.size());
+            return idleServers(rig_.cli("servers --json").out) == static_cast<int>(kServers.size());
         };
         if (!waitUntil(idle, 300s)) {
             std::printf("chaos %6.1f s: the servers did not become idle within 300 s: no checkpoint\n", elapsed());
@@ -461,12 +465,8 @@ class ChaosRun {
             [&] {
                 servers = rig_.cli("servers --json").out;
                 sessions = rig_.cli("sessions --json").out;
-                int idle = 0;
-                for (size_t at = servers.find("\"open_sessions\":0,"); at != std::string::npos;
-                     at = servers.find("\"open_sessions\":0,", at + 1)) {
-                    ++idle;
-                }
-                return idle == 3 && std::regex_search(sessions, std::regex("FINISHED")) &&
+                return idleServers(servers) == static_cast<int>(kServers.size()) &&
+                       std::regex_search(sessions, std::regex("FINISHED")) &&
                        !std::regex_search(sessions, std::regex("\"state\":\"(WAITING|SCANNING|LOST)\""));
             },
             60s);

@@ -401,7 +401,7 @@ Status Agent::run(const std::atomic<bool>& external_stop, const std::function<vo
     auto report = [&](bool force) {
         // An owner that stops serving (or a new one) is told at once, not at the next second: a server weighs the
         // agent's word before it takes the scan over, and would wait for it.
-        if (const uint32_t serving = stream.state().serving_epoch; serving != camera.serving_epoch) {
+        if (const uint32_t serving = stream.servingEpoch(); serving != camera.serving_epoch) {
             camera.serving_epoch = serving;
             announce();
         }

@@ -294,11 +294,11 @@ std::vector<wire::EncodedFrame> SessionStream::unconfirmed() {
     return frames;
 }
 
-StreamState SessionStream::state() const {
-    StreamState st = state_;
+StreamState SessionStream::state() const { return state_; }
+
+uint32_t SessionStream::servingEpoch() const {
     const std::optional<OwnerInfo>& o = link_.owner();
-    st.serving_epoch = o && o->serving() ? o->data.epoch : 0u;
-    return st;
+    return o && o->serving() ? o->data.epoch : 0u;
 }
 
 void SessionStream::dropConfirmed(uint32_t confirmed_seq) {

@@ -97,7 +97,6 @@ struct StreamState {
     uint64_t digest = wire::kFrameDigestSeed;  // of every frame sent (the first time), as the server digests them
     uint32_t followed_epoch = 0;               // the highest owner epoch streamed to
     uint32_t dropped_before = 0;               // recordings: frames before it were confirmed and dropped
-    uint32_t serving_epoch = 0;                // the epoch of the owner serving the session now (0: none)
 };
 
 // How long the agent's frame writes may block before they look at `stop` and the owner again. The writer's
@@ -133,6 +132,8 @@ class SessionStream {
     // only, so a larger one would make it ask for frames that will never come.
     uint32_t nextSeq() const { return next_seq_; }
     StreamState state() const;
+    // The epoch of the owner serving the session now (0: none), without copying the whole state: asked per frame.
+    uint32_t servingEpoch() const;
     // Called about every 20 ms while the stream waits (the agent reports its status line from it).
     void onWait(std::function<void()> tick) { on_wait_ = std::move(tick); }
     // Why no server may answer (e.g. a secured domain): said once when no server was seen for 2 s.
