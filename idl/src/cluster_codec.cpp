@@ -105,6 +105,7 @@ facescan_wire_SessionOwner toMessage(const SessionOwnerData& o) {
     m.failovers = o.failovers;
     m.last_takeover_ms = o.last_takeover_ms;
     m.updated_ns = o.updated_ns;
+    m.owner_incarnation = o.owner_incarnation;
     return m;
 }
 
@@ -135,6 +136,7 @@ StatusOr<SessionOwnerData> fromMessage(const facescan_wire_SessionOwner& m) {
     o.failovers = m.failovers;
     o.last_takeover_ms = m.last_takeover_ms;
     o.updated_ns = m.updated_ns;
+    o.owner_incarnation = m.owner_incarnation;
     return o;
 }
 

@@ -170,4 +170,29 @@ class ClusterRig {
     std::map<std::string, int> restarts_;
 };
 
+// True once the agent has dropped frames its owner confirmed (its standby then holds a copy), within 60 s.
+inline bool standbyHoldsACopy(const ClusterRig& rig, const std::string& session) {
+    return waitUntil(
+        [&] {
+            const std::string kept = lastMatch(readText(rig.agentLog(session)), "\\| kept ([0-9]+)");
+            return !kept.empty() && std::stoi(kept) < rig.published(session);
+        },
+        std::chrono::seconds(60));
+}
+
+// The loopback profile with another DDS lease, for a process whose death the others should notice late (its
+// --profile flag, after the rig's own): returns the file's path in the rig's folder.
+inline std::filesystem::path loopbackProfileWithLease(const ClusterRig& rig, int lease_s) {
+    std::string profile = readText(std::filesystem::path(FACESCAN_SOURCE_DIR) / "deploy" / "profiles" / "loopback.xml");
+    const std::string lease = "<LeaseDuration>3s</LeaseDuration>";
+    EXPECT_NE(profile.find(lease), std::string::npos) << profile;
+    if (profile.find(lease) != std::string::npos) {
+        profile.replace(profile.find(lease), lease.size(),
+                        "<LeaseDuration>" + std::to_string(lease_s) + "s</LeaseDuration>");
+    }
+    const std::filesystem::path path = rig.dir() / ("loopback-" + std::to_string(lease_s) + "s-lease.xml");
+    std::ofstream(path) << profile;
+    return path;
+}
+
 }  // namespace facescan::testing

@@ -178,16 +178,6 @@ TEST(StuckServer, AServerWhoseIntakeStallsIsListedAsNotResponding) {
     EXPECT_NE(table.out.find("NOT RESPONDING"), std::string::npos) << table.out;
 }
 
-// True once the agent has dropped frames its owner confirmed (its standby then holds a copy), within 60 s.
-bool standbyHoldsACopy(const ClusterRig& rig, const std::string& session) {
-    return waitUntil(
-        [&] {
-            const std::string kept = lastMatch(readText(rig.agentLog(session)), "\\| kept ([0-9]+)");
-            return !kept.empty() && std::stoi(kept) < rig.published(session);
-        },
-        60s);
-}
-
 // Three servers and a 400-frame recording whose owner is then cut off from the other two, but not from its agent,
 // once the standby holds a copy (the agent has dropped confirmed frames): without one the others would have nothing
 // to continue from. The recording is long enough that the agent still streams when the others take over.
@@ -336,12 +326,7 @@ TEST(StuckServer, AnAgentHeldAliveButSilentIsNoWitnessForATakeover) {
     ASSERT_EQ(busy_owner, "srv-a") << readText(rig.agentLog("busy"));
     rig.startServer("srv-b");
     ASSERT_TRUE(rig.waitForServers(2, 30s));
-    std::string profile = readText(fs::path(FACESCAN_SOURCE_DIR) / "deploy" / "profiles" / "loopback.xml");
-    const std::string lease = "<LeaseDuration>3s</LeaseDuration>";
-    ASSERT_NE(profile.find(lease), std::string::npos) << profile;
-    profile.replace(profile.find(lease), lease.size(), "<LeaseDuration>30s</LeaseDuration>");
-    const fs::path agent_profile = rig.dir() / "agent-30s-lease.xml";
-    std::ofstream(agent_profile) << profile;
+    const fs::path agent_profile = loopbackProfileWithLease(rig, 30);
     rig.startAgent("rec", kLongFrames, "max", ",period=900", {"--profile", agent_profile.string()});
     // Placed on the server with room to spare: the other one streams "busy".
     const std::string owner = rig.waitForOwner("rec", 30s);

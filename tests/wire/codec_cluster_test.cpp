@@ -248,10 +248,12 @@ TEST(ClusterCodec, AnnouncementsAndClaimsRoundTripAndBadOnesAreRefused) {
     o.state = OwnerState::kActive;
     o.resume_seq = 10;
     o.confirmed_seq = 8;
+    o.owner_incarnation = 0x8000000000000001ull;  // all 64 bits travel
     auto owner = fromMessage(toMessage(o));
     ASSERT_TRUE(owner.isOk()) << owner.status().toString();
     EXPECT_EQ(owner->standby_id, "srv-b");
     EXPECT_EQ(owner->epoch, 3u);
+    EXPECT_EQ(owner->owner_incarnation, 0x8000000000000001ull);
     facescan_wire_SessionOwner bad_state = toMessage(o);
     bad_state.state = static_cast<facescan_wire_OwnerState>(9);
     EXPECT_FALSE(fromMessage(bad_state).isOk());

@@ -51,6 +51,7 @@ struct SessionOwnerData {
     uint32_t failovers = 0;
     float last_takeover_ms = 0;
     int64_t updated_ns = 0;
+    uint64_t owner_incarnation = 0;  // the writer's ServerAnnounce incarnation; 0: an older server
 };
 facescan_wire_SessionOwner toMessage(const SessionOwnerData& o);
 StatusOr<SessionOwnerData> fromMessage(const facescan_wire_SessionOwner& msg);

@@ -192,6 +192,11 @@ Status Cluster::takeAnnouncements() {
             }
             if (a->server_id == options_.server_id && a->incarnation != self_.incarnation) return;
             PeerView& p = peers_[a->server_id];
+            if (p.announce.incarnation != a->incarnation) {
+                p.previous_incarnation = p.announce.incarnation;
+                p.previous_heard_ns = p.heard_ns;
+                p.incarnation_since_ns = steadyNowNs();
+            }
             p.announce = std::move(*a);
             p.alive = info.instance_state == DDS_IST_ALIVE;
             p.seen_ns = p.heard_ns = steadyNowNs();
@@ -285,6 +290,26 @@ bool Cluster::diedOnThisHost(const std::string& server_id) const {
     return it != peers_.end() && deadLocalProcess(it->second.announce);
 }
 
+bool Cluster::replaced(const std::string& server_id, uint64_t incarnation) const {
+    // Both processes alive and in view would alternate in peers_ (each announces twice a second), and the second
+    // would restart the count each time: a second of the new one alone means the old one is silent. It is not
+    // merely cut off from this server: the new one could only start once the old one had let go of the id.
+    constexpr int64_t kAloneNs = 1'000'000'000;
+    if (incarnation == 0) return false;
+    std::lock_guard lk(mutex_);
+    const auto it = peers_.find(server_id);
+    return it != peers_.end() && it->second.alive && it->second.announce.incarnation != incarnation &&
+           steadyNowNs() - it->second.incarnation_since_ns >= kAloneNs;
+}
+
+int64_t Cluster::lastHeard(const std::string& server_id, uint64_t incarnation) const {
+    std::lock_guard lk(mutex_);
+    const auto it = peers_.find(server_id);
+    if (it == peers_.end() || incarnation == 0) return 0;
+    if (it->second.announce.incarnation == incarnation) return it->second.heard_ns;
+    return it->second.previous_incarnation == incarnation ? it->second.previous_heard_ns : 0;
+}
+
 int64_t Cluster::lastHeard(const std::string& server_id) const {
     std::lock_guard lk(mutex_);
     const auto it = peers_.find(server_id);
@@ -336,7 +361,9 @@ StatusOr<std::unique_ptr<Claim>> Cluster::claim(const wire::SessionOwnerData& in
         wire::claimWriterQos(wire::claimStrength(initial.epoch, options_.server_id, initial.session_id)),
         options_.lease_s);
     ASSIGN_OR_RETURN(auto writer, wire::Writer<facescan_wire_SessionOwner>::create(*owner_topic_, &qos));
-    return std::make_unique<Claim>(std::move(writer), initial, options_.progressing);
+    wire::SessionOwnerData record = initial;
+    record.owner_incarnation = self_.incarnation;  // which process of this id holds it (Cluster::replaced)
+    return std::make_unique<Claim>(std::move(writer), std::move(record), options_.progressing);
 }
 
 }  // namespace facescan::service

@@ -26,21 +26,35 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
     for (const auto& [id, view] : owners) {
         if (view.disposed || !holdsSession(view.data.state) || owned(id)) continue;
         // Gone: its claim lapsed with its liveliness. A server restarted on the dead owner's data dir need not wait
-        // for the lease when the owner was an earlier process with its id, or a dead process of this host.
+        // for the lease when the owner was an earlier process with its id, or a dead process of this host. Nor need
+        // any server once the owner's id is announced by a new process alone: the owner was restarted, and the
+        // process that holds the claim is dead (on a loaded machine its lease lapsed seconds after the restart,
+        // and the live scans stalled that long).
         const bool restart = resumable_.count(id) > 0;
         const bool stale_self = restart && view.data.owner_id == params_.server_id;
-        const bool gone = !view.alive || stale_self || (restart && cluster_->diedOnThisHost(view.data.owner_id));
+        const bool replaced = cluster_->replaced(view.data.owner_id, view.data.owner_incarnation);
+        const bool known_dead = stale_self || replaced;
+        const bool gone = !view.alive || known_dead || (restart && cluster_->diedOnThisHost(view.data.owner_id));
         if (!gone) {
             owner_gone_since_ns_.erase(id);
             continue;
         }
         const int64_t gone_since_ns = owner_gone_since_ns_.try_emplace(id, steadyNowNs()).first->second;
         if (!witnessed(id, gone_since_ns)) continue;
-        if (agentStillServed(id, view.data.epoch)) {
+        if (stale_self && !view.data.standby_id.empty() && view.data.standby_id != params_.server_id &&
+            cluster_->serverAlive(view.data.standby_id) && steadyNowNs() - gone_since_ns < lease_ns_) {
+            // Restarted before the owner's lease lapsed: its live standby takes the scan over (it has a copy as
+            // fresh as the one on disk, and its view of the cluster is not seconds old). Both at once claimed the
+            // same epoch, and the one that lost the tie had started the scan for nothing. This copy is the
+            // fallback, for a standby that does not take it within a lease.
+            continue;
+        }
+        if (!known_dead && agentStillServed(id, view.data.epoch)) {
             // Witnessed, and yet the agent, heard from within the lease, still streams to that owner (or to a newer
             // one). The witnesses can be wrong for a moment: when a cut between the servers heals, the other
             // servers' announcements arrive before the owner's claim is rediscovered, and a takeover then took a
-            // live scan from its owner. The agent tells at once when its owner stops serving.
+            // live scan from its owner. The agent tells at once when its owner stops serving. (Not when the owner is
+            // known dead: its agent streams on to it until the claim lapses in its own eyes.)
             sayOnce("session " + id + ": owner '" + view.data.owner_id +
                     "' looks gone here, but its agent still streams to it: nothing is taken over");
             continue;
@@ -92,9 +106,11 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         if (disk != resumable_.end()) resumable_.erase(disk);
         held_elsewhere_.erase(id);
         auto o = std::make_shared<OwnedSession>();
-        // The takeover time runs from the old owner's last sign of life (an announcement or a replica).
-        const int64_t heard =
-            std::max(replicator_->lastHeardFrom(view.data.owner_id), cluster_->lastHeard(view.data.owner_id));
+        // The takeover time runs from the old owner's last sign of life (an announcement or a replica); of the old
+        // process, when a new one has its id.
+        const int64_t heard = replaced ? cluster_->lastHeard(view.data.owner_id, view.data.owner_incarnation)
+                                       : std::max(replicator_->lastHeardFrom(view.data.owner_id),
+                                                  cluster_->lastHeard(view.data.owner_id));
         o->takeover_from_ns = heard > 0 ? heard : steadyNowNs();
         const uint32_t epoch = choice.epoch;
         std::fprintf(

@@ -40,8 +40,11 @@ struct OwnerView {
 struct PeerView {
     wire::ServerAnnounceData announce;
     bool alive = false;
-    int64_t seen_ns = 0;   // steady clock of the last change (an announcement, or its liveliness lapsing)
-    int64_t heard_ns = 0;  // steady clock of the last announcement
+    int64_t seen_ns = 0;                // steady clock of the last change (an announcement, or its liveliness lapsing)
+    int64_t heard_ns = 0;               // steady clock of the last announcement
+    int64_t incarnation_since_ns = 0;   // steady clock of the first announcement of its current incarnation
+    uint64_t previous_incarnation = 0;  // the process of this id before (a restart), and when it was last heard
+    int64_t previous_heard_ns = 0;
 };
 
 // A claim on one session: its own DDS writer, whose ownership strength grows with the epoch. Writing the record
@@ -115,6 +118,13 @@ class Cluster {
     bool diedOnThisHost(const std::string& server_id) const;
     // Steady clock of the last announcement heard from a server (0: never).
     int64_t lastHeard(const std::string& server_id) const;
+    // The same for one process of that id: the current one or the one before (0: neither).
+    int64_t lastHeard(const std::string& server_id, uint64_t incarnation) const;
+    // Whether the process that announced itself as `server_id` with `incarnation` has been replaced: another process
+    // of that id (a restart) announces, and has been the only one heard for a second. A server id names one server
+    // (its data dir is locked, and a second process of the id refuses to run beside the first), so the old process
+    // is gone, and its claims with it, although its lease has not lapsed yet. False for 0 (an older server).
+    bool replaced(const std::string& server_id, uint64_t incarnation) const;
     // Whether more than half of the servers known (alive now, or seen within the last minutes) are alive in this
     // server's view, itself included: false for a server cut off from the others.
     bool seesMajority() const;
