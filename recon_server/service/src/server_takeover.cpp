@@ -20,6 +20,15 @@ constexpr int64_t kFallbackNs = 2'000'000'000;  // a takeover: the next server i
 }  // namespace
 
 void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
+    // What the loop below remembers of a session whose claim is gone, withdrawn or done goes with it: a server that
+    // runs for months sees hundreds of thousands of sessions.
+    const auto held = [&](const auto& entry) {
+        const auto view = owners.find(entry.first);
+        return view != owners.end() && !view->second.disposed && holdsSession(view->second.data.state);
+    };
+    std::erase_if(owner_gone_since_ns_, [&](const auto& entry) { return !held(entry); });
+    std::erase_if(owner_back_since_ns_, [&](const auto& entry) { return !held(entry); });
+    std::erase_if(orphaned_since_ns_, [&](const auto& entry) { return !held(entry); });
     // 1. Sessions whose owner is gone (its claim lapsed with its liveliness, or it is a dead process of this
     //    host) and that this server can continue: as their named standby, or from its own data dir after a
     //    restart. The new claim's epoch is higher, so it beats the old one even before that one lapses.
@@ -37,6 +46,7 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
         const bool gone = !view.alive || known_dead || (restart && cluster_->diedOnThisHost(view.data.owner_id));
         if (!gone) {
             owner_gone_since_ns_.erase(id);
+            owner_back_since_ns_.erase(id);
             continue;
         }
         const int64_t gone_since_ns = owner_gone_since_ns_.try_emplace(id, steadyNowNs()).first->second;
@@ -68,6 +78,7 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                               ? !candidate->second.camera.every_frame
                               : (standby && !standby->camera.every_frame) ||
                                     (disk != resumable_.end() && !disk->second.camera.every_frame);
+        if (!known_dead && !live && ownerHeardAgain(id, view.data.owner_id, gone_since_ns)) continue;
         // The agent's own account counts as much as the claim's: it may have followed a newer owner than this
         // view shows, or dropped frames that an owner confirmed after the last claim this server saw.
         wire::SessionOwnerData last = view.data;
@@ -287,7 +298,7 @@ bool Server::witnessed(const std::string& session_id, int64_t owner_gone_since_n
     // in chaos runs, and worse, was made on the claim as it stood when the cut began: frames the owner had
     // confirmed since (the agent dropped them) were nowhere in the new owner's reach. An announcement that arrived
     // after the lapse proves that the network still carries that peer's messages; every server announces at least
-    // twice a second, so this costs a takeover about that much.
+    // four times a second, so this costs a takeover about that much.
     //
     // Losing every one of two or more other servers at once is, seen from inside, what a cut-off looks like (two
     // failures at the same moment are rare). The agent then goes from this server's view too, but Cyclone can
@@ -308,6 +319,27 @@ bool Server::witnessed(const std::string& session_id, int64_t owner_gone_since_n
     // other servers but not from the agents took their live scans over, and a recording lost the frames its owner
     // confirmed meanwhile).
     return candidates_.at(session_id).camera.serving_epoch == 0;
+}
+
+bool Server::ownerHeardAgain(const std::string& session_id, const std::string& owner_id, int64_t gone_since_ns) {
+    // The owner announced itself after its claim lapsed here: it is alive (woken from a freeze, back from a cut, or
+    // its DDS threads were starved), and its claim reads alive again once it writes it. A recording taken over now
+    // would be taken from a live owner on the strength of the owner's own sign of life: in a 30-minute chaos soak a
+    // standby took two recordings over 1 ms after it heard their owner, woken from a 9 s freeze, and both servers
+    // finished them. So the takeover waits a lease for the claim to come back. An owner heard for that long whose
+    // claim stays lapsed cannot write it: taken over as before. (Live scans are not held: their old owner gives
+    // up without writing anything, so a takeover costs at most the frames of the gap, and the wait would stall
+    // them.)
+    const int64_t now = steadyNowNs();
+    if (cluster_->lastHeard(owner_id) <= gone_since_ns) {
+        owner_back_since_ns_.erase(session_id);
+        return false;
+    }
+    const int64_t back = owner_back_since_ns_.try_emplace(session_id, now).first->second;
+    if (now - back >= lease_ns_) return false;
+    sayOnce("session " + session_id + ": owner '" + owner_id +
+            "' was heard again after its claim lapsed here: waiting up to a lease for its claim before taking over");
+    return true;
 }
 
 bool Server::agentLives(const std::string& session_id) const {

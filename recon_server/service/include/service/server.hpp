@@ -180,6 +180,8 @@ class Server {
     bool witnessed(const std::string& session_id, int64_t owner_gone_since_ns) const;
     bool agentLives(const std::string& session_id) const;  // its CameraInfo writer is alive in this view
     bool agentHeardSince(const std::string& session_id, int64_t since_ns) const;  // a CameraInfo came since then
+    // The owner announced itself since its claim lapsed here, less than a lease ago: its claim may come back.
+    bool ownerHeardAgain(const std::string& session_id, const std::string& owner_id, int64_t gone_since_ns);
     // Its agent, heard from within the lease, says that an owner at `epoch` or later serves it.
     bool agentStillServed(const std::string& session_id, uint32_t epoch) const;
     // Whether this server is cut off, or back from it and re-observing the cluster before it takes anything over.
@@ -286,6 +288,7 @@ class Server {
     int64_t rejoin_until_ns_ = 0;   // steady clock: re-observing the cluster until then (rejoining)
     bool had_peers_ = false;
     std::map<std::string, int64_t> owner_gone_since_ns_;        // takeOverOrphans: when its owner was first seen gone
+    std::map<std::string, int64_t> owner_back_since_ns_;        // ownerHeardAgain: when its gone owner was heard again
     std::map<std::string, int64_t> orphaned_since_ns_;          // takeOverFromFirstFrame: when its owner was seen gone
     std::map<std::string, std::unique_ptr<Claim>> tombstones_;  // refuseReusedId, while the candidate lasts
     std::set<std::string> refusals_logged_;                     // takeovers refused: each reason said once
