@@ -183,6 +183,7 @@ void Server::shutdown() {
     }
     if (replicator_) replicator_->stop();
     if (watchdog_) watchdog_->stop();
+    erasure_.reset();  // its thread forgets erased records, handing their claims to the retiring thread
     retirer_.reset();  // what was given up ends now, while the participant still exists
     if (!status_writer_) return;
     // The last word on every session: final status and final mesh (durable: late subscribers still get them),

@@ -434,17 +434,41 @@ void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_cl
     unlist(o->id);
     // The replication thread may still hold the OwnedSession for a moment (it copies the list each turn): the
     // retiring thread waits until it holds the last reference, so the endpoints end there and in this order.
+    retireFrameReader(std::move(o->frames));  // no more frames for this session here (only this thread uses it)
     retirer_->retire([this, held = o]() mutable {
         retirer_->note("waiting for the other threads to let go of a session");
         for (int i = 0; i < 1000 && held.use_count() > 1; ++i)
             std::this_thread::sleep_for(std::chrono::milliseconds(5));
-        retirer_->note("deleting a session's frame reader");
-        held->frames.reset();  // no more frames for this session here
         retirer_->note("deleting a session's claim writer");
         held->claim.reset();  // withdrawn (or released above)
         retirer_->note("stopping a session's worker");
         held->session.reset();  // its worker stops; joined here, never on itself
         held.reset();
+    });
+}
+
+void Server::retireFrameReader(std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames) {
+    if (!frames) return;
+    // Not deleted while its agent may still write to it (to a new owner, or finishing): nothing takes from it any
+    // more, so its keep-all history fills, Cyclone's receive thread retries the delivery for good (the whole
+    // server then hears nothing), and the reader's deletion waits on a garbage collector that waits for that
+    // thread. The chaos soaks' retiring thread hung there for 120 s (gdb: the receive thread in its retry sleep,
+    // the collector waiting, the deletion in dds_reader_close). So it lingers, drained, until no writer is
+    // matched: from then on nothing can be delivered to it, and it goes at once.
+    retirer_->linger([reader = std::shared_ptr<wire::Reader<facescan_wire_RgbdFrame>>(std::move(frames))] {
+        constexpr int kDrainBatch = 16;
+        const dds_entity_t h = reader->handle();
+        void* samples[kDrainBatch];
+        dds_sample_info_t infos[kDrainBatch];
+        for (;;) {
+            samples[0] = nullptr;
+            const dds_return_t n = dds_take(h, samples, infos, kDrainBatch, kDrainBatch);
+            if (n <= 0) break;
+            (void)dds_return_loan(h, samples, n);
+            if (n < kDrainBatch) break;
+        }
+        dds_subscription_matched_status_t matched{};
+        return dds_get_subscription_matched_status(h, &matched) != DDS_RETCODE_OK || matched.current_count == 0;
     });
 }
 
@@ -481,8 +505,7 @@ void Server::releaseStale() {
             // Done: its frames are no longer read, and the claim says FINISHED (standbys drop their copies).
             if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
             o->frame_condition = 0;
-            retirer_->retire([reader = std::shared_ptr<wire::Reader<facescan_wire_RgbdFrame>>(
-                                  std::move(o->frames))]() mutable { reader.reset(); });
+            retireFrameReader(std::move(o->frames));
             o->phase = OwnedSession::Phase::kFinished;
             // How far the scan got whole: a server that finished it too, unseen (cut off), compares
             // (resultSuperseded). A scan that lost frames on the way (a takeover from a copy older than what the

@@ -47,7 +47,7 @@ void Server::retireFinished(std::map<std::string, bool>& final_sent) {
     }
     std::erase_if(final_sent, [&](const auto& entry) { return !owned_ids.count(entry.first); });
     all.clear();
-    for (const FinishedSession& f : finished_.expire(now)) forgetFinished(f);
+    for (FinishedSession& f : finished_.expire(now)) forgetFinished(f);
     // An erased scan (service/erasure.hpp) is not kept listed, whichever came first, its retirement or the erasure.
     for (const SessionStats& s : finished_.stats()) {
         if (!isErased(params_.data_dir, s.session_id)) continue;
@@ -61,7 +61,13 @@ void Server::retireFinished(std::map<std::string, bool>& final_sent) {
     retirer_->retire([gone = std::move(gone)]() mutable { gone.clear(); });
 }
 
-void Server::forgetFinished(const FinishedSession& f) { unlist(f.stats.session_id); }
+void Server::forgetFinished(FinishedSession& f) {
+    unlist(f.stats.session_id);
+    // Its claim's writer ends on the retiring thread, as every endpoint does: deleting a DDS entity can wait on
+    // Cyclone's garbage collector (retirer.hpp), and the threads that forget records publish statuses (the status
+    // thread) or make the cluster's decisions (the intake).
+    if (f.claim) retirer_->retire([claim = std::move(f.claim)]() mutable { claim.reset(); });
+}
 
 bool Server::resultSuperseded(const OwnerView& view, uint32_t epoch, uint32_t next_seq) const {
     // The reader holds the strongest claim's record (EXCLUSIVE ownership: a later epoch, or the tie-break within
@@ -76,13 +82,13 @@ bool Server::resultSuperseded(const OwnerView& view, uint32_t epoch, uint32_t ne
 void Server::dropSupersededResults(const std::map<std::string, OwnerView>& owners) {
     // On the intake thread, every turn: the records are checked where they lie, not copied out first.
     std::vector<std::pair<std::string, wire::SessionOwnerData>> fuller;
-    const std::vector<FinishedSession> superseded = finished_.removeIf([&](const SessionStats& s) {
+    std::vector<FinishedSession> superseded = finished_.removeIf([&](const SessionStats& s) {
         const auto it = owners.find(s.session_id);
         if (it == owners.end()) return false;
         if (holdsFullerResult(it->second, s)) fuller.emplace_back(s.session_id, it->second.data);
         return resultSuperseded(it->second, s.epoch, s.next_seq);
     });
-    for (const FinishedSession& f : superseded) {
+    for (FinishedSession& f : superseded) {
         const SessionStats& s = f.stats;
         const wire::SessionOwnerData& winner = owners.at(s.session_id).data;
         forgetFinished(f);

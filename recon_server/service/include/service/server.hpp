@@ -148,7 +148,7 @@ class Server {
     // server_finished.cpp, on the status thread: finished sessions whose final status went out (final_sent) leave
     // owned_ and memory for finished_; those beyond --keep-finished or older than --keep-finished-s are unlisted.
     void retireFinished(std::map<std::string, bool>& final_sent);
-    void forgetFinished(const FinishedSession& f);
+    void forgetFinished(FinishedSession& f);  // unlisted; its claim ends on the retiring thread
     // A result finished here while this server was cut off or frozen, and finished again by the server that took
     // the scan over meanwhile: the winner's claim (view) says FINISHED with every frame this one had (up to
     // next_seq). Then this one is a second result for one scan and goes (dropSupersededResults, yield).
@@ -202,11 +202,14 @@ class Server {
     // After a yield: this server's copy of a recording in its data dir, kept ready in case the new owner fails too.
     void keepCopyInCase(const std::string& session_id, const OwnerView& winner);
     // The one way a session's endpoints end: out of owned_, its frame reader's condition off the waitset and its
-    // status unlisted (all here, on the intake thread), then reader, claim and session ended in that order on the
-    // retiring thread.
+    // status unlisted (all here, on the intake thread), then claim and session ended in that order on the retiring
+    // thread, where the frame reader lingers until no writer is left (retireFrameReader).
     // `dispose_claim`: the claim says RELEASED first (nobody owns the session); else it is withdrawn, as if this
     // server had died, and a stronger claim stays the only one.
     void retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_claim);
+    // A session's frame reader that nothing takes from any more: drained on the retiring thread until its agent's
+    // writer is gone, then deleted (never while a writer can fill it: retirer.hpp).
+    void retireFrameReader(std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames);
     // server_health.cpp: the cluster view. A server that was frozen (SIGSTOP, a paused VM) for half a lease or more
     // (its watchdog's thread notices it: noticePause) saw the others' leases lapse only in its own eyes: for two leases
     // after it wakes, it re-observes the cluster and takes nothing over, places nothing, and holds its own sessions'
