@@ -12,6 +12,7 @@
 #include "recon/parallel.hpp"
 #include "service/finished_sessions.hpp"
 #include "service/frame_load.hpp"
+#include "service/lingering_reader.hpp"
 #include "service/replica_log.hpp"
 #include "service/replication.hpp"
 #include "service/server.hpp"
@@ -449,27 +450,31 @@ void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_cl
 
 void Server::retireFrameReader(std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames) {
     if (!frames) return;
-    // Not deleted while its agent may still write to it (to a new owner, or finishing): nothing takes from it any
-    // more, so its keep-all history fills, Cyclone's receive thread retries the delivery for good (the whole
-    // server then hears nothing), and the reader's deletion waits on a garbage collector that waits for that
-    // thread. The chaos soaks' retiring thread hung there for 120 s (gdb: the receive thread in its retry sleep,
-    // the collector waiting, the deletion in dds_reader_close). So it lingers, drained, until no writer is
-    // matched: from then on nothing can be delivered to it, and it goes at once.
-    retirer_->linger([reader = std::shared_ptr<wire::Reader<facescan_wire_RgbdFrame>>(std::move(frames))] {
-        constexpr int kDrainBatch = 16;
-        const dds_entity_t h = reader->handle();
-        void* samples[kDrainBatch];
-        dds_sample_info_t infos[kDrainBatch];
-        for (;;) {
-            samples[0] = nullptr;
-            const dds_return_t n = dds_take(h, samples, infos, kDrainBatch, kDrainBatch);
-            if (n <= 0) break;
-            (void)dds_return_loan(h, samples, n);
-            if (n < kDrainBatch) break;
+    // Not deleted while its agent may still write to it (service/lingering_reader.hpp): drained here, on the intake
+    // thread, whenever data comes, until no writer is matched; then ended on the retiring thread. Drained here and
+    // not there: while the retiring thread waits in a deletion, another lingering reader that it was to drain would
+    // fill, and that deletion would never end (a soak's retiring thread hung so).
+    LingeringReader l;
+    l.condition = dds_create_readcondition(frames->handle(), DDS_ANY_STATE);
+    if (l.condition > 0) (void)dds_waitset_attach(waitset_.handle(), l.condition, l.condition);
+    l.reader = std::move(frames);
+    lingering_frames_.push_back(std::move(l));
+}
+
+void Server::drainLingering() {
+    for (auto it = lingering_frames_.begin(); it != lingering_frames_.end();) {
+        if (!drainedAndUnwritten(it->reader->handle())) {
+            ++it;
+            continue;
         }
-        dds_subscription_matched_status_t matched{};
-        return dds_get_subscription_matched_status(h, &matched) != DDS_RETCODE_OK || matched.current_count == 0;
-    });
+        if (it->condition > 0) (void)dds_waitset_detach(waitset_.handle(), it->condition);
+        retirer_->retire(
+            [reader = std::shared_ptr<wire::Reader<facescan_wire_RgbdFrame>>(std::move(it->reader)), this]() mutable {
+                retirer_->note("deleting a frame reader that no writer writes to any more");
+                reader.reset();
+            });
+        it = lingering_frames_.erase(it);
+    }
 }
 
 void Server::requestReplays() {

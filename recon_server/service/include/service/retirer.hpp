@@ -5,14 +5,8 @@
 // and a Session must never be destroyed on its own worker thread (joining itself aborts the process). So every path
 // that gives up a session's endpoints (yield, release, finish, shutdown) hands them here, and one thread ends them
 // in the order they were handed over, under the watchdog like every other loop.
-//
-// Some endpoints must not end yet: a session's frame reader that its agent still writes to (Cyclone 0.10 delivers
-// to a full keep-all reader by retrying on its receive thread, which then never lets the garbage collector on, and
-// the reader's deletion waits for that collector: a deadlock). Those linger here, looked after every
-// kLingerPeriod, until they can end.
 #pragma once
 
-#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <functional>
@@ -35,11 +29,6 @@ class Retirer {
     // Runs `end` on the retiring thread, after everything handed over before it. `end` and whatever it captured
     // are destroyed there too.
     void retire(std::function<void()> end);
-    // After everything handed over before it, calls `step` on the retiring thread every kLingerPeriod until it
-    // returns true; `step` and whatever it captured are then destroyed there. On shutdown each lingering step
-    // runs once more and is destroyed, done or not.
-    void linger(std::function<bool()> step);
-    static constexpr std::chrono::milliseconds kLingerPeriod{50};
     // From a job: what it does now (a string literal), named if it hangs (Watchdog::Beat::note).
     void note(const char* doing) {
         if (beat_) beat_->note(doing);
@@ -47,14 +36,11 @@ class Retirer {
 
  private:
     void loop();
-    void runLingering(bool final_turn);  // the retiring thread only
 
     std::shared_ptr<Watchdog::Beat> beat_;
     mutable std::mutex mutex_;
     std::condition_variable cv_;
     std::deque<std::function<void()>> jobs_;
-    std::deque<std::function<bool()>> lingering_;  // the retiring thread only
-    std::chrono::steady_clock::time_point next_linger_;
     bool stopping_ = false;
     std::thread thread_;
 };
