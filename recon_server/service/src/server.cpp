@@ -10,7 +10,6 @@
 #include "recon/parallel.hpp"
 #include "service/failpoint.hpp"
 #include "service/frame_load.hpp"
-#include "service/lingering_reader.hpp"
 #include "service/replication.hpp"
 #include "service/session_store.hpp"
 #include "wire/private_files.hpp"
@@ -185,10 +184,7 @@ void Server::shutdown() {
     if (replicator_) replicator_->stop();
     if (watchdog_) watchdog_->stop();
     erasure_.reset();  // its thread forgets erased records, handing their claims to the retiring thread
-    // Frame readers that still linger go now, each drained once more (service/lingering_reader.hpp): nothing is
-    // left to drain them, and the process is ending.
-    for (LingeringReader& l : lingering_frames_) (void)drainedAndUnwritten(l.reader->handle());
-    lingering_frames_.clear();
+    endLingering();    // frame readers that still linger go now
     retirer_.reset();  // what was given up ends now, while the participant still exists
     if (!status_writer_) return;
     // The last word on every session: final status and final mesh (durable: late subscribers still get them),

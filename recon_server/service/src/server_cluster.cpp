@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <set>
 #include <thread>
+#include <utility>
 
 #include "recon/parallel.hpp"
 #include "service/finished_sessions.hpp"
@@ -426,8 +427,6 @@ void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_cl
         if (auto it = owned_.find(o->id); it != owned_.end() && it->second == o) owned_.erase(it);
     }
     o->phase = OwnedSession::Phase::kGivenUp;
-    if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
-    o->frame_condition = 0;
     if (dispose_claim && o->claim) o->claim->release();
     // Its last status and mesh from here leave the writers' histories: a session given up (yielded, released for
     // want of frames, or unable to start) would otherwise stay listed on this server for as long as it runs, as a
@@ -435,7 +434,8 @@ void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_cl
     unlist(o->id);
     // The replication thread may still hold the OwnedSession for a moment (it copies the list each turn): the
     // retiring thread waits until it holds the last reference, so the endpoints end there and in this order.
-    retireFrameReader(std::move(o->frames));  // no more frames for this session here (only this thread uses it)
+    // No more frames for this session here (only this thread uses its reader).
+    retireFrameReader(std::move(o->frames), std::exchange(o->frame_condition, 0));
     retirer_->retire([this, held = o]() mutable {
         retirer_->note("waiting for the other threads to let go of a session");
         for (int i = 0; i < 1000 && held.use_count() > 1; ++i)
@@ -448,17 +448,17 @@ void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_cl
     });
 }
 
-void Server::retireFrameReader(std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames) {
-    if (!frames) return;
+void Server::retireFrameReader(std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames, dds_entity_t condition) {
+    if (!frames) {
+        if (condition > 0) (void)dds_waitset_detach(waitset_.handle(), condition);
+        return;
+    }
     // Not deleted while its agent may still write to it (service/lingering_reader.hpp): drained here, on the intake
-    // thread, whenever data comes, until no writer is matched; then ended on the retiring thread. Drained here and
-    // not there: while the retiring thread waits in a deletion, another lingering reader that it was to drain would
-    // fill, and that deletion would never end (a soak's retiring thread hung so).
-    LingeringReader l;
-    l.condition = dds_create_readcondition(frames->handle(), DDS_ANY_STATE);
-    if (l.condition > 0) (void)dds_waitset_attach(waitset_.handle(), l.condition, l.condition);
-    l.reader = std::move(frames);
-    lingering_frames_.push_back(std::move(l));
+    // thread, whenever data comes (its read condition stays on the intake's waitset), until no writer is matched;
+    // then ended on the retiring thread. Drained here and not there: while the retiring thread waits in a deletion,
+    // another lingering reader that it was to drain would fill, and that deletion would never end (a soak's
+    // retiring thread hung so).
+    lingering_frames_.push_back({std::move(frames), condition});
 }
 
 void Server::drainLingering() {
@@ -475,6 +475,12 @@ void Server::drainLingering() {
             });
         it = lingering_frames_.erase(it);
     }
+}
+
+void Server::endLingering() {
+    // On shutdown: nothing is left to drain them, and the process is ending. Each is drained once more first.
+    for (LingeringReader& l : lingering_frames_) (void)drainedAndUnwritten(l.reader->handle());
+    lingering_frames_.clear();
 }
 
 void Server::requestReplays() {
@@ -508,9 +514,7 @@ void Server::releaseStale() {
         }
         if (o->phase != OwnedSession::Phase::kFinished && o->session && o->session->finished()) {
             // Done: its frames are no longer read, and the claim says FINISHED (standbys drop their copies).
-            if (o->frame_condition > 0) (void)dds_waitset_detach(waitset_.handle(), o->frame_condition);
-            o->frame_condition = 0;
-            retireFrameReader(std::move(o->frames));
+            retireFrameReader(std::move(o->frames), std::exchange(o->frame_condition, 0));
             o->phase = OwnedSession::Phase::kFinished;
             // How far the scan got whole: a server that finished it too, unseen (cut off), compares
             // (resultSuperseded). A scan that lost frames on the way (a takeover from a copy older than what the

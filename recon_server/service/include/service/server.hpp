@@ -201,17 +201,18 @@ class Server {
     void yield(const std::string& session_id, const std::string& why, const OwnerView& winner);
     // After a yield: this server's copy of a recording in its data dir, kept ready in case the new owner fails too.
     void keepCopyInCase(const std::string& session_id, const OwnerView& winner);
-    // The one way a session's endpoints end: out of owned_, its frame reader's condition off the waitset and its
+    // The one way a session's endpoints end: out of owned_, its frame reader lingering (retireFrameReader) and its
     // status unlisted (all here, on the intake thread), then claim and session ended in that order on the retiring
-    // thread; the frame reader lingers until no writer is left (retireFrameReader).
+    // thread.
     // `dispose_claim`: the claim says RELEASED first (nobody owns the session); else it is withdrawn, as if this
     // server had died, and a stronger claim stays the only one.
     void retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_claim);
-    // A session's frame reader that nothing takes from any more: drained on the intake thread until its agent's
-    // writer is gone (drainLingering, every turn), then deleted on the retiring thread; never deleted while a
-    // writer can fill it (service/lingering_reader.hpp).
-    void retireFrameReader(std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames);
+    // A session's frame reader that nothing takes from any more, with its read condition on the intake's waitset:
+    // drained on the intake thread until its agent's writer is gone (drainLingering, every turn), then deleted on
+    // the retiring thread; never deleted while a writer can fill it (service/lingering_reader.hpp).
+    void retireFrameReader(std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames, dds_entity_t condition);
     void drainLingering();
+    void endLingering();  // shutdown
     // server_health.cpp: the cluster view. A server that was frozen (SIGSTOP, a paused VM) for half a lease or more
     // (its watchdog's thread notices it: noticePause) saw the others' leases lapse only in its own eyes: for two leases
     // after it wakes, it re-observes the cluster and takes nothing over, places nothing, and holds its own sessions'
@@ -294,7 +295,7 @@ class Server {
     bool had_peers_ = false;
     struct LingeringReader {
         std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> reader;
-        dds_entity_t condition = 0;  // on the intake's waitset: data wakes the intake, which drains it
+        dds_entity_t condition = 0;  // the session's, still on the intake's waitset: data wakes the intake
     };
     std::vector<LingeringReader> lingering_frames_;             // the intake thread only
     std::map<std::string, int64_t> owner_gone_since_ns_;        // takeOverOrphans: when its owner was first seen gone
