@@ -73,6 +73,16 @@ void Claim::release() {
     (void)writer_.dispose(wire::toMessage(record_));
 }
 
+wire::Writer<facescan_wire_SessionOwner> Claim::raise(wire::Writer<facescan_wire_SessionOwner> writer, uint32_t epoch,
+                                                      uint32_t resume_seq) {
+    std::lock_guard lk(mutex_);
+    std::swap(writer_, writer);
+    record_.epoch = epoch;
+    record_.resume_seq = resume_seq;
+    publishLocked();
+    return writer;
+}
+
 Cluster::Cluster(Options options) : options_(std::move(options)) {}
 
 Cluster::~Cluster() = default;
@@ -357,11 +367,20 @@ std::string Cluster::responder() const {
     return lowest;
 }
 
-StatusOr<std::unique_ptr<Claim>> Cluster::claim(const wire::SessionOwnerData& initial) {
+StatusOr<wire::Writer<facescan_wire_SessionOwner>> Cluster::claimWriter(uint32_t epoch,
+                                                                        const std::string& session_id) const {
     const wire::Qos qos = wire::withProgressLiveliness(
-        wire::claimWriterQos(wire::claimStrength(initial.epoch, options_.server_id, initial.session_id)),
-        options_.lease_s);
-    ASSIGN_OR_RETURN(auto writer, wire::Writer<facescan_wire_SessionOwner>::create(*owner_topic_, &qos));
+        wire::claimWriterQos(wire::claimStrength(epoch, options_.server_id, session_id)), options_.lease_s);
+    return wire::Writer<facescan_wire_SessionOwner>::create(*owner_topic_, &qos);
+}
+
+StatusOr<wire::Writer<facescan_wire_SessionOwner>> Cluster::raise(Claim& claim, uint32_t epoch, uint32_t resume_seq) {
+    ASSIGN_OR_RETURN(auto writer, claimWriter(epoch, claim.record().session_id));
+    return claim.raise(std::move(writer), epoch, resume_seq);
+}
+
+StatusOr<std::unique_ptr<Claim>> Cluster::claim(const wire::SessionOwnerData& initial) {
+    ASSIGN_OR_RETURN(auto writer, claimWriter(initial.epoch, initial.session_id));
     wire::SessionOwnerData record = initial;
     record.owner_incarnation = self_.incarnation;  // which process of this id holds it (Cluster::replaced)
     return std::make_unique<Claim>(std::move(writer), std::move(record), options_.progressing);

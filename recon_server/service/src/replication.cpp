@@ -405,6 +405,19 @@ int Replicator::standbyCount() const {
     return static_cast<int>(incoming_.size());
 }
 
+size_t Replicator::standbyBytes() const {
+    std::lock_guard lk(mutex_);
+    size_t bytes = 0;
+    for (const auto& [id, in] : incoming_) {
+        const recon::ReconState& st = in.copy.state;
+        bytes +=
+            st.blocks.voxels.capacity() * sizeof(recon::Voxel) + st.blocks.coords.capacity() * sizeof(Eigen::Vector3i);
+        bytes += st.trajectory.capacity() * sizeof(st.trajectory[0]);
+        for (const wire::ReplicaKeyframe& k : in.copy.keyframes) bytes += k.jpeg.capacity();
+    }
+    return bytes;
+}
+
 int64_t Replicator::lastHeardFrom(const std::string& server_id) const {
     std::lock_guard lk(mutex_);
     const auto it = heard_.find(server_id);

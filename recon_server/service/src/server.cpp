@@ -260,6 +260,7 @@ void Server::intakeLoop() {
         dds_set_guardcondition(wake_.handle(), false);
         if (stopping_) break;
         assertProgress(steadyNowNs());
+        refreshClaims(steadyNowNs());
         if (const Status s = cluster_->poll(); !s.isOk() && !duplicate_logged) {
             // After the join only a newer server can clash with our id, and that one refuses to start.
             std::fprintf(stderr, "facescan-server: %s\n", s.message().c_str());
@@ -612,6 +613,8 @@ void Server::statusLoop() {
         for (const auto& [id, r] : refused) publishRefused(id, r.detail);
         all.clear();  // retireFinished frees the sessions it retires
         retireFinished(final_sent);
+        returnHeldMemory(now);
+        logMemory(now);
     }
 }
 

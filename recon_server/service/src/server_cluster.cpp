@@ -307,6 +307,8 @@ void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
                     retireOwned(o, /*dispose_claim=*/true);
                 }
             }
+        } else if (beaten && holdsFullerSession(*o, *view)) {
+            claimFullerSession(*o, view->data);
         } else if (beaten) {
             // A stronger claim: a takeover that happened while this server could not be seen (split brain), or
             // a claim made at the same moment from another view. The other one continues; this one stops.
@@ -362,7 +364,7 @@ Status Server::activate(OwnedSession& o) {
     }
     o.restore_from.reset();  // the state lives in the session now
     std::fprintf(stderr, "facescan-server: owns session %s (epoch %u%s, %.0f ms after the claim)\n", o.id.c_str(),
-                 o.epoch, resumed.c_str(), static_cast<double>(steadyNowNs() - o.claimed_ns) * 1e-6);
+                 o.epoch.load(), resumed.c_str(), static_cast<double>(steadyNowNs() - o.claimed_ns) * 1e-6);
     return Status::ok();
 }
 
@@ -459,6 +461,7 @@ void Server::retireFrameReader(std::unique_ptr<wire::Reader<facescan_wire_RgbdFr
     // another lingering reader that it was to drain would fill, and that deletion would never end (a soak's
     // retiring thread hung so).
     lingering_frames_.push_back({std::move(frames), condition});
+    lingering_count_ = static_cast<int>(lingering_frames_.size());
 }
 
 void Server::drainLingering() {
@@ -475,12 +478,14 @@ void Server::drainLingering() {
             });
         it = lingering_frames_.erase(it);
     }
+    lingering_count_ = static_cast<int>(lingering_frames_.size());
 }
 
 void Server::endLingering() {
     // On shutdown: nothing is left to drain them, and the process is ending. Each is drained once more first.
     for (LingeringReader& l : lingering_frames_) (void)drainedAndUnwritten(l.reader->handle());
     lingering_frames_.clear();
+    lingering_count_ = 0;
 }
 
 void Server::requestReplays() {

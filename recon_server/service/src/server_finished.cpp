@@ -163,6 +163,50 @@ void Server::claimFullerResult(const std::string& session_id, const wire::Sessio
                  record->dir.c_str(), data.epoch);
 }
 
+bool Server::holdsFullerSession(const OwnedSession& o, const OwnerView& view) {
+    // Two claims at one epoch: the ownership strength breaks the tie (the epoch, then a hash of server and session),
+    // not what each holds. A server whose view missed this one's claim (cut off from it when the scan was placed,
+    // or its view of the claims lagging after a cut) placed the scan too, from the first frame; when the cut heals,
+    // its claim may win the tie although this server has meanwhile confirmed frames that the agent then dropped.
+    // Yielding would lose them for good: the winner starts before them, and nobody can send them any more (a
+    // recording in the chaos soak lost 71 frames so).
+    const wire::SessionOwnerData& d = view.data;
+    if (d.owner_id == params_.server_id || d.epoch != o.epoch || d.state == wire::OwnerState::kFinished ||
+        d.state == wire::OwnerState::kReleased) {
+        return false;
+    }
+    if (o.phase != OwnedSession::Phase::kActive || !o.session || o.session->finished() || !o.claim) return false;
+    const uint32_t confirmed_here = o.claim->record().confirmed_seq;
+    // After a pause this server's own view is what is in doubt: it yields as before.
+    return confirmed_here > std::max(d.confirmed_seq, d.resume_seq) && viewFresh() && ownSessionsFree();
+}
+
+void Server::claimFullerSession(OwnedSession& o, const wire::SessionOwnerData& winner) {
+    const uint32_t epoch = o.epoch + 1;
+    const uint32_t confirmed_here = o.claim->record().confirmed_seq;
+    const uint32_t resume_seq = o.session->nextSeq();
+    auto old = cluster_->raise(*o.claim, epoch, resume_seq);
+    if (!old.isOk()) {
+        sayOnce("session " + o.id + ": cannot raise its claim above server '" + winner.owner_id +
+                "' (which holds fewer of its frames): " + old.status().toString());
+        return;
+    }
+    o.epoch = epoch;
+    o.session->setOwnership(params_.server_id, epoch);
+    retirer_->retire(
+        [writer = std::make_shared<wire::Writer<facescan_wire_SessionOwner>>(std::move(*old)), this]() mutable {
+            retirer_->note("deleting a claim's writer of an earlier epoch");
+            writer.reset();
+        });
+    std::fprintf(
+        stderr,
+        "facescan-server: session %s: server '%s' claimed it too at epoch %u, with frames confirmed up to %u "
+        "only; this server confirmed them up to %u, and its agent may have dropped those: claiming it again at "
+        "epoch %u and going on from frame %u (the other server gives it up)\n",
+        o.id.c_str(), winner.owner_id.c_str(), winner.epoch, std::max(winner.confirmed_seq, winner.resume_seq),
+        confirmed_here, epoch, resume_seq);
+}
+
 void Server::removeResultFiles(const std::string& session_id, const std::filesystem::path& dir,
                                const std::string& why) {
     if (dir.empty()) return;

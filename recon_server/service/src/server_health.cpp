@@ -111,6 +111,23 @@ void Server::assertProgress(int64_t now_ns) {
     }
 }
 
+void Server::refreshClaims(int64_t now_ns) {
+    // Each claim this server holds is written again a few times a lease, whether it changed or not. Asserting the
+    // participant (above) should keep them alive at every reader, but it did not: a server restarted during the
+    // chaos soak saw an owner's quiet claims (a scan finishing, a recording waiting) lapse 58 ms after that owner's
+    // last announcement, and took a live scan over from its old copy while the owner was writing the whole one.
+    // A sample renews its own writer's liveliness at every reader that receives it. Written through the claim, so
+    // a server whose work has stopped still lets its claims lapse (Claim's `progressing`); not while its view is
+    // stale after a pause, when it must not look surer of its sessions than it is.
+    if (now_ns - claims_refreshed_ns_ < lease_ns_ / 3 || !viewFresh()) return;
+    claims_refreshed_ns_ = now_ns;
+    for (const auto& o : ownedSessions()) {
+        const OwnedSession::Phase phase = o->phase;
+        if (!o->claim || phase == OwnedSession::Phase::kFinished || phase == OwnedSession::Phase::kGivenUp) continue;
+        o->claim->update([](wire::SessionOwnerData&) {}, /*force=*/true);
+    }
+}
+
 void Server::failpoint() {
     std::error_code ec;
     if (!std::filesystem::exists(stall_file_, ec)) return;

@@ -68,6 +68,11 @@ class Claim {
         if (force || changed(before)) publishLocked();
     }
     void release();  // state RELEASED, then disposed: nobody owns the session any more
+    // The claim at a later epoch (Cluster::raise): `writer`, of that epoch's strength, publishes the record from now
+    // on, resuming at `resume_seq`. Returns the old writer, to be deleted on the retiring thread: withdrawn, not
+    // disposed, since the new writer holds the instance.
+    wire::Writer<facescan_wire_SessionOwner> raise(wire::Writer<facescan_wire_SessionOwner> writer, uint32_t epoch,
+                                                   uint32_t resume_seq);
 
  private:
     bool changed(const wire::SessionOwnerData& before) const;
@@ -141,11 +146,15 @@ class Cluster {
     // The server that answers commands for sessions nobody owns (unknown, refused): the lowest live id.
     std::string responder() const;
 
+    // Raises a claim of this server to `epoch` (Claim::raise), through a new writer with that epoch's strength.
+    StatusOr<wire::Writer<facescan_wire_SessionOwner>> raise(Claim& claim, uint32_t epoch, uint32_t resume_seq);
     // Writes a claim on a session at the record's epoch (a new DDS writer with that strength).
     StatusOr<std::unique_ptr<Claim>> claim(const wire::SessionOwnerData& initial);
 
  private:
     explicit Cluster(Options options);
+    // A claim's DDS writer at `epoch`'s ownership strength (wire::claimStrength).
+    StatusOr<wire::Writer<facescan_wire_SessionOwner>> claimWriter(uint32_t epoch, const std::string& session_id) const;
     Status takeAnnouncements();
     void takeOwners();
     // Another live server with our id that has the older right to it: the refusal, else ok.

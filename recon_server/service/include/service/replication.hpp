@@ -59,6 +59,7 @@ class Replicator {
     // The standby's full copy of a session (nullopt when this server holds none).
     std::optional<wire::ReplicaData> standbyCopy(const std::string& session_id) const;
     int standbyCount() const;
+    size_t standbyBytes() const;  // what the copies' volumes and keyframes hold
     // Steady clock of the last replica received from `server_id` (0: none).
     int64_t lastHeardFrom(const std::string& server_id) const;
     ReplicationStats stats() const;

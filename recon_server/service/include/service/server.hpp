@@ -35,6 +35,7 @@
 #include "service/erasure.hpp"
 #include "service/erasure_service.hpp"
 #include "service/finished_sessions.hpp"
+#include "service/live_count.hpp"
 #include "service/retirer.hpp"
 #include "service/server_params.hpp"
 #include "service/session.hpp"
@@ -50,10 +51,13 @@ class Replicator;
 // A session this server claimed: its claim on SessionOwner and, once the claim settled, the session and the
 // reader of its frames. Shared with the replication thread.
 struct OwnedSession {
+    LiveCount<OwnedSession> live;  // first, so last destroyed (the memory line counts these)
     // kGivenUp: yielded or released; its endpoints are on their way to the retiring thread (retirer.hpp).
     enum class Phase { kClaiming, kReady, kActive, kFinished, kGivenUp };
     std::string id;
-    uint32_t epoch = 1;
+    // Raised while the session runs when another server's claim won the tie at this epoch with less of the scan
+    // (Server::claimFullerSession); the replication thread reads it.
+    std::atomic<uint32_t> epoch{1};
     std::shared_ptr<Claim> claim;  // shared with its FinishedSession record once retired
     std::atomic<Phase> phase{Phase::kClaiming};
     int64_t claimed_ns = 0;  // steady clock
@@ -158,6 +162,11 @@ class Server {
     // it claims the scan again above that epoch, and the other server's partial result then goes.
     bool holdsFullerResult(const OwnerView& view, const SessionStats& mine) const;
     void claimFullerResult(const std::string& session_id, const wire::SessionOwnerData& winner);
+    // The same while the session runs: another server's claim won the tie at this session's epoch, holding fewer
+    // confirmed frames than this server's, which its agent may have dropped. This server raises its claim to the
+    // next epoch and goes on; the other one yields to it.
+    bool holdsFullerSession(const OwnedSession& o, const OwnerView& view);
+    void claimFullerSession(OwnedSession& o, const wire::SessionOwnerData& winner);
     // The files of a copy in the data dir (a replica, and what an interrupted finish wrote beside it), not folders.
     void removeCopy(const std::filesystem::path& dir);
     void removeResultFiles(const std::string& session_id, const std::filesystem::path& dir, const std::string& why);
@@ -212,7 +221,18 @@ class Server {
     // the retiring thread; never deleted while a writer can fill it (service/lingering_reader.hpp).
     void retireFrameReader(std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames, dds_entity_t condition);
     void drainLingering();
-    void endLingering();  // shutdown
+    // Status thread, server_memory.cpp: once a minute, when it changed, what this server holds in memory and why
+    // (resident, heap in use and held free, sessions open and still in memory, standby copies, finished records,
+    // lingering readers): memory that grows shows what holds it.
+    void logMemory(int64_t now_ns);
+    int64_t memory_logged_ns_ = 0;  // status thread: last checked
+    // Status thread, server_memory.cpp: freed memory that stays resident goes back to the system (malloc_trim) once
+    // it exceeds a bound; checked every 2 s when idle, every 30 s under load.
+    void returnHeldMemory(int64_t now_ns);
+    int64_t trim_checked_ns_ = 0;
+    double baseline_outside_heap_mib_ = -1;
+    std::string memory_said_;  // status thread: the counts last said
+    void endLingering();       // shutdown
     // server_health.cpp: the cluster view. A server that was frozen (SIGSTOP, a paused VM) for half a lease or more
     // (its watchdog's thread notices it: noticePause) saw the others' leases lapse only in its own eyes: for two leases
     // after it wakes, it re-observes the cluster and takes nothing over, places nothing, and holds its own sessions'
@@ -224,7 +244,9 @@ class Server {
     bool sessionFree(bool recording) const;  // a session may: a live scan is not held (server_health.cpp)
     // Status thread: a session without frames for idle_timeout_s is finished, but a recording whose agent lives.
     void finishIdle(OwnedSession& o);
-    void assertProgress(int64_t now_ns);    // the announcement's and claims' liveliness (wire::withProgressLiveliness)
+    void assertProgress(int64_t now_ns);  // the announcement's and claims' liveliness (wire::withProgressLiveliness)
+    void refreshClaims(int64_t now_ns);   // intake thread: each claim written again a few times a lease
+    int64_t claims_refreshed_ns_ = 0;
     void onStall(const std::string& what);  // the watchdog found a loop stuck: say so and exit non-zero
     // Fault injection for the cluster tests (failpoint.hpp): with FACESCAN_FAILPOINT=intake-stall-when-file:PATH
     // the intake thread stops for good once PATH exists, a real stall of a real thread that the watchdog and the
@@ -298,6 +320,7 @@ class Server {
         dds_entity_t condition = 0;  // the session's, still on the intake's waitset: data wakes the intake
     };
     std::vector<LingeringReader> lingering_frames_;             // the intake thread only
+    std::atomic<int> lingering_count_{0};                       // its size, for the memory line
     std::map<std::string, int64_t> owner_gone_since_ns_;        // takeOverOrphans: when its owner was first seen gone
     std::map<std::string, int64_t> owner_back_since_ns_;        // ownerHeardAgain: when its gone owner was heard again
     std::map<std::string, int64_t> orphaned_since_ns_;          // takeOverFromFirstFrame: when its owner was seen gone

@@ -22,6 +22,7 @@
 #include "recon/reconstructor.hpp"
 #include "recon/scan_step.hpp"
 #include "service/frame_load.hpp"
+#include "service/live_count.hpp"
 #include "service/server_params.hpp"
 #include "service/texture_keyframes.hpp"
 #include "service/watchdog.hpp"
@@ -221,7 +222,7 @@ class Session {
     // Once finished: the folder its files went to (empty when they could not be written).
     std::filesystem::path filesDir() const;
     // Sessions alive in this process: a finished one must not stay (the server's memory would grow with its scans).
-    static int liveCount() { return Live::count.load(); }
+    static int liveCount() { return LiveCount<Session>::alive(); }
 
  private:
     struct Control {
@@ -261,13 +262,7 @@ class Session {
     std::string frameTimingsTsv() const;
 
     // First member, so last destroyed: a session counts as live until all of its memory is freed.
-    struct Live {
-        static inline std::atomic<int> count{0};
-        Live() { ++count; }
-        ~Live() { --count; }
-        Live(const Live&) = delete;
-        Live& operator=(const Live&) = delete;
-    } live_;
+    LiveCount<Session> live_;
     const std::string id_;
     const ServerParams params_;
     std::function<void()> space_freed_;
