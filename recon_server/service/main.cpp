@@ -1,5 +1,6 @@
 // facescan-server: the thin main around service::Server (recon_server/service). Parses and validates the
 // parameters, runs until SIGINT/SIGTERM, then finishes every open session to disk and exits 0.
+#include <malloc.h>
 #include <signal.h>
 
 #include <cstdio>
@@ -15,6 +16,13 @@
 
 int main(int argc, char** argv) {
     using namespace facescan;
+    // One malloc arena for the process, before any thread allocates. glibc gives threads that allocate at once
+    // arenas of their own (up to 8 a core), and malloc_trim never returns the free top of those, only the main
+    // arena's: each session's engine, worker and copies come and go in threads of their own, so an idle server kept
+    // 50-250 MB of freed memory spread over up to 16 arenas, more after each burst of scans (the chaos soak's idle
+    // checkpoints). Six recordings, three at a time, then idle: 87 MB resident against 133-184 MB, in the same
+    // wall and CPU time (docs/benchmarks.md, Memory).
+    (void)mallopt(M_ARENA_MAX, 1);
     const std::vector<std::string> args(argv + 1, argv + argc);
     if (!args.empty() && args[0] == "--version") {
         printVersion("facescan-server");

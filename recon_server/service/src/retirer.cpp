@@ -42,10 +42,10 @@ void Retirer::loop() {
         }
         job();
         job = nullptr;  // what it captured ends here too, still timed by the beat
-        // Once the queue is drained, what the jobs freed goes back to the system. A session's buffers were
-        // allocated by its worker, in that thread's malloc arena; freed, they stay resident until trimmed, and
-        // the next session's worker may get another arena: without the trim an idle server kept hundreds of
-        // megabytes from scans given up, released or finished (the chaos soak's idle checkpoints).
+        // Once the queue is drained, what the jobs freed goes back to the system: freed, a session's buffers stay
+        // resident until trimmed (facescan-server keeps one malloc arena, so that the trim reaches all of it), and
+        // without the trim an idle server kept hundreds of megabytes from scans given up, released or finished
+        // (the chaos soak's idle checkpoints).
         bool drained = false;
         {
             std::lock_guard lk(mutex_);
