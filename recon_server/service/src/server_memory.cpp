@@ -61,8 +61,8 @@ void Server::logMemory(int64_t now_ns) {
     std::snprintf(counts, sizeof counts,
                   "%d sessions open, %d in memory (%d records); %d standby copies (%.0f MB); %zu finished listed; "
                   "%d frame readers lingering",
-                  openSessions(), Session::liveCount(), LiveCount<OwnedSession>::alive(),
-                  replicator_->standbyCount(), standby_mib, finished_.size(), lingering_count_.load());
+                  openSessions(), Session::liveCount(), LiveCount<OwnedSession>::alive(), replicator_->standbyCount(),
+                  standby_mib, finished_.size(), lingering_count_.load());
     // Said again when the holdings changed, or when the heap moved by 8 MB or more: a steady server stays quiet.
     const std::string said = std::string(counts) + " " + std::to_string(static_cast<long>(in_use_mib / 8));
     if (said == memory_said_) return;
