@@ -7,13 +7,15 @@
 # Target: the last within 10 % of the tenth.
 #   usage: tests/bench/memory.sh [SCANS (default 100)] [FRAMES (default 90)]
 #   env:   BUILD_DIR (default ./build: another build's binaries give its figures), PRESET (default face),
-#          SERVER_ARGS (more server flags, e.g. "--keep-finished 4")
+#          SERVER_ARGS (more server flags, e.g. "--keep-finished 4"), AT_ONCE (default 1: each of the SCANS rounds
+#          runs this many recordings at once, each in threads of its own on the server)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
 scans=${1:-100}
 frames=${2:-90}
 preset=${PRESET:-face}
+at_once=${AT_ONCE:-1}
 BUILD_DIR=${BUILD_DIR:-$root/build}
 server_bin=$BUILD_DIR/recon_server/service/facescan-server
 agent_bin=$BUILD_DIR/capture_agent/core/facescan-agent
@@ -39,22 +41,34 @@ trap cleanup EXIT
 spid=$!
 sleep 1.5
 rss_mb() { awk '/^VmRSS:/ {printf "%.1f", $2 / 1024}' "/proc/$spid/status"; }
-echo "memory.sh: $scans scans of $frames frames (--preset $preset), $BUILD_DIR, domain $domain, load $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "memory.sh: $scans rounds of $at_once scan(s) of $frames frames (--preset $preset), $BUILD_DIR, domain $domain, load $(cut -d' ' -f1-3 /proc/loadavg)"
 rss_10=""
 start_s=$(date +%s)
 for i in $(seq 1 "$scans"); do
-    session="mem-$i"
-    if ! "$agent_bin" "${dds[@]}" --session "$session" --rate max --wait-for-server 30 \
-        --source "synthetic:frames=$frames,subject=builtin,seed=$i" >"$work/agent.log" 2>&1; then
-        echo "memory.sh: the agent of $session failed:" >&2
-        tail -5 "$work/agent.log" >&2
-        # The work folder goes on exit: the server's side of it is printed here.
-        echo "memory.sh: the server's log ends:" >&2
-        grep -v "replication:" "$work/server.log" | tail -15 >&2
-        exit 1
-    fi
-    for _ in $(seq 1 100); do [ -f "$work/data/$session/summary.json" ] && break; sleep 0.1; done
-    [ -f "$work/data/$session/summary.json" ] || { echo "memory.sh: $session was not written (log: $work/server.log)" >&2; exit 1; }
+    pids=()
+    for j in $(seq 1 "$at_once"); do
+        session="mem-$i" seed=$i
+        [ "$at_once" -gt 1 ] && session="mem-$i-$j" seed=$i$j
+        "$agent_bin" "${dds[@]}" --session "$session" --rate max --wait-for-server 30 \
+            --source "synthetic:frames=$frames,subject=builtin,seed=$seed" >"$work/agent-$j.log" 2>&1 &
+        pids+=($!)
+    done
+    for j in $(seq 1 "$at_once"); do
+        if ! wait "${pids[$((j - 1))]}"; then
+            echo "memory.sh: an agent of scan $i failed:" >&2
+            tail -5 "$work/agent-$j.log" >&2
+            # The work folder goes on exit: the server's side of it is printed here.
+            echo "memory.sh: the server's log ends:" >&2
+            grep -v "replication:" "$work/server.log" | tail -15 >&2
+            exit 1
+        fi
+    done
+    for j in $(seq 1 "$at_once"); do
+        session="mem-$i"
+        [ "$at_once" -gt 1 ] && session="mem-$i-$j"
+        for _ in $(seq 1 100); do [ -f "$work/data/$session/summary.json" ] && break; sleep 0.1; done
+        [ -f "$work/data/$session/summary.json" ] || { echo "memory.sh: $session was not written (log: $work/server.log)" >&2; exit 1; }
+    done
     sleep 2  # the server retires a finished scan within a few status ticks (2 Hz)
     rss=$(rss_mb)
     [ "$i" -eq 10 ] && rss_10=$rss

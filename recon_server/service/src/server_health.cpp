@@ -117,9 +117,11 @@ void Server::refreshClaims(int64_t now_ns) {
     // chaos soak saw an owner's quiet claims (a scan finishing, a recording waiting) lapse 58 ms after that owner's
     // last announcement, and took a live scan over from its old copy while the owner was writing the whole one.
     // A sample renews its own writer's liveliness at every reader that receives it. Written through the claim, so
-    // a server whose work has stopped still lets its claims lapse (Claim's `progressing`); not while its view is
-    // stale after a pause, when it must not look surer of its sessions than it is.
-    if (now_ns - claims_refreshed_ns_ < lease_ns_ / 3 || !viewFresh()) return;
+    // a server whose work has stopped still lets its claims lapse (Claim's `progressing`). Also while its view is
+    // stale after a pause: the claims are what tells the others it is back, and a claim at its epoch cannot win
+    // over a takeover made meanwhile (a higher epoch). Held back for the two leases of re-observing, they lapsed
+    // after a 2.7 s freeze, and two servers took a live scan that the owner was finishing over from old copies.
+    if (now_ns - claims_refreshed_ns_ < lease_ns_ / 3) return;
     claims_refreshed_ns_ = now_ns;
     for (const auto& o : ownedSessions()) {
         const OwnedSession::Phase phase = o->phase;
