@@ -78,7 +78,12 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                               ? !candidate->second.camera.every_frame
                               : (standby && !standby->camera.every_frame) ||
                                     (disk != resumable_.end() && !disk->second.camera.every_frame);
-        if (!known_dead && !live && ownerHeardAgain(id, view.data.owner_id, gone_since_ns)) continue;
+        // A live scan whose agent is gone is being finished by its owner: held like a recording, or a server whose
+        // view of that owner's claim lapsed (restarted, or back from a cut) replaces the owner's whole result with
+        // one from its older copy (three splits in a 30-minute soak, each with the owner heard 87-302 ms before).
+        // While its agent streams, a live scan is not held: the wait would stall it.
+        const bool hold_if_heard = !live || !agentLives(id);
+        if (!known_dead && hold_if_heard && ownerHeardAgain(id, view.data.owner_id, gone_since_ns)) continue;
         // The agent's own account counts as much as the claim's: it may have followed a newer owner than this
         // view shows, or dropped frames that an owner confirmed after the last claim this server saw.
         wire::SessionOwnerData last = view.data;
@@ -327,9 +332,9 @@ bool Server::ownerHeardAgain(const std::string& session_id, const std::string& o
     // would be taken from a live owner on the strength of the owner's own sign of life: in a 30-minute chaos soak a
     // standby took two recordings over 1 ms after it heard their owner, woken from a 9 s freeze, and both servers
     // finished them. So the takeover waits a lease for the claim to come back. An owner heard for that long whose
-    // claim stays lapsed cannot write it: taken over as before. (Live scans are not held: their old owner gives
-    // up without writing anything, so a takeover costs at most the frames of the gap, and the wait would stall
-    // them.)
+    // claim stays lapsed cannot write it: taken over as before. (Live scans whose agent streams are not held:
+    // their old owner gives up without writing anything, so a takeover costs at most the frames of the gap, and
+    // the wait would stall them.)
     const int64_t now = steadyNowNs();
     if (cluster_->lastHeard(owner_id) <= gone_since_ns) {
         owner_back_since_ns_.erase(session_id);
