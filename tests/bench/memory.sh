@@ -8,7 +8,8 @@
 #   usage: tests/bench/memory.sh [SCANS (default 100)] [FRAMES (default 90)]
 #   env:   BUILD_DIR (default ./build: another build's binaries give its figures), PRESET (default face),
 #          SERVER_ARGS (more server flags, e.g. "--keep-finished 4"), AT_ONCE (default 1: each of the SCANS rounds
-#          runs this many recordings at once, each in threads of its own on the server)
+#          runs this many recordings at once, each in threads of its own on the server), IDLE_S (default 0: after
+#          the last round, the server stays idle this long, then its resident memory and its last memory line)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
@@ -76,6 +77,11 @@ for i in $(seq 1 "$scans"); do
         echo "  after scan $i: resident $rss MB ($(($(date +%s) - start_s)) s)"
     fi
 done
+if [ "${IDLE_S:-0}" -gt 0 ]; then
+    sleep "$IDLE_S"
+    echo "  idle $IDLE_S s after the last scan: resident $(rss_mb) MB"
+    grep "memory:" "$work/server.log" | tail -1 | sed 's/^/  /'
+fi
 if [ -n "$rss_10" ]; then
     awk -v a="$rss_10" -v b="$rss" -v n="$scans" \
         'BEGIN {printf "memory.sh: after scan %d %.1f MB against %.1f MB after scan 10: %+.1f %% (target within 10 %%)\n", n, b, a, (b / a - 1) * 100}'
