@@ -279,19 +279,6 @@ void Server::settleClaims(const std::map<std::string, OwnerView>& owners) {
         const bool beaten =
             view && view->alive && !ours &&
             (view->data.epoch > o->epoch || (view->data.epoch == o->epoch && view->data.owner_id != params_.server_id));
-        // A weaker claim shown instead of this one: written again (below), so that readers see this server's.
-        const bool weaker_shown = view && view->alive && view->data.owner_id != params_.server_id &&
-                                  view->data.epoch < o->epoch && o->phase != OwnedSession::Phase::kFinished;
-        // Our own claim, current, that reads as not alive: a weaker writer of the same instance (an old owner back
-        // from a partition, which then withdraws) can leave readers with no live writer although ours still
-        // writes. The agent would wait for a standby, and this server would never settle the claim. Writing it
-        // again makes the instance alive for every reader; a stronger claim still wins on ownership strength.
-        const bool unseen = view && !view->alive && !view->disposed && view->data.owner_id == params_.server_id &&
-                            view->data.epoch == o->epoch && o->phase != OwnedSession::Phase::kFinished;
-        if ((unseen || weaker_shown) && viewFresh() && steadyNowNs() - o->last_reassert_ns >= lease_ns_ / 2) {
-            o->last_reassert_ns = steadyNowNs();
-            if (o->claim) o->claim->update([](wire::SessionOwnerData&) {}, /*force=*/true);
-        }
         if (o->phase == OwnedSession::Phase::kClaiming) {
             if (beaten) {
                 yield(o->id,

@@ -163,7 +163,7 @@ void Server::claimFullerResult(const std::string& session_id, const wire::Sessio
                  record->dir.c_str(), data.epoch);
 }
 
-bool Server::holdsFullerSession(const OwnedSession& o, const OwnerView& view) {
+bool Server::holdsFullerSession(const OwnedSession& o, const OwnerView& view) const {
     // Two claims at one epoch: the ownership strength breaks the tie (the epoch, then a hash of server and session),
     // not what each holds. A server whose view missed this one's claim (cut off from it when the scan was placed,
     // or its view of the claims lagging after a cut) placed the scan too, from the first frame; when the cut heals,

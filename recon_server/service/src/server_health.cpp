@@ -121,6 +121,10 @@ void Server::refreshClaims(int64_t now_ns) {
     // stale after a pause: the claims are what tells the others it is back, and a claim at its epoch cannot win
     // over a takeover made meanwhile (a higher epoch). Held back for the two leases of re-observing, they lapsed
     // after a 2.7 s freeze, and two servers took a live scan that the owner was finishing over from old copies.
+    // The same write revives a claim of ours that reads as not alive while we hold it: a weaker writer of the same
+    // instance (an old owner back from a partition, which then withdraws) can leave readers with no live writer
+    // although ours still writes, and the agent would wait for a standby. It also covers a weaker claim shown
+    // instead of ours while ours has not reached a reader yet. A stronger claim still wins on ownership strength.
     if (now_ns - claims_refreshed_ns_ < lease_ns_ / 3) return;
     claims_refreshed_ns_ = now_ns;
     for (const auto& o : ownedSessions()) {

@@ -75,7 +75,6 @@ struct OwnedSession {
     std::atomic<bool> agent_alive{false};  // its agent's CameraInfo writer is alive (the intake thread's view)
     bool idle_said = false;                // status thread: "waiting for the agent" said once
     int64_t last_replay_request_ns = 0;
-    int64_t last_reassert_ns = 0;             // the claim last written again because it looked gone (settleClaims)
     dds_instance_handle_t camera_writer = 0;  // the CameraInfo writer (flood control)
     // The session's engine, built on a thread of its own from the claim on (Server::buildEngine): activate() waits
     // for it. Last, so that its destructor, which waits for the build, runs before camera and restore_from go.
@@ -165,7 +164,7 @@ class Server {
     // The same while the session runs: another server's claim won the tie at this session's epoch, holding fewer
     // confirmed frames than this server's, which its agent may have dropped. This server raises its claim to the
     // next epoch and goes on; the other one yields to it.
-    bool holdsFullerSession(const OwnedSession& o, const OwnerView& view);
+    bool holdsFullerSession(const OwnedSession& o, const OwnerView& view) const;
     void claimFullerSession(OwnedSession& o, const wire::SessionOwnerData& winner);
     // The files of a copy in the data dir (a replica, and what an interrupted finish wrote beside it), not folders.
     void removeCopy(const std::filesystem::path& dir);
@@ -221,6 +220,7 @@ class Server {
     // the retiring thread; never deleted while a writer can fill it (service/lingering_reader.hpp).
     void retireFrameReader(std::unique_ptr<wire::Reader<facescan_wire_RgbdFrame>> frames, dds_entity_t condition);
     void drainLingering();
+    void endLingering();  // shutdown
     // Status thread, server_memory.cpp: once a minute, when it changed, what this server holds in memory and why
     // (resident, heap in use and held free, sessions open and still in memory, standby copies, finished records,
     // lingering readers): memory that grows shows what holds it.
@@ -232,7 +232,6 @@ class Server {
     int64_t trim_checked_ns_ = 0;
     double baseline_outside_heap_mib_ = -1;
     std::string memory_said_;  // status thread: the counts last said
-    void endLingering();       // shutdown
     // server_health.cpp: the cluster view. A server that was frozen (SIGSTOP, a paused VM) for half a lease or more
     // (its watchdog's thread notices it: noticePause) saw the others' leases lapse only in its own eyes: for two leases
     // after it wakes, it re-observes the cluster and takes nothing over, places nothing, and holds its own sessions'
