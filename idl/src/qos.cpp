@@ -46,6 +46,10 @@ Qos withProgressLiveliness(Qos q, double lease_s) {
     dds_qset_liveliness(q.get(), DDS_LIVELINESS_MANUAL_BY_PARTICIPANT, static_cast<dds_duration_t>(lease_s * 1e9));
     return q;
 }
+Qos withClaimLiveliness(Qos q, double lease_s) {
+    dds_qset_liveliness(q.get(), DDS_LIVELINESS_MANUAL_BY_TOPIC, static_cast<dds_duration_t>(lease_s * 1e9));
+    return q;
+}
 Qos replicaQos() {
     Qos q = reliable(DDS_DURABILITY_VOLATILE, DDS_HISTORY_KEEP_ALL, 0);
     // A few replicas in flight per standby: a slow standby blocks the owner's replication thread (never its

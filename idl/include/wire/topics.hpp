@@ -23,11 +23,19 @@ Qos replicaAckQos();      // reliable, volatile, keep-last 4
 Qos erasureQos();
 // A claim writer's QoS: sessionOwnerQos with this ownership strength (claimStrength).
 Qos claimWriterQos(int32_t strength);
-// A server's announcement and claims stay alive only while the server makes progress: MANUAL_BY_PARTICIPANT
-// liveliness with this lease, asserted (dds_assert_liveliness) by the loop that does the server's work. DDS keeps
-// automatic liveliness up as long as its own threads run, so a server whose work had stalled kept its sessions;
-// with this, a stalled server loses its claims within the lease, exactly as a dead one does.
+// A server's announcement and claims stay alive only while the server makes progress. DDS keeps automatic
+// liveliness up as long as its own threads run, so a server whose work had stalled kept its sessions; with these,
+// a stalled server loses its claims within the lease, exactly as a dead one does.
+// The announcement: MANUAL_BY_PARTICIPANT liveliness with this lease, asserted (dds_assert_liveliness on the
+// participant) by the loop that does the server's work.
 Qos withProgressLiveliness(Qos q, double lease_s);
+// A claim: MANUAL_BY_TOPIC liveliness with this lease, renewed by writing the claim (Server::refreshClaims), so each
+// claim lives by its own writes. Not MANUAL_BY_PARTICIPANT: Cyclone tracks those writers of a remote participant by
+// the lease of one of them, and when that writer is deleted (a claim withdrawn when its scan finished, or raised to
+// a new writer) the lease that replaces it expires at once, so every other claim of that server reads not alive
+// at the other servers until its next write, and they took live scans over from an owner that was finishing them
+// (tests/wire/claim_liveliness_test.cpp). The server's one announcement writer is never deleted while it runs.
+Qos withClaimLiveliness(Qos q, double lease_s);
 
 // Frames of a recording must all arrive: keep-all with a bounded history, so a slow server blocks the writer
 // (reliable back-pressure) instead of losing frames. Live cameras use keep-last: old frames are worth nothing.

@@ -369,7 +369,7 @@ std::string Cluster::responder() const {
 
 StatusOr<wire::Writer<facescan_wire_SessionOwner>> Cluster::claimWriter(uint32_t epoch,
                                                                         const std::string& session_id) const {
-    const wire::Qos qos = wire::withProgressLiveliness(
+    const wire::Qos qos = wire::withClaimLiveliness(
         wire::claimWriterQos(wire::claimStrength(epoch, options_.server_id, session_id)), options_.lease_s);
     return wire::Writer<facescan_wire_SessionOwner>::create(*owner_topic_, &qos);
 }

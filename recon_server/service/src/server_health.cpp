@@ -102,8 +102,9 @@ void Server::finishIdle(OwnedSession& o) {
 }
 
 void Server::assertProgress(int64_t now_ns) {
-    // A few times a lease is enough for the readers' lease, and cheap (one small message per peer). Often enough
-    // that a server cut off sees the agents' leases lapse soon after its peers' claims (Server::witnessed).
+    // The announcement's liveliness (the claims live by their own writes, Server::refreshClaims). A few times a
+    // lease is enough for the readers' lease, and cheap (one small message per peer). Often enough that a server cut
+    // off sees the agents' leases lapse soon after its peers' claims (Server::witnessed).
     if (now_ns - last_progress_ns_.load() < lease_ns_ / 12) return;
     last_progress_ns_ = now_ns;
     if (const dds_return_t rc = dds_assert_liveliness(participant_->handle()); rc < 0) {
@@ -112,20 +113,19 @@ void Server::assertProgress(int64_t now_ns) {
 }
 
 void Server::refreshClaims(int64_t now_ns) {
-    // Each claim this server holds is written again a few times a lease, whether it changed or not. Asserting the
-    // participant (above) should keep them alive at every reader, but it did not: a server restarted during the
-    // chaos soak saw an owner's quiet claims (a scan finishing, a recording waiting) lapse 58 ms after that owner's
-    // last announcement, and took a live scan over from its old copy while the owner was writing the whole one.
-    // A sample renews its own writer's liveliness at every reader that receives it. Written through the claim, so
-    // a server whose work has stopped still lets its claims lapse (Claim's `progressing`). Also while its view is
-    // stale after a pause: the claims are what tells the others it is back, and a claim at its epoch cannot win
-    // over a takeover made meanwhile (a higher epoch). Held back for the two leases of re-observing, they lapsed
-    // after a 2.7 s freeze, and two servers took a live scan that the owner was finishing over from old copies.
-    // The same write revives a claim of ours that reads as not alive while we hold it: a weaker writer of the same
-    // instance (an old owner back from a partition, which then withdraws) can leave readers with no live writer
-    // although ours still writes, and the agent would wait for a standby. It also covers a weaker claim shown
-    // instead of ours while ours has not reached a reader yet. A stronger claim still wins on ownership strength.
-    if (now_ns - claims_refreshed_ns_ < lease_ns_ / 3) return;
+    // Each claim this server holds is written again a few times a lease, whether it changed or not: a claim lives by
+    // its own writes (MANUAL_BY_TOPIC, wire::withClaimLiveliness), and this is what keeps it alive at every reader.
+    // From the intake thread and through the claim, so a server whose work has stopped lets its claims lapse
+    // (Claim's `progressing`). Also while its view is stale after a pause: the claims are what tells the others it
+    // is back, and a claim at its epoch cannot win over a takeover made meanwhile (a higher epoch). Held back for
+    // the two leases of re-observing, they lapsed after a 2.7 s freeze, and two servers took a live scan that the
+    // owner was finishing over from old copies. The same write revives a claim of ours that reads as not alive while
+    // we hold it: a weaker writer of the same instance (an old owner back from a partition, which then withdraws)
+    // can leave readers with no live writer although ours still writes, and the agent would wait for a standby. It
+    // also covers a weaker claim shown instead of ours while ours has not reached a reader yet. A stronger claim
+    // still wins on ownership strength. Six times a lease: a claim lapses only after the intake thread missed five
+    // writes in a row, on a loaded machine too.
+    if (now_ns - claims_refreshed_ns_ < lease_ns_ / 6) return;
     claims_refreshed_ns_ = now_ns;
     for (const auto& o : ownedSessions()) {
         const OwnedSession::Phase phase = o->phase;

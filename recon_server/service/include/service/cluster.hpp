@@ -52,10 +52,10 @@ struct PeerView {
 // readers see NOT_ALIVE_NO_WRITERS, as if this server had died) unless release() disposed it first.
 class Claim {
  public:
-    // `progressing`, when set, says whether the server's work makes progress: a write asserts the liveliness of every
-    // claim and the announcement of the participant (MANUAL_BY_PARTICIPANT), so a claim's change made by another
-    // thread (replication's confirmed frames, the status's counters) while the intake is stuck waits unpublished
-    // instead of keeping a stuck server's sessions alive.
+    // `progressing`, when set, says whether the server's work makes progress: a write renews the claim's liveliness
+    // (MANUAL_BY_TOPIC, wire::withClaimLiveliness), so a claim's change made by another thread (replication's
+    // confirmed frames, the status's counters) while the intake is stuck waits unpublished instead of keeping a
+    // stuck server's sessions alive.
     Claim(wire::Writer<facescan_wire_SessionOwner> writer, wire::SessionOwnerData record,
           std::function<bool()> progressing = nullptr);
     wire::SessionOwnerData record() const;

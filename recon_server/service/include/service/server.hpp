@@ -243,8 +243,8 @@ class Server {
     bool sessionFree(bool recording) const;  // a session may: a live scan is not held (server_health.cpp)
     // Status thread: a session without frames for idle_timeout_s is finished, but a recording whose agent lives.
     void finishIdle(OwnedSession& o);
-    void assertProgress(int64_t now_ns);  // the announcement's and claims' liveliness (wire::withProgressLiveliness)
-    void refreshClaims(int64_t now_ns);   // intake thread: each claim written again a few times a lease
+    void assertProgress(int64_t now_ns);  // the announcement's liveliness (wire::withProgressLiveliness)
+    void refreshClaims(int64_t now_ns);   // the claims' liveliness: each written again a few times a lease
     int64_t claims_refreshed_ns_ = 0;
     void onStall(const std::string& what);  // the watchdog found a loop stuck: say so and exit non-zero
     // Fault injection for the cluster tests (failpoint.hpp): with FACESCAN_FAILPOINT=intake-stall-when-file:PATH
