@@ -60,7 +60,7 @@ std::vector<cv::Mat> expectedDepth(const std::string& spec) {
 // agent runs with --hold-until: it must announce nothing for a second, until the file is created.
 void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expected, uint32_t salt,
                       const std::vector<std::string>& extra_args = {}, const fs::path& hold_file = {},
-                      std::optional<wire::CameraInfoData>* received = nullptr) {
+                      std::optional<wire::CameraInfoData>* received = nullptr, int ends_wanted = 1) {
     ASSERT_FALSE(expected.empty());
     const uint32_t domain = privateDomain(salt);
     const std::string session = "agent-test-" + std::to_string(salt);
@@ -112,10 +112,10 @@ void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expec
     wire::DepthDecoder decoder;
     std::vector<uint32_t> seqs;
     int mismatches = 0;
-    bool ended = false;
+    int ends = 0;
     std::vector<const facescan_wire_RgbdFrame*> unused;
     const auto deadline = std::chrono::steady_clock::now() + 60s;
-    while (!ended && std::chrono::steady_clock::now() < deadline) {
+    while (ends < ends_wanted && std::chrono::steady_clock::now() < deadline) {
         if (!camera) {
             (void)info_reader->take([&](const facescan_wire_CameraInfo& m, const dds_sample_info_t& i) {
                 if (!i.valid_data) return;
@@ -132,7 +132,7 @@ void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expec
         auto n = frame_reader->take([&](const facescan_wire_RgbdFrame& m, const dds_sample_info_t& i) {
             if (!i.valid_data) return;
             if (m.end_of_stream) {
-                ended = true;
+                ++ends;
                 return;
             }
             seqs.push_back(m.seq);
@@ -152,7 +152,7 @@ void streamAndCompare(const std::string& spec, const std::vector<cv::Mat>& expec
     int status = 0;
     waitpid(agent, &status, 0);
     EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "agent exit status " << status;
-    EXPECT_TRUE(ended) << "no end-of-stream sample";
+    EXPECT_EQ(ends, ends_wanted) << "end-of-stream samples";
     ASSERT_EQ(seqs.size(), expected.size());
     for (size_t i = 0; i < seqs.size(); ++i) EXPECT_EQ(seqs[i], i) << "out of order at " << i;
     EXPECT_EQ(mismatches, 0) << "depth frames not bit-exact";
@@ -167,6 +167,16 @@ TEST(AgentStream, SyntheticSourceArrivesBitExactAndInOrder) {
     const auto expected = expectedDepth(spec);
     ASSERT_EQ(expected.size(), 24u);
     streamAndCompare(spec, expected, 1);
+}
+
+// An owner that lost the end of the stream (it went with an owner that had it confirmed, or its write was cut
+// short by a takeover) must still learn of it: the agent sends it again while it waits for the finish. Here the
+// owner (the test) does not finish after the first one; a second one must come (one a few seconds later).
+TEST(AgentStream, TheEndOfTheStreamIsSentAgainWhileTheOwnerHasNotFinished) {
+    const std::string spec = "synthetic:frames=6,seed=3,subject=builtin";
+    const auto expected = expectedDepth(spec);
+    ASSERT_EQ(expected.size(), 6u);
+    streamAndCompare(spec, expected, 5, {}, {}, nullptr, /*ends_wanted=*/2);
 }
 
 TEST(AgentStream, TumFolderArrivesBitExactAndInOrder) {

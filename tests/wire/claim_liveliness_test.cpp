@@ -50,8 +50,10 @@ SessionOwnerData claimOf(const std::string& session_id) {
     const SessionOwnerData first = claimOf("first");
     const SessionOwnerData second = claimOf("second");
     std::optional<Writer<facescan_wire_SessionOwner>> first_writer;
-    if (auto w = writerFor(first.session_id)) first_writer.emplace(std::move(*w));
-    else _exit(12);
+    if (auto w = writerFor(first.session_id))
+        first_writer.emplace(std::move(*w));
+    else
+        _exit(12);
     if (!first_writer->waitForReaders(1, 20s) || !first_writer->write(toMessage(first)).isOk()) _exit(13);
     std::this_thread::sleep_for(200ms);  // discovered after the first: Cyclone's lease is the first writer's
     auto second_writer = writerFor(second.session_id);
@@ -96,8 +98,10 @@ TEST(ClaimLiveliness, WithdrawingOneClaimLeavesTheServersOtherClaimsAliveElsewhe
             const bool alive = info.instance_state == DDS_IST_ALIVE;
             if (id == "first" && !alive) first_gone = true;
             if (id != "second") return;
-            if (alive) second_alive = true;
-            else if (second_alive) ++second_lapses;
+            if (alive)
+                second_alive = true;
+            else if (second_alive)
+                ++second_lapses;
         });
         ASSERT_TRUE(n.isOk()) << n.status().toString();
     }

@@ -67,6 +67,9 @@ namespace {
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
+// While the agent waits for the finish, the end of the stream goes again this often.
+constexpr auto kEndRepeat = 3s;
+
 std::string seconds(double s) {
     char text[32];
     std::snprintf(text, sizeof(text), "%g", s);
@@ -134,7 +137,7 @@ bool SessionStream::follow(const std::atomic<bool>& stop, Clock::time_point dead
     state_.kept = kept_.size();
     state_.standby = d.standby_id;
     const bool new_owner = d.owner_id != state_.owner || d.epoch != state_.epoch;
-    if (!new_owner && d.replay_request == replay_seen_) {
+    if (!new_owner && d.replay_request == replay_seen_ && !resend_cut_) {
         if (!stalled_) say("");
         return true;
     }
@@ -163,6 +166,9 @@ bool SessionStream::follow(const std::atomic<bool>& stop, Clock::time_point dead
         complete = !sent.isOk() || *sent;
         return sent.isOk() && *sent;
     });
+    // Cut short (a stop, the deadline): the rest goes at the next follow(), or it never would while this owner
+    // lasts (duplicates of what arrived are dropped by the owner).
+    resend_cut_ = !complete;
     return complete;
 }
 
@@ -214,6 +220,10 @@ StatusOr<bool> SessionStream::write(const wire::EncodedFrame& frame, bool end_of
         if (on_wait_) on_wait_();
     }
     if (!end_of_stream) next_seq_ = std::max(next_seq_, frame.seq + 1);
+    if (end_of_stream && !end_) {
+        end_ = frame;
+        end_written_ = Clock::now();
+    }
     if (stalled_) {
         stalled_ = false;
         on_event_("server '" + state_.owner + "' takes frames again");
@@ -274,9 +284,15 @@ bool SessionStream::waitFinished(const std::atomic<bool>& stop, float timeout_s,
             stopped = true;
             deadline = std::min(deadline, deadlineAfter(grace_after_stop_s));
         }
-        (void)follow(stop, deadline);
+        const bool served = follow(stop, deadline);
         if (finished()) return true;
         if (Clock::now() >= deadline) return false;
+        if (served && end_ && Clock::now() - end_written_ >= kEndRepeat) {
+            // The owner may never have had it (it was lost with an owner that had it confirmed, or a write of it
+            // was cut short): once more. An owner that has it already drops the duplicate.
+            end_written_ = Clock::now();
+            (void)write(*end_, /*end_of_stream=*/true, stop, std::min(deadline, Clock::now() + kEndRepeat));
+        }
         if (on_wait_) on_wait_();
         std::this_thread::sleep_for(20ms);
     }

@@ -387,6 +387,13 @@ void Server::yield(const std::string& session_id, const std::string& why, const 
         return;
     }
     if (agent_lives) keepCopyInCase(session_id, winner);
+    if (o->session && o->session->finishing()) {
+        // Its finish goes on until it would write: it writes nothing then, or, already writing, carries out the
+        // rule above for written files itself (Session::abandon), and says which.
+        std::fprintf(stderr, "facescan-server: session %s: gave it up, %s, while finishing it here\n",
+                     session_id.c_str(), why.c_str());
+        return;
+    }
     std::fprintf(
         stderr, "facescan-server: session %s: gave it up, %s; nothing written for it here%s\n", session_id.c_str(),
         why.c_str(),

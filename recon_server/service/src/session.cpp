@@ -273,6 +273,11 @@ bool Session::finished() const {
     return stats_.state == SessionState::kFinished;
 }
 
+bool Session::finishing() const {
+    std::lock_guard lk(mutex_);
+    return finishing_ && stats_.state != SessionState::kFinished;
+}
+
 void Session::requestReset(std::function<void(const Status&)> done) {
     std::unique_lock lk(mutex_);
     if (stats_.state == SessionState::kFinished || finishing_) {

@@ -219,6 +219,11 @@ void Session::finalize(const std::string& why, const FinishCallback& done) {
                          "are removed (the new owner writes the scan)\n",
                          id_.c_str(), written.c_str());
             written.clear();
+        } else if (stop_) {
+            std::fprintf(stderr,
+                         "facescan-server: session %s: given up while its files were being written: the files in %s "
+                         "stay (its agent is gone: they may hold frames the new owner never gets)\n",
+                         id_.c_str(), written.c_str());
         }
     }
 

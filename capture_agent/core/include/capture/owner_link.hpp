@@ -122,7 +122,9 @@ class SessionStream {
     Status send(const wire::EncodedFrame& frame, bool end_of_stream, const std::atomic<bool>& stop,
                 float timeout_s = 0);
     // After the end of the stream: until the owner reports the session finished (resending to a new owner
-    // meanwhile). False when it did not within timeout_s, or within grace_after_stop_s of `stop`.
+    // meanwhile, and the end of the stream again every few seconds: an owner that lost it, or took the session
+    // over from a copy after the agent had dropped it, finishes then). False when it did not within timeout_s, or
+    // within grace_after_stop_s of `stop`.
     bool waitFinished(const std::atomic<bool>& stop, float timeout_s, float grace_after_stop_s);
     bool finished() const { return link_.owner() && link_.owner()->finished(); }
     // The recording frames that no owner has confirmed (the latest claim's confirmed_seq read now), then the
@@ -166,6 +168,10 @@ class SessionStream {
     Events on_event_;
     StreamState state_;
     uint32_t replay_seen_ = 0;
+    bool resend_cut_ = false;  // the last resend stopped short: the next follow() resends again
+    // The end of the stream once sent, and when it was last written: repeated while the agent waits for the finish.
+    std::optional<wire::EncodedFrame> end_;
+    Clock::time_point end_written_{};
     std::function<void()> on_wait_;
     std::function<std::string()> no_server_hint_;
     int64_t no_server_since_ns_ = 0;  // steady clock; 0 while servers are seen

@@ -209,6 +209,8 @@ class Session {
     // Finish now: queued frames are skipped, then the final mesh is extracted and written to dir.
     void requestFinish(const std::string& why, FinishCallback done);
     bool finished() const;
+    // Its finish is under way (meshing, texturing or writing): not finished yet.
+    bool finishing() const;
     bool open() const { return !finished(); }
     SessionStats stats() const;
     // Full-resolution mesh: the final one once finished, else extracted from the current model now.
