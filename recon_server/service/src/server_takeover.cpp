@@ -79,9 +79,10 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                               : (standby && !standby->camera.every_frame) ||
                                     (disk != resumable_.end() && !disk->second.camera.every_frame);
         // A live scan whose agent is gone is being finished by its owner: held like a recording, or a server whose
-        // view of that owner's claim lapsed (restarted, or back from a cut) replaces the owner's whole result with
-        // one from its older copy (three splits in a 30-minute soak, each with the owner heard 87-302 ms before).
-        // While its agent streams, a live scan is not held: the wait would stall it.
+        // view of that owner's claim lapsed while the owner lived (it was frozen, or cut off) replaces the owner's
+        // whole result with one from its older copy. (The soaks' splits of this kind came from claims that lapsed
+        // when their server withdrew another one, fixed in wire::withClaimLiveliness; a freeze or a cut still does
+        // it.) While its agent streams, a live scan is not held: the wait would stall it.
         const bool hold_if_heard = !live || !agentLives(id);
         if (!known_dead && hold_if_heard && ownerHeardAgain(id, view.data.owner_id, gone_since_ns)) continue;
         // The agent's own account counts as much as the claim's: it may have followed a newer owner than this
