@@ -1,7 +1,7 @@
 // A camera held in portrait, upside down or tilted: the person lies on their side (or on their head) in the image.
 // Detection and the head/torso split run on the frame turned upright (recon/image_roll.hpp); these tests check the
-// turning itself against the pinhole model, and that a rolled synthetic frame is detected and segmented like the
-// upright one, with the roll found from the frames (colour, and depth alone) or fixed by the caller.
+// turning itself against the pinhole model, and that a rolled or tilted synthetic frame is detected and segmented
+// like the upright one, with the roll found from the frames (colour, and depth alone) or fixed by the caller.
 #include <gtest/gtest.h>
 
 #include <opencv2/imgproc.hpp>
@@ -56,6 +56,78 @@ TEST(ImageRoll, IntrinsicsAndPointsTurnWithTheImage) {
     }
     EXPECT_EQ(ImageRoll::fromDegrees(-90).degrees(), 270);
     EXPECT_EQ(ImageRoll::fromDegrees(450).degrees(), 90);
+}
+
+// A tilt between quarter turns resamples the image about its centre onto a canvas that holds all of it: a point's
+// pixel still lands where the canvas's intrinsics project the turned point (within the nearest-pixel rounding), and
+// boxes map to boxes that hold what was in them.
+TEST(ImageRoll, TiltsTurnImagesIntrinsicsAndPointsAlike) {
+    Intrinsics k;
+    k.width_px = 320, k.height_px = 240, k.fx_px = 217.5f, k.fy_px = 219.0f, k.cx_px = 161.2f, k.cy_px = 118.7f;
+    for (const int deg : {30, 45, 60, 135, 240, 315}) {
+        const ImageRoll roll = ImageRoll::fromDegrees(deg);
+        ASSERT_EQ(roll.degrees(), deg);
+        ASSERT_FALSE(roll.quarterTurn());
+        const Intrinsics ku = roll.toUpright(k);
+        for (const Eigen::Vector3f& p : {Eigen::Vector3f(0.031f, -0.052f, 0.4f), Eigen::Vector3f(-0.1f, 0.06f, 0.5f)}) {
+            cv::Mat marker = cv::Mat::zeros(k.height_px, k.width_px, CV_8U);
+            const Eigen::Vector2f px = k.project(p);
+            marker.at<uint8_t>(static_cast<int>(std::lround(px.y())), static_cast<int>(std::lround(px.x()))) = 255;
+            cv::Mat up = cv::Mat::zeros(1, 1, CV_8U);
+            // Dilated first: nearest-neighbour resampling may skip a lone pixel.
+            cv::dilate(marker, marker, cv::Mat::ones(3, 3, CV_8U));
+            roll.toUpright(marker, up);
+            ASSERT_EQ(up.cols, ku.width_px) << deg;
+            ASSERT_EQ(up.rows, ku.height_px) << deg;
+            const cv::Moments m = cv::moments(up, true);
+            ASSERT_GT(m.m00, 0) << deg;
+            const Eigen::Vector2f pu = ku.project(roll.toUpright(p));
+            // The focal lengths differ by 0.7 %: one focal length on the canvas moves a point by up to ~0.5 px.
+            EXPECT_NEAR(pu.x(), m.m10 / m.m00, 1.0f) << deg;
+            EXPECT_NEAR(pu.y(), m.m01 / m.m00, 1.0f) << deg;
+            EXPECT_TRUE(roll.fromUpright(roll.toUpright(p)).isApprox(p)) << deg;
+        }
+        // The whole image fits on the canvas: nothing of the frame is lost.
+        cv::Mat ones(k.height_px, k.width_px, CV_8U, cv::Scalar(1)), ones_up, back;
+        roll.toUpright(ones, ones_up);
+        EXPECT_NEAR(cv::countNonZero(ones_up), ones.total(), 0.02 * static_cast<double>(ones.total())) << deg;
+        roll.fromUpright(ones_up, back, ones.size());
+        EXPECT_GE(cv::countNonZero(back), static_cast<int>(ones.total()) - k.width_px - k.height_px) << deg;
+        // A box turned upright holds the turned box's pixels, and turned back it holds the box.
+        const cv::Rect box(40, 30, 70, 50);
+        cv::Mat box_img = cv::Mat::zeros(ones.size(), CV_8U), box_img_up;
+        box_img(box).setTo(255);
+        roll.toUpright(box_img, box_img_up);
+        const cv::Rect box_up = roll.rectToUpright(box, ones.size());
+        EXPECT_EQ(cv::boundingRect(box_img_up) & box_up, cv::boundingRect(box_img_up)) << deg;
+        EXPECT_EQ(roll.rectFromUpright(box_up, ones.size()) & box, box) << deg;
+        EXPECT_EQ(ImageRoll::fromDownDirection(roll.downCamera(), ImageRoll()), roll) << deg;
+    }
+    EXPECT_EQ(ImageRoll::fromDegrees(-30).degrees(), 330);
+    EXPECT_EQ(ImageRoll::fromDegrees(37).degrees(), 30);
+}
+
+// A down direction at `deg` degrees of roll.
+Eigen::Vector3f downAt(float deg) {
+    const float a = deg * 3.14159265f / 180.0f;
+    return {-std::sin(a), std::cos(a), 0.1f};
+}
+
+// Directions go to the nearest step, and a roll in use is kept within three quarters of a step of the direction
+// (no flicker between two steps).
+TEST(ImageRoll, DownDirectionsGoToTheNearestStepAndHoldTheRollInUse) {
+    const ImageRoll upright, tilt30 = ImageRoll::fromDegrees(30);
+    EXPECT_EQ(ImageRoll::fromDownDirection(downAt(7), upright).degrees(), 0);
+    EXPECT_EQ(ImageRoll::fromDownDirection(downAt(-11), upright).degrees(), 0) << "held";
+    EXPECT_EQ(ImageRoll::fromDownDirection(downAt(-12), upright).degrees(), 345);
+    EXPECT_EQ(ImageRoll::fromDownDirection(downAt(10), ImageRoll::fromDegrees(180)).degrees(), 15);
+    EXPECT_EQ(ImageRoll::fromDownDirection(downAt(26), upright).degrees(), 30);
+    EXPECT_EQ(ImageRoll::fromDownDirection(downAt(41), upright).degrees(), 45);
+    EXPECT_EQ(ImageRoll::fromDownDirection(downAt(-58), upright).degrees(), 300);
+    EXPECT_EQ(ImageRoll::fromDownDirection(downAt(85), upright).degrees(), 90);
+    EXPECT_EQ(ImageRoll::fromDownDirection(downAt(20), tilt30).degrees(), 30) << "held: within 11.25 deg of 30";
+    EXPECT_EQ(ImageRoll::fromDownDirection(downAt(18), tilt30).degrees(), 15);
+    EXPECT_EQ(ImageRoll::fromDownDirection(Eigen::Vector3f(0, 0, 1), tilt30), tilt30) << "along the optical axis";
 }
 
 struct Found {
@@ -120,6 +192,26 @@ TEST(FacePipelineRoll, DepthAloneFindsTheRollFromTheBody) {
         EXPECT_TRUE(f.obs.depth_only);
         EXPECT_EQ(f.obs.roll_deg, roll) << "the torso leaves the image on the person's down side";
         EXPECT_GT(f.iou, 0.75) << roll;
+    }
+}
+
+// A camera tilted between quarter turns (a phone held at a slant): the body's direction gives the tilt, the cascade
+// finds the face on the frame turned by it, and the head/torso split runs across the neck, as upright.
+TEST(FacePipelineRoll, TiltedFrameIsFoundAtItsTiltWithColourAndWithDepthAlone) {
+    const Found upright = findHead(0, {}, true);
+    ASSERT_TRUE(upright.obs.found) << upright.obs.reason;
+    for (const bool colour : {true, false}) {
+        for (const int roll : {15, 30, 45, 300, 210}) {
+            const Found f = findHead(roll, {}, colour);
+            ASSERT_TRUE(f.obs.found) << roll << ": " << f.obs.reason;
+            EXPECT_EQ(f.obs.depth_only, !colour) << roll;
+            // The body's direction is measured, not given: within a step of the truth.
+            const int apart = std::abs(f.obs.roll_deg - roll);
+            EXPECT_LE(std::min(apart, 360 - apart), ImageRoll::kStepDeg) << roll << ": found " << f.obs.roll_deg;
+            EXPECT_NEAR(f.iou, upright.iou, 0.08) << roll << (colour ? " colour" : " depth alone");
+            EXPECT_NEAR(f.obs.extent_m.y(), upright.obs.extent_m.y(), 0.02f) << roll << ": height as the person stands";
+            EXPECT_EQ(cv::countNonZero(f.obs.depth_m > 0), cv::countNonZero(f.obs.mask)) << roll;
+        }
     }
 }
 
@@ -222,6 +314,20 @@ TEST(ScanRoll, UpsideDownWideTurnsTrackLikeUpright) {
     EXPECT_EQ(rolled.roll_deg.front(), 180);
 }
 
+// A camera tilted by 30 degrees for the whole scan: the model keeps the face (the chin plane lies along the tilted
+// person's down), and nothing of the torso is fused.
+TEST(ScanRoll, ATiltedCameraScansTheWholeFace) {
+    synth::SequenceParams sp;
+    sp.frames = 60;
+    const RollRun upright = runScan(sp, 0);
+    const RollRun tilted = runScan(sp, 30);
+    EXPECT_GE(tilted.figures.trackedShare(), 0.98);
+    EXPECT_EQ(tilted.figures.wrong_poses, 0);
+    EXPECT_EQ(tilted.figures.foreign_vertices, 0) << "torso fused";
+    EXPECT_GE(tilted.figures.mesh_vertices, 0.93 * upright.figures.mesh_vertices) << "the face was cut";
+    EXPECT_EQ(tilted.roll_deg.front(), 30);
+}
+
 // The camera turns from upright to portrait during the scan (0.6 deg a frame): tracking follows it, and the roll of
 // each frame comes from the tracked model's down axis seen through the pose, so the pipeline knows the camera is
 // in portrait by the end without a detection.
@@ -235,6 +341,12 @@ TEST(ScanRoll, ACameraTurnedDuringTheScanIsFollowed) {
     EXPECT_EQ(run.figures.foreign_vertices, 0) << "torso fused";
     EXPECT_EQ(run.roll_deg.front(), 0);
     EXPECT_EQ(run.roll_deg.back(), 90) << "the roll follows the camera";
+    // Through the tilts between, in order: never back, never more than a step's jump past the snap.
+    for (size_t i = 1; i < run.roll_deg.size(); ++i) {
+        if (run.roll_deg[i] >= 0 && run.roll_deg[i - 1] >= 0) {
+            EXPECT_GE(run.roll_deg[i], run.roll_deg[i - 1]) << "frame " << i;
+        }
+    }
 }
 
 }  // namespace

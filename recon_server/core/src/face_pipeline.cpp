@@ -1,6 +1,7 @@
 #include "recon/face_pipeline.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <vector>
@@ -24,8 +25,11 @@ void adopt(const HeadSegmentation& seg, HeadObservation& obs) {
 
 // The roll that puts the body below the head, from depth alone: a person seen from the front leaves the image
 // through the side their torso is on (the head is the part that ends inside it). The near surface (within
-// body_depth_m of the nearest depth) is counted along each image border; the border with the most is "down".
-// Upright when no border holds enough of it (no torso in view).
+// body_depth_m of the nearest depth) is counted along each image border; the border with the most gives the quarter
+// turn. Upright when no border holds enough of it (no torso in view). A tilted camera is seen in where the body
+// leaves: the direction from the crown (below) to the mean of the border samples on that side and the two beside it
+// (not the opposite one, which a head close to the camera may touch) is the person's down: a wide image tilted by
+// 60 degrees still has most of the torso on its bottom border.
 ImageRoll rollFromBody(const cv::Mat& depth_m, float min_m, float max_m, ImageRoll fallback) {
     constexpr int kStep = 4;              // every 4th pixel
     constexpr float kBodyDepthM = 0.5f;   // metres behind the nearest surface that still belong to the person
@@ -45,17 +49,51 @@ ImageRoll rollFromBody(const cv::Mat& depth_m, float min_m, float max_m, ImageRo
         const float z = depth_m.ptr<float>(v)[u];
         return z >= min_m && z <= limit;
     };
-    int bottom = 0, top = 0, left = 0, right = 0;
+    // Border samples on the person, per side (bottom, left, top, right: the person's down at 0, 90, 180, 270).
+    struct Side {
+        int n = 0;
+        double sum_u = 0, sum_v = 0;
+        void add(int u, int v) { ++n, sum_u += u, sum_v += v; }
+    };
+    std::array<Side, 4> side;
     const int last_row = depth_m.rows - 1, last_col = depth_m.cols - 1;
-    for (int u = 0; u < depth_m.cols; u += kStep) bottom += body(u, last_row), top += body(u, 0);
-    for (int v = 0; v < depth_m.rows; v += kStep) left += body(0, v), right += body(last_col, v);
-    const int most = std::max({bottom, top, left, right});
-    if (most < kMinBorderSamples) return fallback;
-    // Upright down is +y (the bottom border); rolled by 90 the person's down points to the image's left.
-    if (most == bottom) return ImageRoll::fromDegrees(0);
-    if (most == left) return ImageRoll::fromDegrees(90);
-    if (most == top) return ImageRoll::fromDegrees(180);
-    return ImageRoll::fromDegrees(270);
+    for (int u = 0; u < depth_m.cols; u += kStep) {
+        if (body(u, last_row)) side[0].add(u, last_row);
+        if (body(u, 0)) side[2].add(u, 0);
+    }
+    for (int v = 0; v < depth_m.rows; v += kStep) {
+        if (body(0, v)) side[1].add(0, v);
+        if (body(last_col, v)) side[3].add(last_col, v);
+    }
+    int down = 0;
+    for (int s = 1; s < 4; ++s) {
+        if (side[s].n > side[down].n) down = s;
+    }
+    if (side[down].n < kMinBorderSamples) return fallback;
+    const ImageRoll quarter = ImageRoll::fromDegrees(90 * down);
+    Side exit;
+    for (const int s : {down, (down + 1) % 4, (down + 3) % 4}) {
+        exit.n += side[s].n, exit.sum_u += side[s].sum_u, exit.sum_v += side[s].sum_v;
+    }
+    const float exit_u = static_cast<float>(exit.sum_u / exit.n), exit_v = static_cast<float>(exit.sum_v / exit.n);
+    // The crown: the seventh of the person's samples farthest from where the body leaves the image. It lies on the
+    // person's axis (a head is symmetric about it) where the centroid of all samples does not: the image's border
+    // cuts the shoulders unevenly once the camera is tilted (30 degrees read as 21 from the centroid).
+    std::vector<std::pair<float, cv::Point>> far;  // distance from the exit (pixels), sample
+    far.reserve(near.size());
+    for (int v = 0; v < depth_m.rows; v += kStep) {
+        for (int u = 0; u < depth_m.cols; u += kStep) {
+            if (body(u, v)) far.emplace_back(std::hypot(u - exit_u, v - exit_v), cv::Point(u, v));
+        }
+    }
+    const size_t crown_n = std::max<size_t>(1, far.size() / 7);
+    std::nth_element(far.begin(), far.begin() + static_cast<std::ptrdiff_t>(crown_n - 1), far.end(),
+                     [](const auto& a, const auto& b) { return a.first > b.first; });
+    double crown_u = 0, crown_v = 0;
+    for (size_t i = 0; i < crown_n; ++i) crown_u += far[i].second.x, crown_v += far[i].second.y;
+    const Eigen::Vector3f to_exit(exit_u - static_cast<float>(crown_u / crown_n),
+                                  exit_v - static_cast<float>(crown_v / crown_n), 0.0f);
+    return ImageRoll::fromDownDirection(to_exit, quarter);
 }
 
 }  // namespace
@@ -93,7 +131,7 @@ StatusOr<FacePipeline> FacePipeline::create(const FacePipelineParams& params, co
 }
 
 const FacePipeline::UprightFrame& FacePipeline::upright(ImageRoll roll, const cv::Mat& depth, const cv::Mat* colour) {
-    UprightFrame& f = upright_[static_cast<size_t>(roll.quarterTurns())];
+    UprightFrame& f = upright_[static_cast<size_t>(roll.index())];
     f.roll = roll;
     if (!f.have_depth) {
         roll.toUpright(depth, f.depth_m);
@@ -109,30 +147,41 @@ const FacePipeline::UprightFrame& FacePipeline::upright(ImageRoll roll, const cv
     return f;
 }
 
-void FacePipeline::turnBack(ImageRoll roll, const HeadSegmentation& up, const cv::Size& size,
-                            HeadSegmentation& out) const {
+void FacePipeline::turnBack(ImageRoll roll, const HeadSegmentation& up, const cv::Mat& depth, HeadSegmentation& out) {
     out.found = up.found;
     out.reason = up.reason;
-    roll.fromUpright(up.mask, out.mask);
-    roll.fromUpright(up.depth_m, out.depth_m);
+    const cv::Size size = depth.size();
+    roll.fromUpright(up.mask, out.mask, size);
+    if (roll.quarterTurn()) {
+        roll.fromUpright(up.depth_m, out.depth_m, size);
+        // What the upright pass wrote, turned back; the whole frame when that is unknown (cv::rotate wrote it all).
+        out.written_px = up.written_px.empty() ? cv::Rect() : roll.rectFromUpright(up.written_px, size);
+    } else {
+        // A tilt resamples: a pixel of this frame takes the nearest upright pixel's verdict, which at the head's
+        // silhouette may be a head pixel beside this background one. Only pixels whose own depth continues the
+        // upright head's there (within the growth's step, Algorithm 1) are head, and they keep their own depth.
+        roll.fromUpright(up.depth_m, tilt_depth_, size);
+        cv::absdiff(depth, tilt_depth_, tilt_diff_);
+        out.mask &= (tilt_depth_ > 0.0f) & (tilt_diff_ <= params_.model.grow_jump_m);
+        out.depth_m.create(size, CV_32FC1);
+        out.depth_m.setTo(0.0f);
+        depth.copyTo(out.depth_m, out.mask);
+        out.written_px = cv::Rect(0, 0, size.width, size.height);
+    }
     out.head_box_px = roll.rectFromUpright(up.head_box_px, size);
-    // What the upright pass wrote, turned back; the whole frame when that is unknown (cv::rotate wrote it all).
-    out.written_px = up.written_px.empty() ? cv::Rect() : roll.rectFromUpright(up.written_px, size);
     out.centroid_m = roll.fromUpright(up.centroid_m);
     out.extent_m = up.extent_m;  // width and height as the person stands
     out.depth_median_m = up.depth_median_m;
-    out.pixels = up.pixels;
+    out.pixels = roll.quarterTurn() ? up.pixels : cv::countNonZero(out.mask);
     out.split_row = -1;  // a row of the upright image, not of this one
 }
 
 void FacePipeline::segmentAt(ImageRoll roll, const cv::Mat& depth, const cv::Rect& seed_box_px, HeadSegmentation& out) {
     if (roll.upright()) return segmenter_.segment(depth, depth_, seed_box_px, out);
     const UprightFrame& f = upright(roll, depth, nullptr);
-    // The seed box turned upright: the inverse roll's box mapping on the upright image.
-    const ImageRoll inverse = ImageRoll::fromDegrees(-roll.degrees());
-    const cv::Rect seed_up = inverse.rectFromUpright(seed_box_px, f.depth_m.size());
+    const cv::Rect seed_up = roll.rectToUpright(seed_box_px, depth.size());
     segmenter_.segment(f.depth_m, f.k, seed_up, upright_segmentation_);
-    turnBack(roll, upright_segmentation_, depth.size(), out);
+    turnBack(roll, upright_segmentation_, depth, out);
 }
 
 StatusOr<FaceDetections> FacePipeline::detectAt(ImageRoll roll, const cv::Mat& depth, const cv::Mat& colour) {
@@ -152,7 +201,7 @@ void FacePipeline::findAt(ImageRoll roll, const cv::Mat& depth, HeadSegmentation
     if (roll.upright()) return finder_.find(depth, depth_, out);
     const UprightFrame& f = upright(roll, depth, nullptr);
     finder_.find(f.depth_m, f.k, upright_segmentation_);
-    turnBack(roll, upright_segmentation_, depth.size(), out);
+    turnBack(roll, upright_segmentation_, depth, out);
 }
 
 HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* predicted_head_box) {
@@ -194,12 +243,31 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
     if (!colour.empty()) {
         const bool search_rolls = params_.roll_deg == FacePipelineParams::kRollAuto &&
                                   (!roll_known_ || misses_at_roll_ >= params_.roll_recheck_misses);
-        const int tries = search_rolls ? 4 : 1;
+        // The current roll, then a quarter turn either way, then upside down; while the roll is unknown, first
+        // the tilt of the body when it is not a quarter turn, and a step either side of it (the cascade finds
+        // faces only up to about a step from upright, and the ladder of its window sizes meets a face's width
+        // at one tilt and misses it by a step at the next).
+        std::array<ImageRoll, 7> rolls;
+        int tries = 0;
+        const auto add = [&](ImageRoll r) {
+            if (std::find(rolls.begin(), rolls.begin() + tries, r) == rolls.begin() + tries) rolls[tries++] = r;
+        };
+        if (search_rolls && !roll_known_) {
+            const ImageRoll body =
+                rollFromBody(depth, params_.segmenter.min_depth_m, params_.segmenter.max_depth_m, roll_);
+            if (!body.quarterTurn()) {
+                for (const int step : {0, -ImageRoll::kStepDeg, ImageRoll::kStepDeg}) {
+                    add(ImageRoll::fromDegrees(body.degrees() + step));
+                }
+            }
+        }
+        for (const int turn : {0, 90, 270, 180}) {
+            if (tries > 0 && !search_rolls) break;
+            add(ImageRoll::fromDegrees(roll_.degrees() + turn));
+        }
         bool cascade_found = false;
         for (int t = 0; t < tries && !cascade_found; ++t) {
-            // The current roll, then a quarter turn either way, then upside down.
-            static constexpr int kOrder[4] = {0, 90, 270, 180};
-            const ImageRoll roll = ImageRoll::fromDegrees(roll_.degrees() + kOrder[t]);
+            const ImageRoll roll = rolls[t];
             const auto t0 = Clock::now();
             StatusOr<FaceDetections> faces = detectAt(roll, depth, colour);
             obs.detect_ms += msSince(t0);

@@ -40,8 +40,9 @@ struct FacePipelineParams {
     // (a phone held in portrait: 90 or 270; upside down: 180). Detection and the head/torso split run on the
     // frame turned upright. kRollAuto finds it from the frames: the cascade tries the other quarter turns when it
     // misses at the current one (at once while the roll is unknown, else after roll_recheck_misses misses in a
-    // row), the depth-only finder takes the side of the image the body leaves through as "down", and while
-    // tracking the model's own down axis, seen through the pose, gives each frame's roll (a turning camera).
+    // row), the depth-only finder takes the direction in which the body leaves the image as "down" (a tilt
+    // between quarter turns too, which the cascade then tries first), and while tracking the model's own down
+    // axis, seen through the pose, gives each frame's roll (a turning camera), in steps of ImageRoll::kStepDeg.
     static constexpr int kRollAuto = -1;
     int roll_deg = kRollAuto;      // kRollAuto, 0, 90, 180 or 270 (degrees)
     int roll_recheck_misses = 10;  // detection frames (count)
@@ -67,7 +68,7 @@ struct HeadObservation {
     bool from_model = false;                               // segmented from the tracked model's prediction
     Eigen::Vector3f centroid_m = Eigen::Vector3f::Zero();  // head centroid, depth camera frame (metres)
     Eigen::Vector3f extent_m = Eigen::Vector3f::Zero();    // head width, height, depth (metres), as the person stands
-    int roll_deg = 0;  // the camera's roll the head was found at (ImageRoll degrees: 0, 90, 180, 270)
+    int roll_deg = 0;  // the camera's roll the head was found at (ImageRoll degrees: 0 .. 345, steps of 15)
 };
 
 class FacePipeline {
@@ -111,7 +112,8 @@ class FacePipeline {
     StatusOr<FaceDetections> detectAt(ImageRoll roll, const cv::Mat& depth, const cv::Mat& colour);
     void findAt(ImageRoll roll, const cv::Mat& depth, HeadSegmentation& out);
     // An upright segmentation turned back into this camera's pixels.
-    void turnBack(ImageRoll roll, const HeadSegmentation& up, const cv::Size& size, HeadSegmentation& out) const;
+    // `depth` is this camera's frame.
+    void turnBack(ImageRoll roll, const HeadSegmentation& up, const cv::Mat& depth, HeadSegmentation& out);
 
     FacePipelineParams params_;
     Intrinsics depth_;
@@ -123,11 +125,12 @@ class FacePipeline {
     HeadSegmentation segmentation_;
     HeadSegmentation model_segmentation_;  // separate buffers: ModelSegmenter clears only what it wrote
     int frames_since_detection_ = 0;
-    ImageRoll roll_;                       // the roll in use
-    bool roll_known_ = false;              // fixed, or confirmed by a detection or the tracked model
-    int misses_at_roll_ = 0;               // detection frames in a row without a face at roll_
-    std::array<UprightFrame, 4> upright_;  // per quarter turn; reused between frames
+    ImageRoll roll_;                                       // the roll in use
+    bool roll_known_ = false;                              // fixed, or confirmed by a detection or the tracked model
+    int misses_at_roll_ = 0;                               // detection frames in a row without a face at roll_
+    std::array<UprightFrame, ImageRoll::kSteps> upright_;  // per roll; reused between frames
     HeadSegmentation upright_segmentation_;
+    cv::Mat tilt_depth_, tilt_diff_;  // turnBack's scratch at a tilt
 };
 
 }  // namespace facescan::recon
