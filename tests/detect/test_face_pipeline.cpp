@@ -1,6 +1,7 @@
 // The per-frame head policy: detect or follow the tracked box, segment, fall back to depth, explain failures.
 #include <gtest/gtest.h>
 
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "detect_data.hpp"
@@ -32,6 +33,7 @@ TEST(FacePipeline, BiwiFullPathDetectsSegmentsThenTracks) {
         EXPECT_EQ(obs.detection_ran, first) << "detection runs only until the head is tracked";
         EXPECT_FALSE(obs.depth_only);
         EXPECT_EQ(obs.other_faces, 0);
+        EXPECT_EQ(obs.roll_deg, 0) << name << ": a seated person, camera upright (no tilt read into the body)";
         // The head: rows ~172-300 of the depth image, 0.8-0.9 m away, head-sized; the torso below is gone.
         EXPECT_GE(obs.extent_m.x(), 0.12f);
         EXPECT_LE(obs.extent_m.x(), 0.22f);
@@ -63,6 +65,33 @@ TEST(FacePipeline, LostTrackingTriggersDetectionAndNoColourFallsBackToDepth) {
     EXPECT_TRUE(obs.depth_only);
     EXPECT_GE(obs.extent_m.x(), 0.08f);
     EXPECT_LE(obs.extent_m.y(), 0.30f);
+}
+
+// Real upright cameras read no tilt into the body: a fresh pipeline (the roll unknown) on depth alone takes the
+// person's down from the direction the body leaves the image, and it must come out upright for a seated person
+// (Biwi, background removed) and for a head in profile before a room (PCL).
+TEST(FacePipeline, RealUprightFramesReadNoTiltFromTheBody) {
+    FACESCAN_REQUIRE_DATA(biwi, "biwi_subject01_5frames");
+    const Intrinsics k = dd::biwiDepthIntrinsics(biwi);
+    RgbdFrame frame;
+    for (const auto& name : dd::biwiFrames(biwi)) {
+        FacePipeline pipeline = makePipeline(k, dd::biwiColourCamera());
+        ASSERT_TRUE(dd::loadBiwiFrame(biwi, name, frame));
+        frame.colour_bgr.release();
+        const HeadObservation obs = pipeline.process(frame);
+        ASSERT_TRUE(obs.found) << name << ": " << obs.reason;
+        EXPECT_TRUE(obs.depth_only);
+        EXPECT_EQ(obs.roll_deg, 0) << name;
+    }
+    FACESCAN_REQUIRE_DATA(pcl, "pcl_kinect_person");
+    const cv::Mat raw = cv::imread((pcl / "person_depth_mm.png").string(), cv::IMREAD_ANYDEPTH);
+    ASSERT_EQ(raw.type(), CV_16UC1);
+    RgbdFrame person;
+    depthRawToMetres(raw, 0.001f, person.depth_m);
+    FacePipeline pipeline = makePipeline(dd::pclIntrinsics(), ColourCamera::registeredTo(dd::pclIntrinsics()));
+    const HeadObservation obs = pipeline.process(person);
+    ASSERT_TRUE(obs.found) << obs.reason;
+    EXPECT_EQ(obs.roll_deg, 0);
 }
 
 // Two real faces (the Biwi face pasted twice) on two head-shaped depth blobs at 0.8 m and 1.3 m, colour
