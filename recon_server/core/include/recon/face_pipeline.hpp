@@ -108,7 +108,8 @@ class FacePipeline {
     };
     const UprightFrame& upright(ImageRoll roll, const cv::Mat& depth, const cv::Mat* colour);
     // The segmenter / cascade / finder at `roll`; results in this camera's pixels and frame.
-    void segmentAt(ImageRoll roll, const cv::Mat& depth, const cv::Rect& seed_box_px, HeadSegmentation& out);
+    void segmentAt(ImageRoll roll, const cv::Mat& depth, const cv::Rect& seed_box_px, HeadSegmentation& out,
+                   const cv::Rect* seed_box_upright = nullptr);
     StatusOr<FaceDetections> detectAt(ImageRoll roll, const cv::Mat& depth, const cv::Mat& colour);
     void findAt(ImageRoll roll, const cv::Mat& depth, HeadSegmentation& out);
     // An upright segmentation turned back into this camera's pixels.
@@ -130,7 +131,8 @@ class FacePipeline {
     int misses_at_roll_ = 0;                               // detection frames in a row without a face at roll_
     std::array<UprightFrame, ImageRoll::kSteps> upright_;  // per roll; reused between frames
     HeadSegmentation upright_segmentation_;
-    cv::Mat tilt_depth_, tilt_diff_;  // turnBack's scratch at a tilt
+    cv::Mat tilt_depth_, tilt_diff_;                // turnBack's scratch at a tilt
+    std::vector<cv::Rect> detected_upright_boxes_;  // detectAt's faces in the upright frame's depth pixels
 };
 
 }  // namespace facescan::recon
