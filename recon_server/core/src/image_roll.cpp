@@ -113,8 +113,12 @@ cv::Matx23d ImageRoll::uprightMap(const cv::Size& size) const {
 void ImageRoll::toUpright(const cv::Mat& image, cv::Mat& upright) const {
     if (quarterTurn()) return rotateBy(image, upright, 4 - deg_ / 90);
     const int interpolation = image.channels() == 3 ? cv::INTER_LINEAR : cv::INTER_NEAREST;
-    cv::warpAffine(image, upright, uprightMap(image.size()), uprightSize(image.size()), interpolation,
-                   cv::BORDER_CONSTANT, cv::Scalar::all(0));
+    // Images (depth, colour) go on past the frame's border on the canvas, masks do not: a torso that leaves the
+    // frame is cut by its border at the tilt's angle on the canvas, and its rows would be no wider than the head's
+    // for the width criterion (eq. 3.7-3.13); upright, the border cuts it across and keeps its shoulders.
+    const int border = image.type() == CV_8UC1 ? cv::BORDER_CONSTANT : cv::BORDER_REPLICATE;
+    cv::warpAffine(image, upright, uprightMap(image.size()), uprightSize(image.size()), interpolation, border,
+                   cv::Scalar::all(0));
 }
 
 void ImageRoll::fromUpright(const cv::Mat& upright, cv::Mat& image, const cv::Size& size) const {
