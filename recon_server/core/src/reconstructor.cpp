@@ -258,7 +258,7 @@ void Reconstructor::integrateFrame(const RgbdFrame& frame, FrameResult& result) 
         // counts as fusion's).
         const cv::Mat& colour = frameColour(frame, frame_.levels[0].roi);
         std::lock_guard<std::mutex> lock(volume_mutex_);
-        volume_.integrate(frame_.levels[0], colour, T_world_camera_);
+        volume_.integrate(frame_.levels[0], colour, T_world_camera_, frames_integrated_);
     }
     result.integrated = true;
     ++frames_integrated_;

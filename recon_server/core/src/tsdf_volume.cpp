@@ -92,6 +92,7 @@ Status TsdfParams::validate() const {
         return invalidArgument("tsdf weight sigmas must be > 0");
     if (!(min_cos_angle >= 0.0f && min_cos_angle < 1.0f)) return invalidArgument("tsdf min_cos_angle in [0, 1)");
     if (!(edge_weight >= 0.0f && edge_weight <= 1.0f)) return invalidArgument("tsdf edge_weight in [0, 1]");
+    if (edge_weight_frames < 0) return invalidArgument("tsdf edge_weight_frames must be >= 0");
     if (max_blocks < 1) return invalidArgument("tsdf max_blocks must be >= 1");
     if (!std::isfinite(centre_behind_surface_m)) return invalidArgument("tsdf centre_behind_surface_m not finite");
     return Status::ok();
@@ -175,7 +176,8 @@ bool TsdfVolume::place(const SurfaceLevel& first) {
     return true;
 }
 
-IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& colour_bgr, const Pose& T_world_camera) {
+IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& colour_bgr, const Pose& T_world_camera,
+                                     int frames_fused) {
     IntegrateStats stats;
     const cv::Rect roi = frame.roi;
     if (roi.empty() || !placed_) return stats;
@@ -251,6 +253,7 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
     const float inv_angle_sigma = 1.0f / params_.weight_angle_sigma;
     const float inv_two_depth_var = 1.0f / (2.0f * params_.weight_depth_sigma_m * params_.weight_depth_sigma_m);
     const float min_cos = params_.min_cos_angle;
+    const float edge_weight = frames_fused < params_.edge_weight_frames ? params_.edge_weight : 0.0f;
     pixel_range_weight_.create(frame.depth_m.size(), CV_32FC2);  // allocates on the first frame only
     parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
         for (int v = v_lo; v < v_hi; ++v) {
@@ -278,8 +281,8 @@ IntegrateStats TsdfVolume::integrate(const SurfaceLevel& frame, const cv::Mat& c
                                         (ray_len * std::sqrt(n_sum.dot(n_sum)));
                 if (cos_angle < min_cos) continue;
                 rw[u] = cv::Vec2f(z[u] * ray_len,
-                                  (edge ? params_.edge_weight : 1.0f) * std::exp(-(1.0f - cos_angle) * inv_angle_sigma -
-                                                                                 z[u] * z[u] * inv_two_depth_var));
+                                  (edge ? edge_weight : 1.0f) * std::exp(-(1.0f - cos_angle) * inv_angle_sigma -
+                                                                         z[u] * z[u] * inv_two_depth_var));
             }
         }
     });
