@@ -267,8 +267,8 @@ HeadObservation FacePipeline::process(const RgbdFrame& frame, const cv::Rect* pr
             }
         }
         for (const int turn : {0, 90, 270, 180}) {
-            if (tries > 0 && !search_rolls) break;
             add(ImageRoll::fromDegrees(roll_.degrees() + turn));
+            if (!search_rolls) break;
         }
         bool cascade_found = false;
         for (int t = 0; t < tries && !cascade_found; ++t) {

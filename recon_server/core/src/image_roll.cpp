@@ -36,7 +36,16 @@ void rotateBy(const cv::Mat& src, cv::Mat& dst, int q) {
     }
 }
 
-constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+constexpr double kDegToRad = M_PI / 180.0;
+
+// R_z(deg) applied to (x, y): the scene turned clockwise on screen (y down) by deg, a multiple of kStepDeg (negative
+// too); quarter turns exactly.
+Eigen::Vector3f turnDegrees(const Eigen::Vector3f& p, int deg) {
+    if (deg % 90 == 0) return turn(p, deg / 90);
+    const double a = deg * kDegToRad;
+    const float c = static_cast<float>(std::cos(a)), s = static_cast<float>(std::sin(a));
+    return {c * p.x() - s * p.y(), s * p.x() + c * p.y(), p.z()};
+}
 
 // The absolute difference of two angles (degrees), in [0, 180].
 float angleApartDeg(float a, float b) {
@@ -79,19 +88,8 @@ ImageRoll ImageRoll::fromDownDirection(const Eigen::Vector3f& down_camera, Image
 
 Eigen::Vector3f ImageRoll::downCamera() const { return fromUpright(Eigen::Vector3f::UnitY()); }
 
-Eigen::Vector3f ImageRoll::toUpright(const Eigen::Vector3f& p_camera) const {
-    if (quarterTurn()) return turn(p_camera, 4 - deg_ / 90);
-    const double a = deg_ * kDegToRad;
-    const float c = static_cast<float>(std::cos(a)), s = static_cast<float>(std::sin(a));
-    return {c * p_camera.x() + s * p_camera.y(), -s * p_camera.x() + c * p_camera.y(), p_camera.z()};
-}
-
-Eigen::Vector3f ImageRoll::fromUpright(const Eigen::Vector3f& p_upright) const {
-    if (quarterTurn()) return turn(p_upright, deg_ / 90);
-    const double a = deg_ * kDegToRad;
-    const float c = static_cast<float>(std::cos(a)), s = static_cast<float>(std::sin(a));
-    return {c * p_upright.x() - s * p_upright.y(), s * p_upright.x() + c * p_upright.y(), p_upright.z()};
-}
+Eigen::Vector3f ImageRoll::toUpright(const Eigen::Vector3f& p_camera) const { return turnDegrees(p_camera, -deg_); }
+Eigen::Vector3f ImageRoll::fromUpright(const Eigen::Vector3f& p_upright) const { return turnDegrees(p_upright, deg_); }
 
 cv::Size ImageRoll::uprightSize(const cv::Size& size) const {
     if (quarterTurn()) return (deg_ / 90) % 2 == 1 ? cv::Size(size.height, size.width) : size;

@@ -16,6 +16,7 @@
 #include <array>
 #include <opencv2/core.hpp>
 #include <string>
+#include <vector>
 
 #include "recon/camera.hpp"
 #include "recon/face_detector.hpp"
