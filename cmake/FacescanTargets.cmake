@@ -43,10 +43,13 @@ function(facescan_test_flags target)
     target_compile_options(${target} PRIVATE $<$<CONFIG:Release>:-Og>)
 endfunction()
 
-# facescan_add_test(NAME name SOURCES a.cpp ... LIBS lib ... [LABELS l ...] [TIMEOUT s] [RUN_SERIAL])
+# facescan_add_test(NAME name SOURCES a.cpp ... LIBS lib ... [LABELS l ...] [TIMEOUT s] [COST s] [RUN_SERIAL])
 # One gtest executable, discovered test by test so ctest reports each case.
+# COST: about the seconds its slower cases take. ctest starts costlier tests first, but it learns their times only
+# from an earlier run in the same tree, and CI's tree is always fresh: there it started them in file order, and a
+# 45 s failover case that came last ran on alone at the end of the suite.
 function(facescan_add_test)
-    cmake_parse_arguments(T "RUN_SERIAL" "NAME;TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
+    cmake_parse_arguments(T "RUN_SERIAL" "NAME;TIMEOUT;COST" "SOURCES;LIBS;LABELS" ${ARGN})
     add_executable(${T_NAME} ${T_SOURCES})
     target_link_libraries(${T_NAME} PRIVATE ${T_LIBS} GTest::gtest_main)
     facescan_test_flags(${T_NAME})
@@ -62,6 +65,9 @@ function(facescan_add_test)
     set(props TIMEOUT ${T_TIMEOUT})
     if(T_LABELS)
         list(APPEND props LABELS "${T_LABELS}")
+    endif()
+    if(T_COST)
+        list(APPEND props COST ${T_COST})
     endif()
     if(T_RUN_SERIAL)
         list(APPEND props RUN_SERIAL TRUE)
