@@ -64,10 +64,11 @@ options:
                         astra, realsense-d415, azure-kinect, truedepth (default: what the device reports; a
                         source that cannot tell: kinect-v1)
   --depth-range MIN:MAX the camera's working range in metres, over the sensor's (e.g. 0.2:0.5)
-  --roll auto|0|90|180|270
-                        how the camera is held: how far the person appears turned clockwise in the image (a
-                        phone in portrait: 90 or 270; upside down: 180); the server uses it unless its own
-                        --roll is set (default auto: the server finds it from the frames)
+  --roll auto|DEG       how the camera is held: how far the person appears turned clockwise in the image,
+                        0 to 345 degrees in steps of 15 (a phone in portrait: 90 or 270; upside down: 180;
+                        at a slant: the nearest step, e.g. 30); the server uses it unless its own --roll is
+                        set (default auto: the server finds it from the frames). Servers from before slants
+                        were handled take only quarter turns and reject a slant: update them first
   --session ID          session id (default: a fresh unique id, printed at start)
   --frames N            stop after N frames (default: all)
   --rate real|max|HZ    real: the source's own rate (default); max: as fast as the server takes them, with no

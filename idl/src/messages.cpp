@@ -22,10 +22,10 @@ Status CameraInfoData::validate() const {
                                std::to_string(depth_units_m));
     }
     if (!(rate_hz > 0 && rate_hz <= 1000)) return invalidArgument("frame rate must be in (0, 1000] Hz");
-    if (roll_deg != kRollUnknown && roll_deg != 0 && roll_deg != 90 && roll_deg != 180 && roll_deg != 270) {
-        return invalidArgument("camera roll " + std::to_string(roll_deg) +
-                               " deg: must be 0, 90, 180 or 270 (how far the person appears turned clockwise), or "
-                               "unknown (auto)");
+    if (roll_deg != kRollUnknown && !recon::isRollStepDeg(roll_deg)) {
+        return invalidArgument("camera roll " + std::to_string(roll_deg) + " deg: must be 0 to 345 in steps of " +
+                               std::to_string(recon::kRollStepDeg) +
+                               " (how far the person appears turned clockwise), or unknown (auto)");
     }
     if (dropped_before_seq != 0 && (!every_frame || followed_epoch == 0)) {
         return invalidArgument(
@@ -259,10 +259,12 @@ StatusOr<CameraInfoData> fromMessage(const facescan_wire_CameraInfo& msg) {
         }
         for (int r = 0; r < 3; ++r) info.T_colour_depth.matrix()(r, 3) = msg.t_colour_depth_m[r];
     }
-    if (msg.roll_deg != 0 && msg.roll_deg != 90 && msg.roll_deg != 180 && msg.roll_deg != 270 && msg.roll_deg != 360) {
+    // 360 is upright and known (0 means unknown); a tilt between quarter turns is its step.
+    if (msg.roll_deg != 360 && !recon::isRollStepDeg(msg.roll_deg)) {
         return invalidArgument("CameraInfo roll_deg " + std::to_string(msg.roll_deg) +
-                               " is none of 0 (unknown), 90, 180, 270 or 360 (upright): the agent is broken or of "
-                               "another version; run facescan-agent --roll auto|0|90|180|270");
+                               " is none of 0 (unknown), 15 to 345 in steps of " + std::to_string(recon::kRollStepDeg) +
+                               " or 360 (upright): the agent is broken or of another version; run facescan-agent "
+                               "--roll auto or a step from 0 to 345");
     }
     info.roll_deg = msg.roll_deg == 0 ? CameraInfoData::kRollUnknown : msg.roll_deg % 360;
     info.followed_epoch = msg.followed_epoch;

@@ -228,8 +228,26 @@ TEST(FacePipelineRoll, AFixedRollIsUsedAsGiven) {
     const Found wrong = findHead(90, params, true);
     EXPECT_FALSE(wrong.obs.found);
     EXPECT_EQ(wrong.obs.roll_deg, 0);
-    params.roll_deg = 45;
-    EXPECT_FALSE(params.validate().isOk());
+    // A slant between quarter turns, given: the cascade runs on the frame turned by it, as found in the test
+    // above, and exactly there.
+    params.roll_deg = 30;
+    params.depth_only_fallback = true;
+    for (const bool colour : {true, false}) {
+        const Found tilted = findHead(30, params, colour);
+        ASSERT_TRUE(tilted.obs.found) << tilted.obs.reason;
+        EXPECT_EQ(tilted.obs.roll_deg, 30);
+        EXPECT_GT(tilted.iou, 0.8);
+    }
+    for (const int bad : {40, 360, -15, 1}) {
+        params.roll_deg = bad;
+        EXPECT_FALSE(params.validate().isOk()) << bad;
+    }
+    for (const char* text : {"30", "345", "0", "auto"}) EXPECT_TRUE(parseRoll(text).isOk()) << text;
+    for (const char* text : {"40", "360", "-30", "030", "+30", "30.0", "", "portrait"}) {
+        const auto bad = parseRoll(text);
+        ASSERT_FALSE(bad.isOk()) << text;
+        EXPECT_NE(bad.status().message().find("steps of 15"), std::string::npos) << bad.status().message();
+    }
 }
 
 // A whole sequence through scanFrame, as the server runs it: figures against the truth and the advice per frame.

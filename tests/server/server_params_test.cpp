@@ -159,9 +159,13 @@ TEST(ServerParams, RollIsAFlagAndAConfigKey) {
     auto set = parseServerArgs({"--set", "face.roll=180"});
     ASSERT_TRUE(set.isOk()) << set.status().toString();
     EXPECT_EQ(set->params.face.roll_deg, 180);
-    auto bad = parseServerArgs({"--roll", "45"});
+    auto slant = parseServerArgs({"--roll", "30"});
+    ASSERT_TRUE(slant.isOk()) << slant.status().toString();
+    EXPECT_EQ(slant->params.face.roll_deg, 30);
+    auto bad = parseServerArgs({"--roll", "40"});
     ASSERT_FALSE(bad.isOk());
-    EXPECT_NE(bad.status().message().find("auto, 0, 90, 180 or 270"), std::string::npos) << bad.status().message();
+    EXPECT_NE(bad.status().message().find("auto or 0 to 345 degrees in steps of 15"), std::string::npos)
+        << bad.status().message();
     EXPECT_NE(bad.status().message().find("--roll"), std::string::npos) << bad.status().message();
 }
 
@@ -184,6 +188,12 @@ TEST(ServerParams, TheAgentsRollHintIsUsedUnlessTheServerSetsItsOwn) {
     ASSERT_TRUE(overridden.isOk()) << overridden.status().toString();
     EXPECT_EQ(overridden->pipeline->roll().degrees(), 90);
     EXPECT_NE(overridden->camera_line.find("roll 90 deg (face.roll)"), std::string::npos) << overridden->camera_line;
+
+    camera.roll_deg = 30;  // a phone held at a slant
+    auto slanted = SessionEngine::build(server_auto->params, camera, nullptr);
+    ASSERT_TRUE(slanted.isOk()) << slanted.status().toString();
+    EXPECT_EQ(slanted->pipeline->roll().degrees(), 30);
+    EXPECT_NE(slanted->camera_line.find("roll 30 deg (the agent's --roll)"), std::string::npos) << slanted->camera_line;
 
     camera.roll_deg = wire::CameraInfoData::kRollUnknown;
     auto found = SessionEngine::build(server_auto->params, camera, nullptr);

@@ -61,7 +61,7 @@ TEST(CameraInfo, AnOlderAgentsCameraInfoIsAKinectV1) {
 }
 
 TEST(CameraInfo, TheRollHintRoundTripsAndAnOlderAgentsIsUnknown) {
-    for (const int roll : {CameraInfoData::kRollUnknown, 0, 90, 180, 270}) {
+    for (const int roll : {CameraInfoData::kRollUnknown, 0, 90, 180, 270, 15, 30, 45, 345}) {
         CameraInfoData in = trueDepthCamera();
         in.roll_deg = roll;
         ASSERT_TRUE(in.validate().isOk()) << roll << ": " << in.validate().toString();
@@ -81,8 +81,8 @@ TEST(CameraInfo, TheRollHintRoundTripsAndAnOlderAgentsIsUnknown) {
     EXPECT_EQ(out->roll_deg, CameraInfoData::kRollUnknown);
 }
 
-TEST(CameraInfo, ARollThatIsNoQuarterTurnIsRefusedWithOneLine) {
-    for (const int wire_roll : {45, -90, 1, 359, 450, 720}) {
+TEST(CameraInfo, ARollThatIsNoStepIsRefusedWithOneLine) {
+    for (const int wire_roll : {40, -90, 1, 359, 375, 450, 720}) {
         CameraInfoData in = trueDepthCamera();
         facescan_wire_CameraInfo msg = toMessage(in);
         msg.roll_deg = wire_roll;
@@ -92,10 +92,10 @@ TEST(CameraInfo, ARollThatIsNoQuarterTurnIsRefusedWithOneLine) {
         EXPECT_EQ(out.status().message().find('\n'), std::string::npos) << out.status().message();
     }
     CameraInfoData c = trueDepthCamera();
-    c.roll_deg = 45;
+    c.roll_deg = 50;
     const Status s = c.validate();
     ASSERT_FALSE(s.isOk());
-    EXPECT_NE(s.message().find("0, 90, 180 or 270"), std::string::npos) << s.message();
+    EXPECT_NE(s.message().find("0 to 345 in steps of 15"), std::string::npos) << s.message();
 }
 
 TEST(CameraInfo, ARecordingsProgressRoundTripsAndAnImpossibleOneIsRefused) {

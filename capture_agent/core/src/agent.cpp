@@ -82,11 +82,11 @@ Status AgentOptions::validate() const {
     if (wait_for_server_s < 0) return invalidArgument("--wait-for-server must be >= 0 seconds");
     if (!(stalled_after_s > 0)) return invalidArgument("--stalled-after must be > 0 seconds");
     if (!sensor.empty()) RETURN_IF_ERROR(recon::findSensorPreset(sensor).status());
-    if (roll_deg != wire::CameraInfoData::kRollUnknown && roll_deg != 0 && roll_deg != 90 && roll_deg != 180 &&
-        roll_deg != 270) {
+    if (roll_deg != wire::CameraInfoData::kRollUnknown && !recon::isRollStepDeg(roll_deg)) {
         return invalidArgument("--roll " + std::to_string(roll_deg) +
-                               " cannot be right: auto, 0, 90, 180 or 270 (how far the person appears turned "
-                               "clockwise in the image: a phone held in portrait 90 or 270, upside down 180)");
+                               " cannot be right: auto or 0 to 345 in steps of " + std::to_string(recon::kRollStepDeg) +
+                               " (how far the person appears turned clockwise in the image: a phone held in portrait "
+                               "90 or 270, upside down 180)");
     }
     if ((depth_min_m != 0 || depth_max_m != 0) && !(depth_min_m > 0 && depth_max_m > depth_min_m)) {
         return invalidArgument("--depth-range " + std::to_string(depth_min_m) + ":" + std::to_string(depth_max_m) +

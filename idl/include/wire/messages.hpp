@@ -31,8 +31,9 @@ struct CameraInfoData {
     // depth-camera points into it. Registered colour has the depth camera's and the identity.
     recon::Intrinsics colour_intrinsics{0, 0, 0.0f, 0.0f, 0.0f, 0.0f};
     recon::Pose T_colour_depth = recon::Pose::Identity();
-    // How the camera is held (the agent's --roll; recon::FacePipelineParams::roll_deg's meaning): 0, 90, 180 or
-    // 270 degrees, or kRollUnknown for the server to find it from the frames (an older agent sends none).
+    // How the camera is held (the agent's --roll; recon::FacePipelineParams::roll_deg's meaning): 0 to 345 degrees
+    // in steps of recon::kRollStepDeg, or kRollUnknown for the server to find it from the frames (an older agent
+    // sends none).
     static constexpr int kRollUnknown = -1;
     int roll_deg = kRollUnknown;
     // A recording's progress as its agent last wrote it (the message's comment): the highest owner epoch followed,

@@ -104,8 +104,9 @@ Status FacePipelineParams::validate() const {
     RETURN_IF_ERROR(finder.validate());
     RETURN_IF_ERROR(model.validate());
     if (redetect_every_frames < 0) return invalidArgument("redetect_every_frames must be >= 0");
-    if (roll_deg != kRollAuto && roll_deg != 0 && roll_deg != 90 && roll_deg != 180 && roll_deg != 270) {
-        return invalidArgument("roll_deg must be auto, 0, 90, 180 or 270");
+    if (roll_deg != kRollAuto && !isRollStepDeg(roll_deg)) {
+        return invalidArgument("roll_deg must be auto or 0 to 345 degrees in steps of " + std::to_string(kRollStepDeg) +
+                               ", got " + std::to_string(roll_deg));
     }
     if (roll_recheck_misses < 0) return invalidArgument("roll_recheck_misses must be >= 0");
     return Status::ok();
@@ -113,12 +114,18 @@ Status FacePipelineParams::validate() const {
 
 StatusOr<int> parseRoll(const std::string& text) {
     if (text == "auto") return FacePipelineParams::kRollAuto;
-    for (const int deg : {0, 90, 180, 270}) {
-        if (text == std::to_string(deg)) return deg;
+    // Plain decimal degrees only ("030" or "+30" would pass a looser parse and mean the same; they are refused so
+    // that a config value reads as it is used).
+    int deg = -1;
+    if (!text.empty() && text.size() <= 3 && text.find_first_not_of("0123456789") == std::string::npos &&
+        (text.size() == 1 || text[0] != '0')) {
+        deg = std::stoi(text);
     }
-    return invalidArgument("roll '" + text +
-                           "' must be auto, 0, 90, 180 or 270: how far the person appears turned clockwise in the "
-                           "image (a phone held in portrait: 90 or 270, upside down: 180)");
+    if (isRollStepDeg(deg)) return deg;
+    return invalidArgument("roll '" + text + "' must be auto or 0 to 345 degrees in steps of " +
+                           std::to_string(kRollStepDeg) +
+                           ": how far the person appears turned clockwise in the image (a phone held in portrait: "
+                           "90 or 270, upside down: 180, at a slant: the nearest step, e.g. 30)");
 }
 
 StatusOr<FacePipeline> FacePipeline::create(const FacePipelineParams& params, const Intrinsics& depth,

@@ -45,13 +45,13 @@ struct FacePipelineParams {
     // between quarter turns too, which the cascade then tries first), and while tracking the model's own down
     // axis, seen through the pose, gives each frame's roll (a turning camera), in steps of ImageRoll::kStepDeg.
     static constexpr int kRollAuto = -1;
-    int roll_deg = kRollAuto;      // kRollAuto, 0, 90, 180 or 270 (degrees)
+    int roll_deg = kRollAuto;      // kRollAuto, or 0 .. 345 in steps of kRollStepDeg (degrees)
     int roll_recheck_misses = 10;  // detection frames (count)
 
     Status validate() const;
 };
 
-// "auto", "0", "90", "180" or "270" (a --roll flag or config value) to FacePipelineParams::roll_deg.
+// "auto" or "0" .. "345" in steps of kRollStepDeg (a --roll flag or config value) to FacePipelineParams::roll_deg.
 StatusOr<int> parseRoll(const std::string& text);
 
 struct HeadObservation {

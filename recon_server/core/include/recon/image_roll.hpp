@@ -18,13 +18,14 @@
 
 #include "recon/camera.hpp"
 #include "recon/face_detector.hpp"
+#include "recon/sensor.hpp"
 
 namespace facescan::recon {
 
 class ImageRoll {
  public:
     // Tilts are handled in steps of this many degrees: the cascade finds faces up to about half a step either way.
-    static constexpr int kStepDeg = 15;
+    static constexpr int kStepDeg = kRollStepDeg;
     static constexpr int kSteps = 360 / kStepDeg;
 
     ImageRoll() = default;

@@ -12,6 +12,12 @@
 
 namespace facescan::recon {
 
+// How a camera may be said to be held (a --roll flag, CameraInfo): how far the person appears turned clockwise in
+// the image, 0 to 345 degrees in steps of kRollStepDeg, the steps in which the pipeline turns a frame upright
+// (ImageRoll): a phone held in portrait is 90 or 270, upside down 180, and one at a slant the nearest step.
+inline constexpr int kRollStepDeg = 15;
+constexpr bool isRollStepDeg(int deg) { return deg >= 0 && deg < 360 && deg % kRollStepDeg == 0; }
+
 // How the camera measures depth: it decides where its errors are (stereo: holes where texture or baseline fail,
 // error growing with z^2; time of flight: flying pixels at silhouettes, multipath in concave parts).
 enum class SensorFamily : uint8_t { kUnknown = 0, kStructuredLight = 1, kActiveStereo = 2, kTimeOfFlight = 3 };
