@@ -250,6 +250,34 @@ TEST(FacePipelineRoll, AFixedRollIsUsedAsGiven) {
     }
 }
 
+// A camera held at 30 degrees as the head walks out of view: what is left in the frame's corner is a sliver of
+// shoulder at its lower edge. On the turned canvas the border's repeated pixels smear it into a head-sized blob
+// (18205 pixels, 488 of them in the frame), which the depth-only finder took for the head. It is no head now.
+TEST(FacePipelineRoll, AHeadMeasuredMostlyPastTheFramesBorderIsNoHead) {
+    synth::SequenceParams sp;
+    ASSERT_TRUE(synth::applyScenario("gap", sp).isOk());
+    sp.gap_start_frame = 25;
+    sp.gap_turn_deg = -55.0f;
+    sp.frames = 27;
+    sp.seed = 20;
+    sp.roll_deg = 30.0f;
+    const synth::KinectSimulator sim(synth::builtinHead(), sp);
+    RgbdFrame frame;
+    sim.render(26, frame, nullptr);
+    FacePipelineParams params;
+    params.roll_deg = 30;
+    StatusOr<FacePipeline> pipeline =
+        FacePipeline::create(params, sim.intrinsics(), ColourCamera::registeredTo(sim.intrinsics()));
+    ASSERT_TRUE(pipeline.isOk()) << pipeline.status().toString();
+    const HeadObservation obs = pipeline->process(frame);
+    EXPECT_FALSE(obs.found) << cv::countNonZero(obs.mask) << " pixels taken for the head";
+    EXPECT_NE(obs.reason.find("mostly past this frame's border"), std::string::npos) << obs.reason;
+    // The same frame's start, before the walk: the head is found at the tilt as ever.
+    sim.render(0, frame, nullptr);
+    const HeadObservation start = pipeline->process(frame);
+    EXPECT_TRUE(start.found) << start.reason;
+}
+
 // A whole sequence through scanFrame, as the server runs it: figures against the truth and the advice per frame.
 struct RollRun {
     eval::ScenarioFigures figures;

@@ -181,6 +181,14 @@ void FacePipeline::turnBack(ImageRoll roll, const HeadSegmentation& up, const cv
     out.depth_median_m = up.depth_median_m;
     out.pixels = roll.quarterTurn() ? up.pixels : cv::countNonZero(out.mask);
     out.split_row = -1;  // a row of the upright image, not of this one
+    // The tilted canvas repeats the frame's border pixels outwards (so that a torso leaving the frame keeps its
+    // width). A "head" measured there mostly on repeated pixels is no head this camera saw: a sliver of shoulder
+    // at the frame's edge, smeared into a head-sized blob. Kept, it reached the reconstructor as the head.
+    if (!roll.quarterTurn() && out.found && 2 * out.pixels < up.pixels) {
+        out.found = false;
+        out.reason = "the head found on the frame turned upright lies mostly past this frame's border (" +
+                     std::to_string(out.pixels) + " of its " + std::to_string(up.pixels) + " pixels in the frame)";
+    }
 }
 
 void FacePipeline::segmentAt(ImageRoll roll, const cv::Mat& depth, const cv::Rect& seed_box_px, HeadSegmentation& out,
