@@ -13,6 +13,25 @@ constexpr int kStripes = 16;  // fixed stripe count: the reduction sums in the s
 constexpr double kDegToRad = M_PI / 180.0;
 constexpr float kMaxPixel = 1 << 20;  // pixels; beyond any image
 
+// Slots of a stripe's partial sums: the upper triangle of A^T A, then A^T b (eq. 4.20), for 6 unknowns (the pose)
+// or 7 (the pose and the model's offset); then the error of eq. 4.21 and the pair count, at fixed slots.
+constexpr int kErrorSlot = 35, kCountSlot = 36;
+
+// One pair's row a (weight w, right-hand side b) into the normal equations of N unknowns. Fully unrolled
+// (straight-line multiply-adds): this is the loop's hottest part.
+template <int N>
+inline void accumulatePair(std::array<double, 40>& acc, const double* a, double w, double b) {
+    constexpr int kRhs = N * (N + 1) / 2;
+    int k = 0;
+#pragma GCC unroll 7
+    for (int i = 0; i < N; ++i) {
+        const double wai = w * a[i];
+#pragma GCC unroll 7
+        for (int j = i; j < N; ++j) acc[k++] += wai * a[j];  // A^T A, upper (eq. 4.20)
+        acc[kRhs + i] += wai * b;                            // A^T b
+    }
+}
+
 // Rigid transform of the ICP unknowns x = [alpha beta gamma tx ty tz] (eq. 4.16). The rotation is built exactly
 // from the angles (eq. 4.2) rather than from the small-angle matrix of eq. 4.14, which is only used to linearise:
 // the estimate stays a proper rotation after many updates.
@@ -62,6 +81,8 @@ Status IcpParams::validate() const {
     if (!(convergence_rel >= 0.0f) || !(convergence_step_m >= 0.0f))
         return invalidArgument("icp convergence thresholds must be >= 0");
     if (min_inliers < 6) return invalidArgument("icp min_inliers must be >= 6 (six unknowns)");
+    if (std::isnan(model_offset_ridge) || std::isinf(model_offset_ridge))
+        return invalidArgument("icp model_offset_ridge must be finite (negative: no offset unknown)");
     if (!(min_inlier_share >= 0.0f && min_inlier_share <= 1.0f))
         return invalidArgument("icp min_inlier_share must be in [0, 1]");
     if (!(max_rmse_m > 0.0f) || !(max_translation_m > 0.0f) || !(max_rotation_deg > 0.0f))
@@ -94,6 +115,10 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
     // l pairs with the model level of its own size, or with the model's finest where the source is finer.
     const int model_shift =
         pyramidLevelOfWidth(source.levels[0].k.width_px, model_world.levels[0].k.width_px, kMaxPyramidLevels);
+    // IcpParams::model_offset_ridge: a seventh unknown, the model's offset along its normals (metres, > 0 = the
+    // model lies in front of the frame's surface). It starts at 0 on every frame and carries over the levels.
+    const bool with_offset = params_.model_offset_ridge >= 0.0f;
+    double offset_m = 0.0;
     Pose estimate = T_world_camera;
     const Pose T_model_world = T_world_model.inverse();
 
@@ -119,7 +144,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
                 for (int s = s_lo; s < s_hi; ++s) {
                     // Summed on this thread's stack and stored once: adjacent stripes' partials share cache lines,
                     // and two threads accumulating into them pair by pair slowed ICP by a third.
-                    std::array<double, 32> acc{};
+                    std::array<double, 40> acc{};
                     const int v0 = src.roi.y + rows * s / kStripes, v1 = src.roi.y + rows * (s + 1) / kStripes;
                     for (int v = v0 + (stride - v0 % stride) % stride; v < v1; v += stride) {
                         const auto* vs = src.vertex.ptr<cv::Vec3f>(v);
@@ -146,58 +171,62 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
                             if ((s_w - d_w).squaredNorm() > dist_gate2) continue;
                             const Eigen::Vector3f n_s = r_wc * Eigen::Vector3f(ns[u][0], ns[u][1], ns[u][2]);
                             if (n_s.dot(n_d) < cos_gate) continue;
-                            // Eq. 4.17-4.18: A_i = [s x n, n], b_i = n.(d - s).
+                            // Eq. 4.17-4.18: A_i = [s x n, n], b_i = n.(d - s); with the offset unknown, A_i gains
+                            // a 1: the model's surface, moved back by the offset, is d - offset n.
                             const float b = n_d.dot(d_w - s_w);
                             const Eigen::Vector3f sxn = s_w.cross(n_d);
-                            const double a[6] = {sxn.x(), sxn.y(), sxn.z(), n_d.x(), n_d.y(), n_d.z()};
-                            const float abs_b = std::fabs(b);
-                            const double w = (huber > 0.0f && abs_b > huber) ? huber / abs_b : 1.0;
-                            // Fully unrolled (straight-line multiply-adds): this is the loop's hottest part.
-                            int k = 0;
-#pragma GCC unroll 6
-                            for (int i = 0; i < 6; ++i) {
-                                const double wai = w * a[i];
-#pragma GCC unroll 6
-                                for (int j = i; j < 6; ++j) acc[k++] += wai * a[j];  // A^T A, upper (eq. 4.20)
-                                acc[21 + i] += wai * b;                              // A^T b
+                            const double a[7] = {sxn.x(), sxn.y(), sxn.z(), n_d.x(), n_d.y(), n_d.z(), 1.0};
+                            const double residual = static_cast<double>(b) - offset_m;
+                            const double abs_r = std::fabs(residual);
+                            const double w = (huber > 0.0f && abs_r > huber) ? huber / abs_r : 1.0;
+                            if (with_offset) {
+                                accumulatePair<7>(acc, a, w, b);
+                            } else {
+                                accumulatePair<6>(acc, a, w, b);
                             }
-                            acc[27] += static_cast<double>(b) * b;  // eq. 4.21 error
-                            acc[28] += 1.0;
+                            acc[kErrorSlot] += residual * residual;  // eq. 4.21 error
+                            acc[kCountSlot] += 1.0;
                         }
                     }
                     partial_[s] = acc;
                 }
             });
-            std::array<double, 32> sum{};
+            std::array<double, 40> sum{};
             for (const auto& part : partial_)
-                for (int i = 0; i < 29; ++i) sum[i] += part[i];
-            const int count = static_cast<int>(sum[28]);
+                for (int i = 0; i <= kCountSlot; ++i) sum[i] += part[i];
+            const int count = static_cast<int>(sum[kCountSlot]);
             ++result.iterations;
             if (count < 6) {
                 if (level == finest) last_inliers = count * stride * stride;
                 break;  // nothing to solve at this level; a finer one may still have pairs
             }
-            Eigen::Matrix<double, 6, 6> ata;
-            Eigen::Matrix<double, 6, 1> atb;
+            const int n = with_offset ? 7 : 6;
+            Eigen::Matrix<double, 7, 7> ata = Eigen::Matrix<double, 7, 7>::Identity();
+            Eigen::Matrix<double, 7, 1> atb = Eigen::Matrix<double, 7, 1>::Zero();
             int k = 0;
-            for (int i = 0; i < 6; ++i) {
-                for (int j = i; j < 6; ++j) ata(i, j) = ata(j, i) = sum[k++];
-                atb[i] = sum[21 + i];
+            for (int i = 0; i < n; ++i) {
+                for (int j = i; j < n; ++j) ata(i, j) = ata(j, i) = sum[k++];
             }
+            for (int i = 0; i < n; ++i) atb[i] = sum[k++];
             // A sphere, a plane or a cylinder leaves some combination of the six unknowns unconstrained (A^T A
             // nearly singular). Cholesky then returns whatever the rounding makes of it, a different large motion
             // with and without FMA. A damping of 1e-6 of the mean diagonal keeps such directions still and changes
             // the constrained ones by a relative 1e-6 at most.
-            ata.diagonal().array() += 1e-6 * ata.trace() / 6.0;
-            // Eq. 4.20 by Cholesky, as the thesis does.
-            const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(ata);
-            const Eigen::Matrix<double, 6, 1> x = llt.solve(atb);
-            if (llt.info() != Eigen::Success || !x.allFinite()) {
+            ata.diagonal().head<6>().array() += 1e-6 * ata.topLeftCorner<6, 6>().trace() / 6.0;
+            // The offset's prior (IcpParams::model_offset_ridge): a share of the pairs' own weight pulls it to 0.
+            // Its column is all ones (the weights' sum on the diagonal), so it stays positive definite.
+            if (with_offset) ata(6, 6) *= 1.0 + static_cast<double>(params_.model_offset_ridge);
+            // Eq. 4.20 by Cholesky, as the thesis does (the unused seventh row is the identity's: x[6] = 0).
+            const Eigen::LLT<Eigen::Matrix<double, 7, 7>> llt(ata);
+            const Eigen::Matrix<double, 7, 1> x7 = llt.solve(atb);
+            if (llt.info() != Eigen::Success || !x7.allFinite()) {
                 solve_failed = true;
                 break;
             }
+            const Eigen::Matrix<double, 6, 1> x = x7.head<6>();
+            if (with_offset) offset_m = x7[6];
             estimate = incrementFromX(x) * estimate;  // eq. 4.13
-            const double error = sum[27] / count;
+            const double error = sum[kErrorSlot] / count;
             if (level == finest) {
                 last_inliers = count * stride * stride;  // the pixels the sampled pairs stand for
                 last_error = error;
@@ -227,6 +256,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
         for (int u = s0.roi.x; u < s0.roi.x + s0.roi.width; ++u) source_valid += std::isnan(row[u][0]) ? 0 : 1;
     }
     result.inliers = last_inliers;
+    result.model_offset_m = static_cast<float>(offset_m);
     result.rmse_m = static_cast<float>(std::sqrt(last_error));
     if (solve_failed || !estimate.matrix().allFinite()) {
         result.status = TrackingStatus::kDiverged;

@@ -21,6 +21,7 @@ RaycastParams windowCast(const ReacquireParams& p) {
 
 // One level, wide gates: a hypothesis may be half a step (6 deg) and the centroid guess a few cm off.
 IcpParams coarseIcp(IcpParams p) {
+    p.model_offset_ridge = -1.0f;  // the pose alone: a hypothesis is judged by how well the head's shape fits
     p.levels = 1;
     p.iterations[0] = 10;
     p.dist_gate_m[0] = 0.10f;
@@ -34,6 +35,7 @@ IcpParams coarseIcp(IcpParams p) {
 
 // Levels 1 and 2 of the frame, tighter gates: from a coarse fit to within a millimetre or so.
 IcpParams refineIcp(IcpParams p) {
+    p.model_offset_ridge = -1.0f;
     p.levels = 2;
     p.iterations[0] = 10;
     p.iterations[1] = 10;

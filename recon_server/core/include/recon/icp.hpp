@@ -30,6 +30,7 @@ struct TrackingResult {
     float rmse_m = 0.0f;                     // metres; point-to-plane RMS of the inliers at the finest level used
     int inliers = 0;                         // count; pairs at the finest level used, last iteration (x stride^2)
     int iterations = 0;                      // count; iterations run over all levels
+    float model_offset_m = 0.0f;  // metres; the model's offset found (IcpParams::model_offset_ridge), > 0 = in front
     bool ok() const { return status == TrackingStatus::kTracked || status == TrackingStatus::kFirstFrame; }
 };
 
@@ -45,6 +46,19 @@ struct IcpParams {
     // Residual scale of the robust (Huber) weight (metres; 0 = plain least squares as in the thesis). Pairs that
     // pass the gates but sit far off the tangent plane (hair, silhouette) then pull less.
     float huber_m = 0.003f;
+    // Frame-to-model ICP cannot tell a model grown uniformly thicker from a camera moved away from it: with the
+    // pose alone as the unknown, a bias of the model's thickness moves the camera, the frame is fused where the
+    // model already was, and the bias stays. A seventh unknown, the model's offset along its normals, takes part of
+    // that up instead. On a face only the turn of the normals tells the offset from a translation along the view,
+    // and on a nearly flat patch the two are one motion, so a prior holds the offset at 0 with this share of the
+    // pairs' own weight. Negative: the thesis' six unknowns. Against six unknowns, the synthetic sensors' gentle
+    // turn, wide turn and orbit (facescan-bench recon --input synthetic:sensor=S,scenario=M,frames=300,
+    // subject=auto --gt-accuracy --mask pipeline), model error in mm: Kinect v1 0.081 / 0.087 / 0.084 -> 0.077 /
+    // 0.082 / 0.078, Azure Kinect 0.148 / 0.143 / 0.154 -> 0.141 / 0.134 / 0.139, near-range 0.109 / 0.148 /
+    // 0.099 -> 0.100 / 0.158 / 0.098, D415 0.047 / 0.046 / 0.043 -> 0.050 / 0.047 / 0.040 (docs/benchmarks.md,
+    // "The model's offset as an unknown of ICP"). A share of 0.01 let the offset trade against the translation
+    // (near-range wide turn 0.19 mm); 0.1 to 0.3 read alike.
+    float model_offset_ridge = 0.1f;
     // pixels; the finest level pairs every n-th pixel of every n-th row. Its neighbours are nearly the same
     // constraint (the bilateral filter already averaged them), and the coarser levels have brought the pose within
     // a fraction of a voxel. 2 against 1, 5 seeds of each synthetic scenario (facescan-bench recon --input
@@ -89,9 +103,10 @@ class Icp {
     const IcpParams& params() const { return params_; }
 
  private:
-    struct Reduction;  // the 21 + 6 sums of A^T A and A^T b (eq. 4.20), error and count
     IcpParams params_;
-    std::vector<std::array<double, 32>> partial_;  // one row per stripe of the parallel reduction
+    // One row per stripe of the parallel reduction: A^T A's upper triangle and A^T b (eq. 4.20) for up to 7
+    // unknowns (28 + 7 sums), then the error and the pair count.
+    std::vector<std::array<double, 40>> partial_;
 };
 
 }  // namespace facescan::recon
