@@ -13,14 +13,11 @@ constexpr int kStripes = 16;  // fixed stripe count: the reduction sums in the s
 constexpr double kDegToRad = M_PI / 180.0;
 constexpr float kMaxPixel = 1 << 20;  // pixels; beyond any image
 
-// Slots of a stripe's partial sums: the upper triangle of A^T A, then A^T b (eq. 4.20), for 6 unknowns (the pose)
-// or 7 (the pose and the model's offset); then the error of eq. 4.21 and the pair count, at fixed slots.
-constexpr int kErrorSlot = 35, kCountSlot = 36;
-
-// One pair's row a (weight w, right-hand side b) into the normal equations of N unknowns. Fully unrolled
-// (straight-line multiply-adds): this is the loop's hottest part.
-template <int N>
-inline void accumulatePair(std::array<double, 40>& acc, const double* a, double w, double b) {
+// One pair's row a (weight w, right-hand side b) into the normal equations of N unknowns, 6 (the pose) or 7 (and
+// the model's offset): the upper triangle of A^T A, then A^T b (eq. 4.20). Fully unrolled (straight-line
+// multiply-adds): this is the loop's hottest part.
+template <int N, size_t Size>
+inline void accumulatePair(std::array<double, Size>& acc, const double* a, double w, double b) {
     constexpr int kRhs = N * (N + 1) / 2;
     int k = 0;
 #pragma GCC unroll 7
@@ -81,7 +78,7 @@ Status IcpParams::validate() const {
     if (!(convergence_rel >= 0.0f) || !(convergence_step_m >= 0.0f))
         return invalidArgument("icp convergence thresholds must be >= 0");
     if (min_inliers < 6) return invalidArgument("icp min_inliers must be >= 6 (six unknowns)");
-    if (std::isnan(model_offset_ridge) || std::isinf(model_offset_ridge))
+    if (!std::isfinite(model_offset_ridge))
         return invalidArgument("icp model_offset_ridge must be finite (negative: no offset unknown)");
     if (!(min_inlier_share >= 0.0f && min_inlier_share <= 1.0f))
         return invalidArgument("icp min_inlier_share must be in [0, 1]");
@@ -144,7 +141,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
                 for (int s = s_lo; s < s_hi; ++s) {
                     // Summed on this thread's stack and stored once: adjacent stripes' partials share cache lines,
                     // and two threads accumulating into them pair by pair slowed ICP by a third.
-                    std::array<double, 40> acc{};
+                    Partial acc{};
                     const int v0 = src.roi.y + rows * s / kStripes, v1 = src.roi.y + rows * (s + 1) / kStripes;
                     for (int v = v0 + (stride - v0 % stride) % stride; v < v1; v += stride) {
                         const auto* vs = src.vertex.ptr<cv::Vec3f>(v);
@@ -191,7 +188,7 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
                     partial_[s] = acc;
                 }
             });
-            std::array<double, 40> sum{};
+            Partial sum{};
             for (const auto& part : partial_)
                 for (int i = 0; i <= kCountSlot; ++i) sum[i] += part[i];
             const int count = static_cast<int>(sum[kCountSlot]);

@@ -104,9 +104,13 @@ class Icp {
 
  private:
     IcpParams params_;
-    // One row per stripe of the parallel reduction: A^T A's upper triangle and A^T b (eq. 4.20) for up to 7
-    // unknowns (28 + 7 sums), then the error and the pair count.
-    std::vector<std::array<double, 40>> partial_;
+    // One row per stripe of the parallel reduction: A^T A's upper triangle and A^T b (eq. 4.20) for up to
+    // kMaxUnknowns unknowns, then the error and the pair count; padded to whole 64-byte cache lines.
+    static constexpr int kMaxUnknowns = 7;  // the pose's six and the model's offset
+    static constexpr int kErrorSlot = kMaxUnknowns * (kMaxUnknowns + 1) / 2 + kMaxUnknowns;
+    static constexpr int kCountSlot = kErrorSlot + 1;
+    using Partial = std::array<double, (kCountSlot + 1 + 7) / 8 * 8>;
+    std::vector<Partial> partial_;
 };
 
 }  // namespace facescan::recon
