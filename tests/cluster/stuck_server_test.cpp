@@ -14,6 +14,8 @@
 //     the standby waits until it hears from the agent again, then continues the scan, whole.
 //   - a standby cut off from the other servers but not from the agent takes nothing over: the agent says that it
 //     still streams to its owner.
+//   - an owner whose claims lapse at the others while it goes on announcing itself (FACESCAN_FAILPOINT holds its
+//     claims back) keeps its live scan: its standby waits for the claim to come back instead of taking over.
 #include <gtest/gtest.h>
 
 #include <csignal>
@@ -392,6 +394,57 @@ TEST(StuckServer, AStandbyCutOffFromTheServersButNotFromTheAgentTakesNothingOver
     }
     EXPECT_EQ(readText(rig.serverLog(owner)).find("session rec: gave it up"), std::string::npos)
         << readText(rig.serverLog(owner));
+}
+
+// On a loaded CI machine two owners' claims lapsed at their standby while both owners still announced themselves,
+// and the standby took their live scans over: one went on from a copy 76 frames old, one started over. Here the
+// owner's claims are held back (FACESCAN_FAILPOINT) until the standby has seen the claim lapse and heard the owner
+// since; the standby waits up to a lease for the claim, which comes back, and the owner keeps the scan to the end.
+TEST(StuckServer, AnOwnerHeardAfterItsClaimLapsedKeepsItsLiveScan) {
+    ClusterRig rig("silentclaims", 69);
+    for (const std::string id : {"srv-a", "srv-b"}) {
+        const std::string silent = (rig.dir() / ("silent-" + id)).string();
+        ::setenv("FACESCAN_FAILPOINT", ("claims-silent-when-file:" + silent).c_str(), 1);
+        rig.startServer(id);
+    }
+    ::unsetenv("FACESCAN_FAILPOINT");
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    rig.startAgent("live", 3000, "10", ",period=900");  // a live scan at 10 Hz: it streams until Ctrl-C
+    const std::string owner = rig.waitForOwner("live", 30s);
+    ASSERT_FALSE(owner.empty()) << readText(rig.agentLog("live"));
+    const std::string other = owner == "srv-a" ? "srv-b" : "srv-a";
+    ASSERT_TRUE(waitUntil(
+        [&] { return readText(rig.agentLog("live")).find("(standby " + other + ")") != std::string::npos; }, 60s))
+        << readText(rig.agentLog("live"));
+    const fs::path silent = rig.dir() / ("silent-" + owner);
+    std::ofstream(silent).put('\n');
+    const std::string held = "session live: owner '" + owner + "' was heard again after its claim lapsed here";
+    const std::string taking_over = "session live: owner '" + owner + "' is gone";
+    ASSERT_TRUE(waitUntil(
+        [&] {
+            const std::string log = readText(rig.serverLog(other));
+            return log.find(held) != std::string::npos || log.find(taking_over) != std::string::npos;
+        },
+        30s))
+        << readText(rig.serverLog(other));
+    fs::remove(silent);
+    EXPECT_NE(readText(rig.serverLog(other)).find(held), std::string::npos) << readText(rig.serverLog(other));
+    // The claim is written again within a sixth of a lease, and the agent streams to its owner again.
+    const int before = rig.published("live");
+    EXPECT_TRUE(waitUntil(
+        [&] {
+            return rig.published("live") >= before + 20 &&
+                   lastMatch(readText(rig.agentLog("live")), "\\| owner ([a-z-]+)") == owner;
+        },
+        60s))
+        << readText(rig.agentLog("live"));
+    rig.agent("live").signal(SIGINT);
+    ASSERT_EQ(rig.agent("live").wait(120s), 0) << readText(rig.agentLog("live"));
+    const fs::path summary = rig.dataDir(owner) / "live" / "summary.json";
+    ASSERT_TRUE(waitUntil([&] { return fs::exists(summary); }, 30s)) << readText(rig.serverLog(owner));
+    EXPECT_NE(readText(summary).find("\"failovers\": 0"), std::string::npos) << readText(summary);
+    EXPECT_FALSE(fs::exists(rig.dataDir(other) / "live")) << readText(rig.serverLog(other));
+    EXPECT_EQ(readText(rig.serverLog(other)).find(taking_over), std::string::npos) << readText(rig.serverLog(other));
 }
 
 }  // namespace

@@ -73,6 +73,7 @@ Status Server::start() {
     }
     if (const char* fp = std::getenv("FACESCAN_FAILPOINT")) {
         if (auto file = failpointArg("intake-stall-when-file")) stall_file_ = *file;
+        if (auto file = failpointArg("claims-silent-when-file")) claims_silent_file_ = *file;
         std::fprintf(stderr, "facescan-server: FACESCAN_FAILPOINT=%s (fault injection for tests)\n", fp);
     }
     Watchdog::Options watch;
@@ -90,10 +91,7 @@ Status Server::start() {
     Cluster::Options cluster;
     cluster.server_id = params_.server_id;
     cluster.lease_s = static_cast<double>(lease_ns_) * 1e-9;
-    cluster.progressing = [this] {
-        const int64_t since = intake_beat_->busySinceNs();
-        return since == 0 || steadyNowNs() - since < lease_ns_ / 3;
-    };
+    cluster.progressing = [this] { return claimsMayBeWritten(); };
     cluster.max_sessions = params_.max_sessions;
     cluster.join_settle_s = params_.join_settle_s;
     cluster.domain = params_.domain;

@@ -141,6 +141,13 @@ void Server::failpoint() {
     while (!stopping_) std::this_thread::sleep_for(std::chrono::milliseconds(100));
 }
 
+bool Server::claimsMayBeWritten() const {
+    std::error_code ec;
+    if (!claims_silent_file_.empty() && std::filesystem::exists(claims_silent_file_, ec)) return false;
+    const int64_t since = intake_beat_->busySinceNs();
+    return since == 0 || steadyNowNs() - since < lease_ns_ / 3;
+}
+
 void Server::onStall(const std::string& what) {
     std::fprintf(stderr,
                  "facescan-server: stuck: %s. Exiting with status %d so that the service manager restarts this "

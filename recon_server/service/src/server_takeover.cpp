@@ -69,6 +69,9 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                     "' looks gone here, but its agent still streams to it: nothing is taken over");
             continue;
         }
+        // An owner heard again after its claim lapsed here is alive: the scan waits up to a lease for its claim to
+        // come back, a recording and a live scan alike (ownerHeardAgain says why).
+        if (!known_dead && ownerHeardAgain(id, view.data.owner_id, gone_since_ns)) continue;
         std::optional<wire::ReplicaData> standby;
         if (view.data.standby_id == params_.server_id) standby = replicator_->standbyCopy(id);
         const auto disk = resumable_.find(id);
@@ -78,13 +81,6 @@ void Server::takeOverOrphans(const std::map<std::string, OwnerView>& owners) {
                               ? !candidate->second.camera.every_frame
                               : (standby && !standby->camera.every_frame) ||
                                     (disk != resumable_.end() && !disk->second.camera.every_frame);
-        // A live scan whose agent is gone is being finished by its owner: held like a recording, or a server whose
-        // view of that owner's claim lapsed while the owner lived (it was frozen, or cut off) replaces the owner's
-        // whole result with one from its older copy. (The soaks' splits of this kind came from claims that lapsed
-        // when their server withdrew another one, fixed in wire::withClaimLiveliness; a freeze or a cut still does
-        // it.) While its agent streams, a live scan is not held: the wait would stall it.
-        const bool hold_if_heard = !live || !agentLives(id);
-        if (!known_dead && hold_if_heard && ownerHeardAgain(id, view.data.owner_id, gone_since_ns)) continue;
         // The agent's own account counts as much as the claim's: it may have followed a newer owner than this
         // view shows, or dropped frames that an owner confirmed after the last claim this server saw.
         wire::SessionOwnerData last = view.data;
@@ -329,13 +325,20 @@ bool Server::witnessed(const std::string& session_id, int64_t owner_gone_since_n
 
 bool Server::ownerHeardAgain(const std::string& session_id, const std::string& owner_id, int64_t gone_since_ns) {
     // The owner announced itself after its claim lapsed here: it is alive (woken from a freeze, back from a cut, or
-    // its DDS threads were starved), and its claim reads alive again once it writes it. A recording taken over now
-    // would be taken from a live owner on the strength of the owner's own sign of life: in a 30-minute chaos soak a
-    // standby took two recordings over 1 ms after it heard their owner, woken from a 9 s freeze, and both servers
-    // finished them. So the takeover waits a lease for the claim to come back. An owner heard for that long whose
-    // claim stays lapsed cannot write it: taken over as before. (Live scans whose agent streams are not held:
-    // their old owner gives up without writing anything, so a takeover costs at most the frames of the gap, and
-    // the wait would stall them.)
+    // its DDS threads were starved), and its claim reads alive again once it writes it. A scan taken over now would
+    // be taken from a live owner on the strength of the owner's own sign of life, so the takeover waits a lease for
+    // the claim to come back. An owner heard for that long whose claim stays lapsed cannot write it: taken over as
+    // before.
+    // - A recording: in a 30-minute chaos soak a standby took two recordings over 1 ms after it heard their owner,
+    //   woken from a 9 s freeze, and both servers finished them.
+    // - A live scan whose agent is gone is being finished by its owner: a takeover replaced the owner's whole result
+    //   with one from an older copy.
+    // - A live scan whose agent streams: the new owner goes on from its copy, and the frames since that copy are
+    //   gone for good (a live agent keeps none), all of them when the owner had no copy out yet. On a loaded CI
+    //   machine two owners' claims lapsed at once while both still announced themselves, and their standby took
+    //   three live scans over: one went on from a copy 76 frames old, one started over and ended with 3 frames.
+    //   The wait stalls the scan by a lease at most: the agent streams to nobody while no claim is alive, whether
+    //   the old owner's comes back or a new one is made.
     const int64_t now = steadyNowNs();
     if (cluster_->lastHeard(owner_id) <= gone_since_ns) {
         owner_back_since_ns_.erase(session_id);

@@ -251,6 +251,10 @@ class Server {
     // the intake thread stops for good once PATH exists, a real stall of a real thread that the watchdog and the
     // cluster must handle. Unset in production.
     void failpoint();
+    // Whether a claim's write may go out now (Claim's `progressing`): the intake makes progress, and
+    // FACESCAN_FAILPOINT=claims-silent-when-file:PATH does not hold the claims back (PATH exists: their liveliness
+    // lapses at the others while this server announces itself, as when its DDS traffic is starved).
+    bool claimsMayBeWritten() const;
     void loadResumable();
     std::shared_ptr<OwnedSession> owned(const std::string& session_id) const;
     std::vector<std::shared_ptr<OwnedSession>> ownedSessions() const;
@@ -283,6 +287,7 @@ class Server {
     std::atomic<int64_t> last_progress_ns_{0};     // intake thread: when liveliness was last asserted
     std::atomic<int64_t> hold_until_ns_{0};        // steady clock: after a long pause, its own sessions wait until then
     std::filesystem::path stall_file_;             // FACESCAN_FAILPOINT; empty: none
+    std::filesystem::path claims_silent_file_;     // FACESCAN_FAILPOINT; empty: none
     wire::Entity waitset_;
     wire::Entity wake_;  // guard condition: queue space freed, an engine built, or shutdown
 
