@@ -56,6 +56,13 @@ void ReplayBuffer::popBack() {
     frames_.pop_back();
 }
 
+uint32_t ReplayBuffer::nextAfterFrames(uint32_t otherwise) const {
+    for (auto e = frames_.rbegin(); e != frames_.rend(); ++e) {
+        if (!e->end_of_stream) return e->frame.seq + 1;
+    }
+    return otherwise;
+}
+
 void ReplayBuffer::dropBefore(uint32_t seq) {
     while (!frames_.empty() && frames_.front().frame.seq < seq) {
         bytes_ -= frames_.front().frame.bytes();
@@ -308,6 +315,14 @@ std::vector<wire::EncodedFrame> SessionStream::unconfirmed() {
     });
     frames.insert(frames.end(), unsent_.begin(), unsent_.end());
     return frames;
+}
+
+uint32_t SessionStream::nextSeq() const {
+    // A recording's frame whose write an owner change cut short is kept, not written, and goes to the next owner
+    // before the end of the stream: the end comes after it. Numbered after the frames written alone, the end took
+    // that frame's number when it was the last one, every later owner dropped it as a duplicate, and the scan was
+    // never finished (a chaos soak's recording of 120 frames, all integrated by four owners in turn, lost).
+    return std::max(next_seq_, kept_.nextAfterFrames(0));
 }
 
 StreamState SessionStream::state() const { return state_; }

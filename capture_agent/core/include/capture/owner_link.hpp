@@ -66,6 +66,8 @@ class ReplayBuffer {
     bool empty() const { return frames_.empty(); }
     // The oldest frame kept; `otherwise` when none is.
     uint32_t firstSeq(uint32_t otherwise) const { return frames_.empty() ? otherwise : frames_.front().frame.seq; }
+    // One past the newest frame kept (not the end of the stream); `otherwise` when none is.
+    uint32_t nextAfterFrames(uint32_t otherwise) const;
     // Calls fn(frame, end_of_stream) for every kept frame from `seq` on, in order; stops when fn returns false.
     template <typename Fn>
     void forEachFrom(uint32_t seq, Fn&& fn) const {
@@ -130,9 +132,10 @@ class SessionStream {
     // The recording frames that no owner has confirmed (the latest claim's confirmed_seq read now), then the
     // ones a stop kept from being sent, in order, without the end of the stream.
     std::vector<wire::EncodedFrame> unconfirmed();
-    // The frame after the last one sent: the end of the stream's seq. A recording's owner takes frames in order
-    // only, so a larger one would make it ask for frames that will never come.
-    uint32_t nextSeq() const { return next_seq_; }
+    // The frame after the last one sent or kept for sending: the end of the stream's seq. A recording's owner takes
+    // frames in order only, so a larger one would make it ask for frames that will never come, and a smaller one
+    // is dropped as a duplicate of a frame.
+    uint32_t nextSeq() const;
     StreamState state() const;
     // The epoch of the owner serving the session now (0: none), without copying the whole state: asked per frame.
     uint32_t servingEpoch() const;
