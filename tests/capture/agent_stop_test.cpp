@@ -17,6 +17,7 @@
 #include "capture/frame_source.hpp"
 #include "capture/tum_recorder.hpp"
 #include "child_process.hpp"
+#include "must.hpp"
 #include "test_domain.hpp"
 #include "wire/cluster_codec.hpp"
 #include "wire/messages.hpp"
@@ -31,15 +32,7 @@ using facescan::testing::ChildProcess;
 using facescan::testing::privateDomain;
 using facescan::testing::readText;
 
-// The value of a set-up step that cannot fail in a working build (the test stops here when it does).
-template <typename T>
-T must(StatusOr<T> made) {
-    if (!made.isOk()) {
-        ADD_FAILURE() << made.status().toString();
-        std::abort();
-    }
-    return std::move(made).value();
-}
+using facescan::testing::must;
 
 std::vector<cv::Mat> expectedDepth(const std::string& spec) {
     auto source = openSource(spec, SourceOptions{});

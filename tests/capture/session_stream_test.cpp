@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "capture/owner_link.hpp"
+#include "must.hpp"
 #include "test_domain.hpp"
 #include "wire/cluster_codec.hpp"
 #include "wire/messages.hpp"
@@ -21,14 +22,7 @@ namespace {
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
-template <typename T>
-T must(StatusOr<T> made) {
-    if (!made.isOk()) {
-        ADD_FAILURE() << made.status().toString();
-        std::abort();
-    }
-    return std::move(made).value();
-}
+using facescan::testing::must;
 
 // A server owning the session at `epoch`: its claim and its frame reader in the session's partition. A reader of
 // `reader_samples` (> 0) that never takes stops acknowledging frames, as a stuck owner's does.
