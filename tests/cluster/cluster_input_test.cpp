@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "sample_replica.hpp"
+#include "scratch_dir.hpp"
 #include "service/server.hpp"
 #include "test_agent.hpp"
 
@@ -21,8 +22,7 @@ using testing::privateDomain;
 ServerParams inputParams(uint32_t domain, const std::string& id) {
     ServerParams p;
     p.domain = {domain, "loopback"};
-    p.data_dir = std::filesystem::temp_directory_path() / ("facescan-input-" + id + "-" + std::to_string(getpid()));
-    std::filesystem::remove_all(p.data_dir);
+    p.data_dir = testing::scratchDir("facescan-input-" + id);  // removed once the test passed
     p.server_id = id;
     p.preset = "fast";
     p.recon = recon::ReconParams::fast();

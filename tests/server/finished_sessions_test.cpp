@@ -13,6 +13,7 @@
 #include <regex>
 #include <thread>
 
+#include "scratch_dir.hpp"
 #include "server_rig.hpp"
 #include "service/server.hpp"
 #include "test_agent.hpp"
@@ -31,9 +32,7 @@ using testing::TestClient;
 ServerParams testParams(uint32_t domain, const std::string& name) {
     ServerParams p;
     p.domain = {domain, "loopback"};
-    p.data_dir =
-        std::filesystem::temp_directory_path() / ("facescan-finished-" + std::to_string(getpid()) + "-" + name);
-    std::filesystem::remove_all(p.data_dir);
+    p.data_dir = testing::scratchDir("facescan-finished-" + name);  // removed once the test passed
     p.server_id = "test-server";
     p.snapshot_hz = 2.0f;
     p.join_settle_s = 0.3f;  // a lone server on loopback has nobody to wait for

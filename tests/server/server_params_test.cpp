@@ -9,6 +9,7 @@
 #include <fstream>
 
 #include "sample_replica.hpp"
+#include "scratch_dir.hpp"
 #include "service/replica_log.hpp"
 #include "service/session.hpp"
 #include "service/session_store.hpp"
@@ -16,12 +17,9 @@
 namespace facescan::service {
 namespace {
 
+// Removed once the test passed (scratch_dir.hpp).
 std::filesystem::path tempDir(const std::string& name) {
-    const auto dir =
-        std::filesystem::temp_directory_path() / ("facescan-server-test-" + std::to_string(getpid()) + "-" + name);
-    std::filesystem::remove_all(dir);
-    std::filesystem::create_directories(dir);
-    return dir;
+    return testing::scratchDir("facescan-server-test-" + name, /*create=*/true);
 }
 
 TEST(ServerParams, DefaultsAreMeyersAndValid) {

@@ -23,6 +23,7 @@
 #include <thread>
 
 #include "recon/indexed_mesh.hpp"
+#include "scratch_dir.hpp"
 #include "server_rig.hpp"
 #include "service/frame_load.hpp"
 #include "test_agent.hpp"
@@ -39,11 +40,9 @@ using testing::StatusCopy;
 using testing::TestAgent;
 using testing::TestClient;
 
+// Removed once the test passed (scratch_dir.hpp).
 std::filesystem::path tempDataDir(const std::string& name) {
-    const auto dir =
-        std::filesystem::temp_directory_path() / ("facescan-server-data-" + std::to_string(getpid()) + "-" + name);
-    std::filesystem::remove_all(dir);
-    return dir;
+    return testing::scratchDir("facescan-server-data-" + name);
 }
 
 ServerParams testParams(uint32_t domain, const std::string& name) {

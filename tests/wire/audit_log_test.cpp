@@ -11,14 +11,14 @@
 #include <fstream>
 #include <thread>
 
+#include "scratch_dir.hpp"
+
 namespace facescan::wire {
 namespace {
 
+// In a folder of the test's own, removed once the test passed (scratch_dir.hpp).
 std::filesystem::path tempFile(const std::string& name) {
-    const auto dir = std::filesystem::temp_directory_path() / ("facescan-audit-" + std::to_string(getpid()));
-    std::filesystem::create_directories(dir);
-    std::filesystem::remove(dir / name);
-    return dir / name;
+    return facescan::testing::scratchDir("facescan-audit-" + name, /*create=*/true) / name;
 }
 
 TEST(AuditLog, TwoWritersAppendWholeRecordsToAPrivateFileThatOnlyGrows) {
