@@ -7,7 +7,8 @@
 # lease + 5 s = 8 s), the live scans' time from a fault to progress again, and the servers' resident memory: each
 # minute under load, and at an idle checkpoint every 5 minutes (no new scan and no fault until no server holds an
 # open session; these minutes come on top of MINUTES). Target: s1's idle memory grows under 5 % from its first
-# checkpoint (5 min) to its last; under load its memory follows the sessions it holds at that instant, so the load
+# checkpoint (5 min) to its last, checked for every server process followed over 10 minutes of checkpoints or more
+# (so from a 16-minute soak on); under load its memory follows the sessions it holds at that instant, so the load
 # figures are printed for information. The run is tests/cluster/chaos_test.cpp's ChaosSoak; the seed is printed
 # first (FACESCAN_CHAOS_SEED=N replays the schedule).
 #   usage: tests/bench/chaos.sh [MINUTES]
