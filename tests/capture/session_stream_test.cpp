@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "capture/owner_link.hpp"
+#include "fake_owner.hpp"
 #include "must.hpp"
 #include "test_domain.hpp"
 #include "wire/cluster_codec.hpp"
@@ -22,52 +23,8 @@ namespace {
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
+using facescan::testing::FakeOwner;
 using facescan::testing::must;
-
-// A server owning the session at `epoch`: its claim and its frame reader in the session's partition. A reader of
-// `reader_samples` (> 0) that never takes stops acknowledging frames, as a stuck owner's does.
-struct Owner {
-    Owner(uint32_t domain, const std::string& session, const std::string& id, uint32_t epoch, int reader_samples = 0)
-        : participant(must(wire::Participant::create({domain, "loopback"}))),
-          owner_topic(must(wire::Topic<facescan_wire_SessionOwner>::create(participant))),
-          frame_topic(must(wire::Topic<facescan_wire_RgbdFrame>::create(participant))) {
-        data.session_id = session;
-        data.owner_id = id;
-        data.epoch = epoch;
-        data.state = wire::OwnerState::kReady;
-        wire::Qos qos = wire::frameReaderQos();
-        if (reader_samples > 0) {
-            dds_qset_resource_limits(qos.get(), reader_samples, DDS_LENGTH_UNLIMITED, reader_samples);
-        }
-        frame_reader.emplace(
-            must(wire::Reader<facescan_wire_RgbdFrame>::create(frame_topic, &qos, wire::sessionPartition(session))));
-        const wire::Qos claim_qos = wire::claimWriterQos(wire::claimStrength(epoch, id, session));
-        claim_writer.emplace(must(wire::Writer<facescan_wire_SessionOwner>::create(owner_topic, &claim_qos)));
-    }
-    void claim() { EXPECT_TRUE(claim_writer->write(wire::toMessage(data)).isOk()); }
-    // (seq, end of stream) of every frame until the end of the stream came (or the timeout).
-    std::vector<std::pair<uint32_t, bool>> takeUntilEnd(std::chrono::seconds timeout) {
-        std::vector<std::pair<uint32_t, bool>> got;
-        const auto deadline = Clock::now() + timeout;
-        bool ended = false;
-        while (!ended && Clock::now() < deadline) {
-            frame_reader->waitForData(100ms);
-            (void)frame_reader->take([&](const facescan_wire_RgbdFrame& m, const dds_sample_info_t& i) {
-                if (!i.valid_data) return;
-                got.emplace_back(m.seq, m.end_of_stream);
-                ended = ended || m.end_of_stream;
-            });
-        }
-        return got;
-    }
-
-    wire::SessionOwnerData data;
-    wire::Participant participant;
-    wire::Topic<facescan_wire_SessionOwner> owner_topic;
-    wire::Topic<facescan_wire_RgbdFrame> frame_topic;
-    std::optional<wire::Reader<facescan_wire_RgbdFrame>> frame_reader;
-    std::optional<wire::Writer<facescan_wire_SessionOwner>> claim_writer;
-};
 
 // Incompressible bytes: the writer's history fills after a few frames that nobody acknowledges.
 wire::EncodedFrame recordingFrame(uint32_t seq) {
@@ -100,13 +57,13 @@ TEST(SessionStream, AnEndAfterAFrameWhoseWriteATakeoverCutShortComesAfterThatFra
     SessionStream stream(must(OwnerLink::create(participant, session)), writer, session, /*every_frame=*/true,
                          /*keep_frames=*/256, /*stalled_after_s=*/60, "the test's domain", [](const std::string&) {});
 
-    std::optional<Owner> stuck(std::in_place, domain, session, "srv-stuck", 1, /*reader_samples=*/1);
+    std::optional<FakeOwner> stuck(std::in_place, domain, session, /*reader_samples=*/1, "srv-stuck", 1);
     stuck->claim();
     const std::atomic<bool> stop{false};
     ASSERT_TRUE(stream.waitUntilServed(stop, 30).isOk());
     // The stuck owner's reader fills, then the writer's history: one write waits. The new owner claims then, with
     // a reader made at that moment, as a server's is when it takes a session over.
-    std::optional<Owner> next;
+    std::optional<FakeOwner> next;
     const auto now_ns = [] {
         return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
     };
@@ -118,7 +75,7 @@ TEST(SessionStream, AnEndAfterAFrameWhoseWriteATakeoverCutShortComesAfterThatFra
             const int64_t since = waiting_since_ns.load();
             if (since != 0 && now_ns() - since > 1'000'000'000) {
                 claimed = true;  // before the claim: the send it cuts short is the last one
-                next.emplace(domain, session, "srv-next", 2);
+                next.emplace(domain, session, /*reader_samples=*/0, "srv-next", 2);
                 next->claim();
                 return;
             }
@@ -140,7 +97,7 @@ TEST(SessionStream, AnEndAfterAFrameWhoseWriteATakeoverCutShortComesAfterThatFra
     wire::EncodedFrame end;
     end.seq = end_seq;
     std::thread finish([&] { EXPECT_TRUE(stream.send(end, /*end_of_stream=*/true, stop, 60).isOk()); });
-    const auto got = next->takeUntilEnd(60s);
+    const auto got = next->takeSeqsUntilEnd(60s);
     finish.join();
     // The new owner gets every frame from the first (nothing confirmed), the one cut short included, then the end.
     ASSERT_FALSE(got.empty());
