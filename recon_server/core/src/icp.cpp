@@ -77,6 +77,8 @@ Status IcpParams::validate() const {
     if (finest_stride_px < 1 || finest_stride_px > 8) return invalidArgument("icp finest_stride_px must be in [1, 8]");
     if (!(convergence_rel >= 0.0f) || !(convergence_step_m >= 0.0f))
         return invalidArgument("icp convergence thresholds must be >= 0");
+    if (!(confident_model_weight >= 0.0f) || !std::isfinite(confident_model_weight))
+        return invalidArgument("icp confident_model_weight must be >= 0 and finite (0: every pair alike)");
     if (min_inliers < 6) return invalidArgument("icp min_inliers must be >= 6 (six unknowns)");
     if (!std::isfinite(model_offset_ridge))
         return invalidArgument("icp model_offset_ridge must be finite (negative: no offset unknown)");
@@ -130,6 +132,9 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
         const float huber = params_.huber_m;
         // Every stride-th pixel of every stride-th row at the finest level (IcpParams::finest_stride_px).
         const int stride = level == 0 ? params_.finest_stride_px : 1;
+        // IcpParams::confident_model_weight: where the model level carries its weights (its finest level).
+        const bool by_confidence = params_.confident_model_weight > 0.0f && dst.weight.size() == dst.vertex.size();
+        const float inv_confident = by_confidence ? 1.0f / params_.confident_model_weight : 0.0f;
         double prev_error = -1.0, prev_prev_error = -1.0;  // eq. 4.21 one and two iterations ago (-1: none)
         for (int it = 0; it < params_.iterations[level]; ++it) {
             // Everything an iteration needs in the model camera: source point -> world (estimate) -> model camera.
@@ -175,7 +180,8 @@ TrackingResult Icp::align(const SurfacePyramid& source, const SurfacePyramid& mo
                             const double a[7] = {sxn.x(), sxn.y(), sxn.z(), n_d.x(), n_d.y(), n_d.z(), 1.0};
                             const double residual = static_cast<double>(b) - offset_m;
                             const double abs_r = std::fabs(residual);
-                            const double w = (huber > 0.0f && abs_r > huber) ? huber / abs_r : 1.0;
+                            double w = (huber > 0.0f && abs_r > huber) ? huber / abs_r : 1.0;
+                            if (by_confidence) w *= std::min(1.0f, dst.weight.at<float>(kv, ku) * inv_confident);
                             if (with_offset) {
                                 accumulatePair<7>(acc, a, w, b);
                             } else {

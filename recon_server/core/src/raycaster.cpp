@@ -39,9 +39,9 @@ struct Bracket {
 // The cell of the first estimate is gathered with the 24 voxels around it once: D there comes from its corners and,
 // when the refined point stays in that cell (nearly always: the step is a fraction of a voxel), the gradient from
 // the same gather; the same values as sampling the cell and then taking the gradient. False where the gradient is
-// unavailable or zero.
+// unavailable or zero. With `weight`, also the accumulated weight W there (trilinear, from the same gather).
 bool surfaceAt(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eigen::Vector3f& dir_vox, const Bracket& b,
-               Eigen::Vector3f& p_vox, Eigen::Vector3f& n) {
+               Eigen::Vector3f& p_vox, Eigen::Vector3f& n, float* weight = nullptr) {
     float s_hit = b.s_front + (b.s_back - b.s_front) * b.d_front / (b.d_front - b.d_back);  // eq. 4.28
     const Eigen::Vector3f p_first = o_vox + dir_vox * s_hit;
     VoxelBlockGrid::CrossCell cross;
@@ -57,12 +57,10 @@ bool surfaceAt(const VoxelBlockGrid& g, const Eigen::Vector3f& o_vox, const Eige
         }
     }
     p_vox = o_vox + dir_vox * s_hit;
-    if (gathered && cross.contains(p_vox)) {
-        if (!cross.cross_observed) return false;
-        n = cross.gradientAt(p_vox);
-    } else if (!g.gradient(p_vox, n)) {
-        return false;
-    }
+    if (!(gathered && cross.contains(p_vox)) && !g.gatherCross(p_vox, cross)) return false;
+    if (!cross.cross_observed) return false;
+    n = cross.gradientAt(p_vox);
+    if (weight != nullptr) *weight = cross.weightAt(p_vox);
     const float len = n.norm();
     if (!(len > 0.0f)) return false;
     n /= len;
@@ -194,6 +192,7 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
     const Eigen::Matrix3f r = T_world_camera.linear();
     const Eigen::Vector3f o_vox = grid.toVoxel(T_world_camera.translation());
     const bool have_hint = !depth_hint_m.empty();
+    const bool with_weight = out.weight.size() == out.vertex.size() && out.weight.type() == CV_32FC1;
     const int u_begin = roi.x, u_end = roi.x + roi.width;
     parallelFor(roi.y, roi.y + roi.height, [&](int v_lo, int v_hi) {
         for (int v = v_lo; v < v_hi; ++v) {
@@ -201,6 +200,8 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
             auto* norm = out.normal.ptr<cv::Vec3f>(v);
             std::fill(vert + u_begin, vert + u_end, cv::Vec3f(kNaN, kNaN, kNaN));
             std::fill(norm + u_begin, norm + u_end, cv::Vec3f(kNaN, kNaN, kNaN));
+            float* weight = with_weight ? out.weight.ptr<float>(v) : nullptr;
+            if (weight != nullptr) std::fill(weight + u_begin, weight + u_end, 0.0f);
             const float* hint = have_hint ? depth_hint_m.ptr<float>(v) : nullptr;
             RowHints row_hints(hint, u_begin, u_end, params_.hint_search_px);
             const float ray_y = k.ray(0.0f, static_cast<float>(v)).y();
@@ -243,7 +244,9 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
                     measured ? marchFromHint(grid, o_vox, dir_vox, s0, z_hint * ray_len / vs, s1, step_vox, bracket)
                              : marchRay(grid, o_vox, dir_vox, s0, s1, step_vox, bracket);
                 Eigen::Vector3f p_vox, n_world;
-                if (!crossed || !surfaceAt(grid, o_vox, dir_vox, bracket, p_vox, n_world)) continue;
+                if (!crossed ||
+                    !surfaceAt(grid, o_vox, dir_vox, bracket, p_vox, n_world, weight ? weight + u : nullptr))
+                    continue;
                 const Eigen::Vector3f p_world = grid.toWorld(p_vox);  // eq. 4.29
                 vert[u] = cv::Vec3f(p_world.x(), p_world.y(), p_world.z());
                 norm[u] = cv::Vec3f(n_world.x(), n_world.y(), n_world.z());

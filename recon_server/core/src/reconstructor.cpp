@@ -52,6 +52,7 @@ Reconstructor::Reconstructor(const Intrinsics& k, const ReconParams& p)
     cast_every_ = init_status_.isOk() ? p.model_cast_every : 1;
     fuse_every_ = init_status_.isOk() ? p.fuse_every : 1;
     model_.allocate(kk.scaled(model_level_), std::max(1, p.filter.levels - model_level_));
+    allocateModelWeight();
     raycaster_ = Raycaster(modelRaycastParams(params_.raycast, model_level_));
     hint_m_.create(kk.height_px, kk.width_px, CV_32FC1);
     hint_m_.setTo(0.0f);
@@ -454,6 +455,7 @@ void Reconstructor::raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_
     if (next_model_level_ != model_level_) {
         model_level_ = next_model_level_;
         model_.allocate(k_.scaled(model_level_), std::max(1, params_.filter.levels - model_level_));
+        allocateModelWeight();
         raycaster_ = Raycaster(modelRaycastParams(params_.raycast, model_level_));
     }
     const int s = model_level_;
@@ -499,6 +501,17 @@ void Reconstructor::raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_
         downsampleNormalMap(model_.levels[l - 1].normal, model_.levels[l - 1].roi, model_.levels[l].normal, unused);
     }
     T_world_model_ = T_world_camera_;
+}
+
+void Reconstructor::allocateModelWeight() {
+    // IcpParams::confident_model_weight: the cast writes the model's weights beside its vertices (finest level).
+    SurfaceLevel& finest = model_.levels[0];
+    if (params_.icp.confident_model_weight > 0.0f) {
+        finest.weight.create(finest.vertex.size(), CV_32FC1);
+        finest.weight.setTo(0.0f);
+    } else {
+        finest.weight.release();
+    }
 }
 
 void Reconstructor::setModelLevel(int level) {

@@ -59,6 +59,15 @@ struct IcpParams {
     // "The model's offset as an unknown of ICP"). A share of 0.01 let the offset trade against the translation
     // (near-range wide turn 0.19 mm); 0.1 to 0.3 read alike.
     float model_offset_ridge = 0.1f;
+    // TSDF weight (a frontal view adds about 0.9); 0 = every pair alike (the thesis). A pair whose model point has
+    // an accumulated weight W below this counts W / this of a pair: surface fused from a view or two, or only at a
+    // slant (the side of the head when a turn first shows it), is where the model is least right, and frame-to-model
+    // ICP moves the camera to meet whatever the model says. As ElasticFusion registers against its confident
+    // surfels. Read at the model's finest level only (SurfaceLevel::weight). Against 0, the synthetic sensors'
+    // gentle turn, wide turn and orbit (the per-sensor command, docs/benchmarks.md "Registration weighted by the
+    // model's confidence"), model error in mm: near-range 0.100 / 0.158 / 0.098 -> 0.103 / 0.130 / 0.098, Kinect v1
+    // 0.077 / 0.082 / 0.078 -> 0.076 / 0.079 / 0.076; 5 and 12 read alike.
+    float confident_model_weight = 8.0f;
     // pixels; the finest level pairs every n-th pixel of every n-th row. Its neighbours are nearly the same
     // constraint (the bilateral filter already averaged them), and the coarser levels have brought the pose within
     // a fraction of a voxel. 2 against 1, 5 seeds of each synthetic scenario (facescan-bench recon --input

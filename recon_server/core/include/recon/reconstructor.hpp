@@ -249,6 +249,7 @@ class Reconstructor {
     void recordPose(int64_t timestamp_ns, FrameResult& result);
     void integrateFrame(const RgbdFrame& frame, FrameResult& result);
     void castModelIfDue(FrameResult& result);
+    void allocateModelWeight();
     void raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_m);
     // Robust integration's pre-filter (ReconParams::occluder_prefilter_m) over the frame's pyramid from `level` on,
     // at the predicted pose (result.occluding_pixels: what it removed); at level 0 it also refreshes the next

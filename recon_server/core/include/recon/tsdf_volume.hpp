@@ -101,6 +101,7 @@ struct VoxelBlockGrid {
     struct CrossCell {
         int x0 = 0, y0 = 0, z0 = 0;   // voxel coordinates; the cell's lower corner
         float corner[8];              // D at the cell's corners (corner i as in fetchCell)
+        float corner_weight[8];       // W at the cell's corners (eq. 4.24's accumulated weight)
         float diff[3][8];             // D(c + e_a) - D(c - e_a) at each corner c, per axis a
         bool cell_observed = false;   // the 8 corners allocated and observed: sample() returns kOk in the cell
         bool cross_observed = false;  // all 32 allocated and observed: gradient() succeeds in the cell
@@ -110,6 +111,7 @@ struct VoxelBlockGrid {
         }
         float tsdfAt(const Eigen::Vector3f& p_vox) const;                // = sample() at a point of the cell
         Eigen::Vector3f gradientAt(const Eigen::Vector3f& p_vox) const;  // = gradient() at a point of the cell
+        float weightAt(const Eigen::Vector3f& p_vox) const;              // W, trilinear, at a point of the cell
         // A point's fractions within the cell, as sample() takes them.
         Eigen::Vector3f fractions(const Eigen::Vector3f& p_vox) const {
             return {p_vox.x() - static_cast<float>(x0), p_vox.y() - static_cast<float>(y0),
@@ -254,6 +256,7 @@ inline constexpr Voxel kUnobservedBlock[kBlockVoxels]{};
                 w_cross, std::min(std::min(x_lo.weight, x_hi.weight),
                                   std::min(std::min(y_lo.weight, y_hi.weight), std::min(z_lo.weight, z_hi.weight))));
             out.corner[corner] = c.tsdf;
+            out.corner_weight[corner] = c.weight;
             out.diff[0][corner] = x_hi.tsdf - x_lo.tsdf;
             out.diff[1][corner] = y_hi.tsdf - y_lo.tsdf;
             out.diff[2][corner] = z_hi.tsdf - z_lo.tsdf;
@@ -284,6 +287,11 @@ inline constexpr Voxel kUnobservedBlock[kBlockVoxels]{};
     const Eigen::Vector3f f = fractions(p_vox);
     return Eigen::Vector3f(trilinear(diff[0], f.x(), f.y(), f.z()), trilinear(diff[1], f.x(), f.y(), f.z()),
                            trilinear(diff[2], f.x(), f.y(), f.z()));
+}
+
+[[gnu::always_inline]] inline float VoxelBlockGrid::CrossCell::weightAt(const Eigen::Vector3f& p_vox) const {
+    const Eigen::Vector3f f = fractions(p_vox);
+    return trilinear(corner_weight, f.x(), f.y(), f.z());
 }
 
 inline bool VoxelBlockGrid::gradient(const Eigen::Vector3f& p_vox, Eigen::Vector3f& grad) const {
