@@ -200,8 +200,7 @@ void Raycaster::cast(const VoxelBlockGrid& grid, const Intrinsics& k, const Pose
             auto* norm = out.normal.ptr<cv::Vec3f>(v);
             std::fill(vert + u_begin, vert + u_end, cv::Vec3f(kNaN, kNaN, kNaN));
             std::fill(norm + u_begin, norm + u_end, cv::Vec3f(kNaN, kNaN, kNaN));
-            float* weight = with_weight ? out.weight.ptr<float>(v) : nullptr;
-            if (weight != nullptr) std::fill(weight + u_begin, weight + u_end, 0.0f);
+            float* weight = with_weight ? out.weight.ptr<float>(v) : nullptr;  // read only where a vertex is
             const float* hint = have_hint ? depth_hint_m.ptr<float>(v) : nullptr;
             RowHints row_hints(hint, u_begin, u_end, params_.hint_search_px);
             const float ray_y = k.ray(0.0f, static_cast<float>(v)).y();

@@ -504,14 +504,10 @@ void Reconstructor::raycastModel(const cv::Rect& roi, const cv::Mat& depth_hint_
 }
 
 void Reconstructor::allocateModelWeight() {
-    // IcpParams::confident_model_weight: the cast writes the model's weights beside its vertices (finest level).
+    // IcpParams::confident_model_weight: the cast writes the model's weights beside its vertices (finest level), at
+    // the pixels where it writes a vertex; ICP reads no other.
     SurfaceLevel& finest = model_.levels[0];
-    if (params_.icp.confident_model_weight > 0.0f) {
-        finest.weight.create(finest.vertex.size(), CV_32FC1);
-        finest.weight.setTo(0.0f);
-    } else {
-        finest.weight.release();
-    }
+    if (params_.icp.confident_model_weight > 0.0f) finest.weight.create(finest.vertex.size(), CV_32FC1);
 }
 
 void Reconstructor::setModelLevel(int level) {

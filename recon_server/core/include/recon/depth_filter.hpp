@@ -33,9 +33,9 @@ struct SurfaceLevel {
     cv::Mat vertex;   // CV_32FC3, camera frame metres, NaN x = invalid (thesis eq. 4.9)
     cv::Mat normal;   // CV_32FC3, unit normals facing the camera, NaN x = invalid (thesis eq. 4.10)
     cv::Rect roi;     // where valid pixels may be; outside it everything is invalid
-    // CV_32F: the model's accumulated weight W (eq. 4.24) where each pixel's ray met the surface. Only on the ray
-    // cast model's finest level, and only when registration weighs its pairs by it
-    // (IcpParams::confident_model_weight); empty elsewhere.
+    // CV_32F: the model's accumulated weight W (eq. 4.24) where each pixel's ray met the surface (set where the
+    // vertex is valid, undefined elsewhere). Only on the ray cast model's finest level, and only when registration
+    // weighs its pairs by it (IcpParams::confident_model_weight); empty elsewhere.
     cv::Mat weight;
 };
 
