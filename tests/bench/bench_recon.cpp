@@ -5,7 +5,7 @@
 // is reported over the whole face region and over its observable part (eval/observed_region.hpp).
 #include <sys/resource.h>
 
-#include <Eigen/SVD>
+#include <Eigen/Core>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -32,6 +32,7 @@
 #include "eval/mesh_io.hpp"
 #include "eval/observed_region.hpp"
 #include "eval/scenario_figures.hpp"
+#include "pose_errors.hpp"
 #include "recon/face_pipeline.hpp"
 #include "recon/parallel.hpp"
 #include "recon/reconstructor.hpp"
@@ -103,45 +104,6 @@ void loopInstrumentation(bool on) {
 #else
     (void)on;
 #endif
-}
-
-// Via the quaternion: acos of the trace loses everything below ~0.03 deg in float.
-float rotationDeg(const Pose& t) { return Eigen::AngleAxisf(t.linear()).angle() * 57.2957795f; }
-
-struct PoseErrors {
-    int frames = 0;
-    double ate_rmse_mm = 0, ate_max_mm = 0, rpe_mm = 0, rpe_deg = 0, rpe_max_mm = 0, rpe_max_deg = 0;
-};
-
-// ATE: the estimate and the reference share the first camera's frame, so no alignment is applied (an honest
-// figure that includes drift). RPE: per consecutive pair of tracked frames.
-PoseErrors poseErrors(const Sequence& seq, const std::vector<std::optional<Pose>>& estimate) {
-    PoseErrors e;
-    double ate2 = 0;
-    int pairs = 0;
-    for (size_t i = 0; i < estimate.size(); ++i) {
-        if (!estimate[i] || !seq.T_ref_camera[i]) continue;
-        const double d = (estimate[i]->translation() - seq.T_ref_camera[i]->translation()).norm() * 1000.0;
-        ate2 += d * d;
-        e.ate_max_mm = std::max(e.ate_max_mm, d);
-        ++e.frames;
-        if (i == 0 || !estimate[i - 1] || !seq.T_ref_camera[i - 1]) continue;
-        const Pose rel_est = estimate[i - 1]->inverse() * *estimate[i];
-        const Pose rel_ref = seq.T_ref_camera[i - 1]->inverse() * *seq.T_ref_camera[i];
-        const Pose err = rel_ref.inverse() * rel_est;
-        const double mm = err.translation().norm() * 1000.0, deg = rotationDeg(err);
-        e.rpe_mm += mm;
-        e.rpe_deg += deg;
-        e.rpe_max_mm = std::max(e.rpe_max_mm, mm);
-        e.rpe_max_deg = std::max(e.rpe_max_deg, deg);
-        ++pairs;
-    }
-    if (e.frames > 0) e.ate_rmse_mm = std::sqrt(ate2 / e.frames);
-    if (pairs > 0) {
-        e.rpe_mm /= pairs;
-        e.rpe_deg /= pairs;
-    }
-    return e;
 }
 
 void printAccuracy(const char* what, const eval::AccuracyReport& r) {
