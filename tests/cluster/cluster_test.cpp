@@ -70,10 +70,11 @@ TEST(Cluster, SixSessionsOnThreeServersAreEachProcessedOnceAndSpreadTwoTwoTwo) {
 
     for (const std::string& id : servers) EXPECT_EQ(per_server[id], 2) << id << " owned " << per_server[id];
     // Ctrl-C on every agent: each tells its owner the stream ended and stops within its grace (2 s), whether or
-    // not the owner has finished the scan by then; on a loaded machine the owner takes longer to write it. There the
-    // end can also be lost with the agent's last packets (its writers linger 200 ms after it stops), and the owner
-    // finishes the scan once it has had no frame for its idle timeout (60 s): in a CI run under the suite's load,
-    // one server missed the ends of both its scans and finished them that way.
+    // not the owner has finished the scan by then; on a loaded machine the owner takes longer to write it. An end
+    // can still be lost with the agent's last packets (its writers linger 200 ms after it stops), and the owner then
+    // finishes the scan once it has had no frame for its idle timeout (60 s). (In a CI run under the suite's load
+    // one server missed the ends of both its scans that way: it had stopped hearing anything while its replication
+    // thread was slow, which StuckServer.AServerWhoseReplicationStallsStillHearsTheFramesOfItsOwnScan now covers.)
     for (const auto& [session, owner] : owner_of) rig.agent(session).signal(SIGINT);
     for (const auto& [session, owner] : owner_of) EXPECT_EQ(rig.agent(session).wait(60s), 0) << session;
     const auto finished_by = std::chrono::steady_clock::now() + 120s;

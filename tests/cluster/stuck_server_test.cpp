@@ -16,6 +16,8 @@
 //     still streams to its owner.
 //   - an owner whose claims lapse at the others while it goes on announcing itself (FACESCAN_FAILPOINT holds its
 //     claims back) keeps its live scan: its standby waits for the claim to come back instead of taking over.
+//   - a server whose replication thread stops (FACESCAN_FAILPOINT) while it stands by for another's scan still
+//     hears the frames of its own scan.
 #include <gtest/gtest.h>
 
 #include <csignal>
@@ -445,6 +447,65 @@ TEST(StuckServer, AnOwnerHeardAfterItsClaimLapsedKeepsItsLiveScan) {
     EXPECT_NE(readText(summary).find("\"failovers\": 0"), std::string::npos) << readText(summary);
     EXPECT_FALSE(fs::exists(rig.dataDir(other) / "live")) << readText(rig.serverLog(other));
     EXPECT_EQ(readText(rig.serverLog(other)).find(taking_over), std::string::npos) << readText(rig.serverLog(other));
+}
+
+// A server stands by for another's scan while it runs its own. Its replication thread (a round's encoding, or a write
+// to a standby that takes nothing, can take seconds on a loaded machine) stops here; meanwhile the other server's
+// replicas keep coming. Cyclone (0.10) delivers to a full keep-all reader by retrying on the process's receive
+// thread, so a replica reader left full while that thread worked made the whole server deaf: in a CI run one server
+// heard neither its two scans' frames nor their ends of stream, and finished both at the idle timeout (60 s).
+TEST(StuckServer, AServerWhoseReplicationStallsStillHearsTheFramesOfItsOwnScan) {
+    ClusterRig rig("slowreplication", 76);
+    for (const std::string id : {"srv-a", "srv-b"}) {
+        ::setenv("FACESCAN_FAILPOINT",
+                 ("replication-stall-when-file:" + (rig.dir() / ("stall-" + id)).string()).c_str(), 1);
+        rig.startServer(id);
+    }
+    ::unsetenv("FACESCAN_FAILPOINT");
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    rig.startAgent("own", 3000, "10");
+    const std::string server = rig.waitForOwner("own", 30s);
+    rig.startAgent("other", 3000, "10");
+    const std::string other = rig.waitForOwner("other", 30s);
+    ASSERT_FALSE(server.empty() || other.empty());
+    ASSERT_NE(server, other) << "two idle servers: one scan each";
+    // The frames of its own scan that the server has received, and whether it stands by for the other scan.
+    const auto received = [&] {
+        std::istringstream out(rig.cli("sessions --json").out);
+        for (std::string line; std::getline(out, line);) {
+            if (jsonField(line, "session") == "own") return std::stoi("0" + jsonField(line, "frames_received"));
+        }
+        return -1;
+    };
+    ASSERT_TRUE(waitUntil(
+        [&] {
+            std::istringstream out(rig.cli("sessions --json").out);
+            for (std::string line; std::getline(out, line);) {
+                if (jsonField(line, "session") == "other" && jsonField(line, "standby") == server) return true;
+            }
+            return false;
+        },
+        30s))
+        << "the server never stood by for the other scan";
+    std::this_thread::sleep_for(3s);  // replicas of the other scan arrive
+
+    std::ofstream(rig.dir() / ("stall-" + server)).put('\n');
+    ASSERT_TRUE(waitUntil(
+        [&] {
+            return readText(rig.serverLog(server)).find("failpoint: the replication thread stops") != std::string::npos;
+        },
+        30s));
+    // A few replica rounds fill a reader that nothing takes from; what is measured comes after them.
+    std::this_thread::sleep_for(8s);
+    const int received_before = received(), published_before = rig.published("own");
+    std::this_thread::sleep_for(10s);
+    const int received_after = received(), published_after = rig.published("own");
+    fs::remove(rig.dir() / ("stall-" + server));
+    const int got = received_after - received_before, sent = published_after - published_before;
+    std::printf("while the replication thread was stopped: %d of %d frames of its own scan received\n", got, sent);
+    ASSERT_GE(received_before, 0);
+    EXPECT_GT(sent, 20) << readText(rig.agentLog("own"));
+    EXPECT_GE(got, sent / 2) << readText(rig.serverLog(server));
 }
 
 }  // namespace

@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
+#include <thread>
 
 #include "recon/parallel.hpp"
+#include "service/failpoint.hpp"
 #include "service/frame_load.hpp"
 #include "service/server.hpp"
 #include "service/session_store.hpp"
@@ -45,6 +48,7 @@ Replicator::~Replicator() { stop(); }
 StatusOr<std::unique_ptr<Replicator>> Replicator::create(const wire::Participant& p, const ServerParams& params,
                                                          Cluster& cluster, OwnedList owned) {
     std::unique_ptr<Replicator> r(new Replicator(params, cluster, std::move(owned)));
+    if (auto file = failpointArg("replication-stall-when-file")) r->stall_file_ = *file;
     const std::string mine = wire::serverPartition(params.server_id);
     ASSIGN_OR_RETURN(r->replica_topic_, wire::Topic<facescan_wire_SessionReplica>::create(p));
     ASSIGN_OR_RETURN(r->ack_topic_, wire::Topic<facescan_wire_ReplicaAck>::create(p));
@@ -57,11 +61,27 @@ StatusOr<std::unique_ptr<Replicator>> Replicator::create(const wire::Participant
 void Replicator::start() {
     running_ = true;
     thread_ = std::thread([this] { loop(); });
+    receive_thread_ = std::thread([this] { receiveLoop(); });
 }
 
 void Replicator::stop() {
     running_ = false;
     if (thread_.joinable()) thread_.join();
+    if (receive_thread_.joinable()) receive_thread_.join();
+}
+
+void Replicator::receiveLoop() {
+    recon::nameThisThread("fs-replica-in");
+    // Its own thread, at the sessions' priority, that does nothing slow: Cyclone (0.10) delivers a sample to a full
+    // keep-all reader by retrying on the process's receive thread, so a replica reader left full (its limit is
+    // what holds a fast owner back) would stop every other delivery to this server, its own scans' frames and
+    // their ends included. Taken on the replication thread, behind its rounds (an encoding, a write that waits for
+    // a slow standby: seconds on a loaded machine, at a background priority), it did.
+    while (running_) {
+        replica_reader_->waitForData(std::chrono::milliseconds(100));
+        std::lock_guard lk(poll_mutex_);
+        takeReplicas();
+    }
 }
 
 void Replicator::poll() {
@@ -79,6 +99,7 @@ void Replicator::loop() {
     int64_t stats_due_ns = steadyNowNs() + kStatsEveryNs;
     ReplicationStats last;
     while (running_) {
+        if (!stall_file_.empty()) failpoint();
         replica_reader_->waitForData(std::chrono::milliseconds(20));
         poll();
         std::map<std::string, bool> live;
@@ -121,6 +142,16 @@ void Replicator::loop() {
             last = now;
         }
     }
+}
+
+void Replicator::failpoint() {
+    std::error_code ec;
+    if (!std::filesystem::exists(stall_file_, ec)) return;
+    std::fprintf(stderr, "facescan-server: failpoint: the replication thread stops while %s exists\n",
+                 stall_file_.c_str());
+    while (running_ && std::filesystem::exists(stall_file_, ec))
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    std::fprintf(stderr, "facescan-server: failpoint: the replication thread goes on\n");
 }
 
 void Replicator::replicate(OwnedSession& o, Outgoing& out) {

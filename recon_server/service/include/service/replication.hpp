@@ -52,8 +52,8 @@ class Replicator {
 
     void start();
     void stop();
-    // Takes replicas and acknowledgements that arrived (the thread does this too; the server calls it while it
-    // joins, before the thread runs).
+    // Takes replicas and acknowledgements that arrived (the threads do this too; the server calls it while it
+    // joins, before the threads run).
     void poll();
 
     // The standby's full copy of a session (nullopt when this server holds none).
@@ -72,6 +72,7 @@ class Replicator {
     };
     Replicator(const ServerParams& params, Cluster& cluster, OwnedList owned);
     void loop();
+    void receiveLoop();  // takes the replicas that come in, on a thread of its own
     void takeReplicas();
     void takeAcks();
     void replicate(OwnedSession& owned, Outgoing& out);
@@ -80,6 +81,9 @@ class Replicator {
     void ack(const std::string& session_id, const std::string& owner_id, uint32_t epoch, uint32_t round, bool need_full,
              const std::string& error);
     void forgetStaleCopies();
+    // FACESCAN_FAILPOINT=replication-stall-when-file:PATH (failpoint.hpp): the replication thread stops while PATH
+    // exists, as a round does whose encoding or write takes long on a loaded machine.
+    void failpoint();
     wire::Writer<facescan_wire_SessionReplica>* replicaWriter(const std::string& standby_id);
     wire::Writer<facescan_wire_ReplicaAck>* ackWriter(const std::string& owner_id);
 
@@ -106,9 +110,12 @@ class Replicator {
     std::map<std::string, int64_t> incompatible_logged_;
     ReplicationStats stats_;
 
-    std::mutex poll_mutex_;  // poll() from the server while joining vs the thread
+    std::string stall_file_;  // the failpoint's file (empty: none)
+
+    std::mutex poll_mutex_;  // poll() from the server while joining vs the threads
     std::atomic<bool> running_{false};
     std::thread thread_;
+    std::thread receive_thread_;
 };
 
 }  // namespace facescan::service
