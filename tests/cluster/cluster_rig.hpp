@@ -15,6 +15,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "child_process.hpp"
@@ -118,6 +119,16 @@ class ClusterRig {
         return *slot;
     }
     ChildProcess& agent(const std::string& session) { return *agents_.at(session); }
+
+    // Two live scans (10 Hz) started one after the other, the second once a server owns the first (so that its
+    // placement sees that load): their owners, in order (empty where no server took it within 30 s).
+    std::pair<std::string, std::string> startTwoLiveScans(const std::string& first, const std::string& second,
+                                                          int frames = 3000) {
+        startAgent(first, frames, "10");
+        const std::string first_owner = waitForOwner(first, std::chrono::seconds(30));
+        startAgent(second, frames, "10");
+        return {first_owner, waitForOwner(second, std::chrono::seconds(30))};
+    }
 
     // The server that owns `session`, as its agent was told (empty until then).
     std::string ownerOf(const std::string& session) const {

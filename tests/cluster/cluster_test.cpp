@@ -98,10 +98,7 @@ TEST(Cluster, ALateServerTakesTheNextSessionAndClientsAgreeOnOwners) {
     rig.startServer("srv-a");
     rig.startServer("srv-b");
     ASSERT_TRUE(rig.waitForServers(2, 30s));
-    rig.startAgent("late-1", 3000, "10");
-    const std::string first = rig.waitForOwner("late-1", 30s);
-    rig.startAgent("late-2", 3000, "10");
-    const std::string second = rig.waitForOwner("late-2", 30s);
+    const auto [first, second] = rig.startTwoLiveScans("late-1", "late-2");
     ASSERT_FALSE(first.empty() || second.empty());
     EXPECT_NE(first, second) << "two idle servers: one session each";
 

@@ -463,10 +463,7 @@ TEST(StuckServer, AServerWhoseReplicationStallsStillHearsTheFramesOfItsOwnScan) 
     }
     ::unsetenv("FACESCAN_FAILPOINT");
     ASSERT_TRUE(rig.waitForServers(2, 30s));
-    rig.startAgent("own", 3000, "10");
-    const std::string server = rig.waitForOwner("own", 30s);
-    rig.startAgent("other", 3000, "10");
-    const std::string other = rig.waitForOwner("other", 30s);
+    const auto [server, other] = rig.startTwoLiveScans("own", "other");
     ASSERT_FALSE(server.empty() || other.empty());
     ASSERT_NE(server, other) << "two idle servers: one scan each";
     // The frames of its own scan that the server has received, and whether it stands by for the other scan.
