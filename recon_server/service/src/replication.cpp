@@ -100,8 +100,12 @@ void Replicator::loop() {
     ReplicationStats last;
     while (running_) {
         if (!stall_file_.empty()) failpoint();
-        replica_reader_->waitForData(std::chrono::milliseconds(20));
-        poll();
+        // The replicas that come in are receiveLoop's; this thread takes the acknowledgements of its own rounds.
+        ack_reader_->waitForData(std::chrono::milliseconds(20));
+        {
+            std::lock_guard lk(poll_mutex_);
+            takeAcks();
+        }
         std::map<std::string, bool> live;
         for (const auto& o : owned_()) {
             const OwnedSession::Phase phase = o->phase;
