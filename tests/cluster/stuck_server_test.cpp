@@ -18,6 +18,8 @@
 //     claims back) keeps its live scan: its standby waits for the claim to come back instead of taking over.
 //   - a server whose replication thread stops (FACESCAN_FAILPOINT) while it stands by for another's scan still
 //     hears the frames of its own scan.
+//   - an owner frozen in the middle of a replication round (FACESCAN_FAILPOINT) gives the session up once awake:
+//     the session waits for the round to end, which then writes, sends and confirms nothing for it.
 #include <gtest/gtest.h>
 
 #include <csignal>
@@ -503,6 +505,65 @@ TEST(StuckServer, AServerWhoseReplicationStallsStillHearsTheFramesOfItsOwnScan) 
     ASSERT_GE(received_before, 0);
     EXPECT_GT(sent, 15) << readText(rig.agentLog("own"));
     EXPECT_GE(got, sent / 2) << readText(rig.serverLog(server));
+}
+
+TEST(StuckServer, AnOwnerGivingUpASessionInTheMiddleOfItsReplicationRoundWaitsForTheRound) {
+    ClusterRig rig("yieldinround", 77);
+    for (const std::string id : {"srv-a", "srv-b"}) {
+        ::setenv("FACESCAN_FAILPOINT",
+                 ("replication-stall-when-file:" + (rig.dir() / ("stall-" + id)).string()).c_str(), 1);
+        rig.startServer(id);
+    }
+    ::unsetenv("FACESCAN_FAILPOINT");
+    ASSERT_TRUE(rig.waitForServers(2, 30s));
+    std::string owner, other;
+    ASSERT_NO_FATAL_FAILURE(startRecording(rig, owner, other));
+    // The owner's replication thread stops in a round, holding the session, as an encoding that takes seconds on a
+    // loaded machine does.
+    std::ofstream(rig.dir() / ("stall-" + owner)).put('\n');
+    ASSERT_TRUE(waitUntil(
+        [&] {
+            return readText(rig.serverLog(owner)).find("failpoint: the replication thread stops") != std::string::npos;
+        },
+        30s));
+    // Frozen past the lease: the other server takes the recording over, and the owner, awake, gives it up while
+    // its round still holds it.
+    rig.server(owner).signal(SIGSTOP);
+    const bool taken = waitUntil(
+        [&] {
+            return readText(rig.serverLog(other)).find("session rec: owner '" + owner + "' is gone") !=
+                   std::string::npos;
+        },
+        30s);
+    std::this_thread::sleep_for(2s);
+    rig.server(owner).signal(SIGCONT);
+    ASSERT_TRUE(taken) << readText(rig.serverLog(other));
+    ASSERT_TRUE(waitUntil(
+        [&] { return readText(rig.serverLog(owner)).find("session rec: gave it up") != std::string::npos; }, 30s))
+        << readText(rig.serverLog(owner));
+    // Longer than the retiring thread used to wait for the other threads before it ended the session's claim and
+    // worker anyway, under the round that still used them.
+    std::this_thread::sleep_for(8s);
+    fs::remove(rig.dir() / ("stall-" + owner));
+    ASSERT_TRUE(waitUntil(
+        [&] {
+            return readText(rig.serverLog(owner)).find("failpoint: the replication thread goes on") !=
+                   std::string::npos;
+        },
+        30s));
+    EXPECT_TRUE(waitUntil(
+        [&] { return readText(rig.serverLog(owner)).find("session rec: replication round") != std::string::npos; },
+        30s))
+        << "the round went on for a session given up: " << readText(rig.serverLog(owner));
+    ASSERT_EQ(rig.agent("rec").wait(180s), 0) << readText(rig.agentLog("rec"));
+    expectFinishedOnceWhole(rig, "rec", other);
+    EXPECT_FALSE(fs::exists(rig.dataDir(owner) / "rec" / "summary.json"));  // the scan is not split
+    // The owner lives on and works: it answers, and its sessions all ended.
+    EXPECT_TRUE(processRuns(rig.server(owner).pid())) << readText(rig.serverLog(owner));
+    EXPECT_TRUE(rig.waitForServers(2, 20s));
+    const std::string log = readText(rig.serverLog(owner));
+    EXPECT_EQ(log.find("terminate called"), std::string::npos) << log;
+    EXPECT_EQ(log.find("stuck:"), std::string::npos) << log;
 }
 
 }  // namespace

@@ -99,7 +99,6 @@ void Replicator::loop() {
     int64_t stats_due_ns = steadyNowNs() + kStatsEveryNs;
     ReplicationStats last;
     while (running_) {
-        if (!stall_file_.empty()) failpoint();
         // The replicas that come in are receiveLoop's; this thread takes the acknowledgements of its own rounds.
         ack_reader_->waitForData(std::chrono::milliseconds(20));
         {
@@ -107,7 +106,14 @@ void Replicator::loop() {
             takeAcks();
         }
         std::map<std::string, bool> live;
-        for (const auto& o : owned_()) {
+        // Held one at a time, each for its own round only: a session given up meanwhile ends on the retiring
+        // thread once nobody else holds it (Server::retireOwned), and a list held through every round (seconds
+        // each on a loaded machine) would keep it waiting.
+        std::vector<std::weak_ptr<OwnedSession>> list;
+        for (const auto& o : owned_()) list.push_back(o);
+        for (const auto& weak : list) {
+            const std::shared_ptr<OwnedSession> o = weak.lock();
+            if (!o) continue;
             const OwnedSession::Phase phase = o->phase;
             // Only sessions that receive frames: a claimed session that never gets one (a bogus id) leaves no
             // replica and no folder behind.
@@ -151,7 +157,7 @@ void Replicator::loop() {
 void Replicator::failpoint() {
     std::error_code ec;
     if (!std::filesystem::exists(stall_file_, ec)) return;
-    std::fprintf(stderr, "facescan-server: failpoint: the replication thread stops while %s exists\n",
+    std::fprintf(stderr, "facescan-server: failpoint: the replication thread stops in a round while %s exists\n",
                  stall_file_.c_str());
     while (running_ && std::filesystem::exists(stall_file_, ec))
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -178,6 +184,7 @@ void Replicator::replicate(OwnedSession& o, Outgoing& out) {
     int64_t t0 = steadyNowNs();
     if (!o.session->captureReplica(full, cap, kCaptureTimeout).isOk()) return;  // finished meanwhile
     const double capture_ms = msSince(t0);
+    if (!stall_file_.empty()) failpoint();
     wire::ReplicaData r;
     r.session_id = o.id;
     r.owner_id = params_.server_id;
@@ -195,6 +202,13 @@ void Replicator::replicate(OwnedSession& o, Outgoing& out) {
     Status status = encoder_.encode(r, bytes);
     const double encode_ms = msSince(t0);
     spare_capture_.state = std::move(r.state);  // encoded: only its buffers are wanted again
+    if (o.phase == OwnedSession::Phase::kGivenUp) {
+        // Given up while it was encoded (another server's stronger claim): this server writes, replicates and
+        // confirms nothing more for it (Server::yield).
+        std::fprintf(stderr, "facescan-server: session %s: replication round %u dropped: the session was given up\n",
+                     o.id.c_str(), out.round + 1);
+        return;
+    }
     if (!status.isOk()) {
         std::fprintf(stderr, "facescan-server: session %s: cannot encode its replica: %s\n", o.id.c_str(),
                      status.toString().c_str());

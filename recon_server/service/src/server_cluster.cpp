@@ -428,14 +428,15 @@ void Server::retireOwned(const std::shared_ptr<OwnedSession>& o, bool dispose_cl
     // want of frames, or unable to start) would otherwise stay listed on this server for as long as it runs, as a
     // stale "waiting for frames" or "scanning" beside the owner's own statuses.
     unlist(o->id);
-    // The replication thread may still hold the OwnedSession for a moment (it copies the list each turn): the
-    // retiring thread waits until it holds the last reference, so the endpoints end there and in this order.
-    // No more frames for this session here (only this thread uses its reader).
+    // Other threads may still hold the OwnedSession for a while (the replication thread, through a round that takes
+    // seconds on a loaded machine): the retiring thread waits until it holds the last reference, so the endpoints
+    // end there and in this order. It waits for as long as that takes: its claim and session, reset under a round
+    // still using them, crashed a server. A holder that never lets go is a stuck server, which the retiring
+    // thread's watchdog ends. No more frames for this session here (only this thread uses its reader).
     retireFrameReader(std::move(o->frames), std::exchange(o->frame_condition, 0));
     retirer_->retire([this, held = o]() mutable {
         retirer_->note("waiting for the other threads to let go of a session");
-        for (int i = 0; i < 1000 && held.use_count() > 1; ++i)
-            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        while (held.use_count() > 1) std::this_thread::sleep_for(std::chrono::milliseconds(5));
         retirer_->note("deleting a session's claim writer");
         held->claim.reset();  // withdrawn (or released above)
         retirer_->note("stopping a session's worker");

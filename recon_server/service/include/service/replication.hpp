@@ -81,8 +81,8 @@ class Replicator {
     void ack(const std::string& session_id, const std::string& owner_id, uint32_t epoch, uint32_t round, bool need_full,
              const std::string& error);
     void forgetStaleCopies();
-    // FACESCAN_FAILPOINT=replication-stall-when-file:PATH (failpoint.hpp): the replication thread stops while PATH
-    // exists, as a round does whose encoding or write takes long on a loaded machine.
+    // FACESCAN_FAILPOINT=replication-stall-when-file:PATH (failpoint.hpp): the replication thread stops in a round,
+    // its state captured, while PATH exists, as a round does whose encoding takes long on a loaded machine.
     void failpoint();
     wire::Writer<facescan_wire_SessionReplica>* replicaWriter(const std::string& standby_id);
     wire::Writer<facescan_wire_ReplicaAck>* ackWriter(const std::string& owner_id);
