@@ -1,5 +1,6 @@
 // Parameters of facescan-server: config file and flags map onto the recon core's Params structs, with errors
-// that name the key, the file and the line. And the data-dir writer: atomic files, nothing half-written.
+// that name the key, the file and the line. And the data-dir writer: atomic files, nothing half-written, and what a
+// finish cut off by a kill left removed when the server starts.
 #include "service/server_params.hpp"
 
 #include <gtest/gtest.h>
@@ -270,6 +271,53 @@ TEST(SessionStore, TwoOwnersOfOneSessionNeverShareAFolder) {
     auto twin = claimSessionDir(data, "s", "srv-c", 2, &note);
     ASSERT_TRUE(twin.isOk());
     EXPECT_EQ(*twin, data / "s" / "srv-c.e2");
+}
+
+// A server killed while it wrote a finished scan restarts: the files of that finish (no summary.json, no replica
+// to continue from) are an incomplete result beside the one the next owner writes, and go. Everything else stays:
+// finished scans, resumable ones, other servers' folders, folders it cannot read as a session's.
+TEST(SessionStore, AFinishCutOffByAKillIsRemovedWhenTheServerStartsAndNothingElseIs) {
+    const auto data = tempDir("cutoff");
+    const auto write = [](const std::filesystem::path& file, const std::string& text) {
+        std::filesystem::create_directories(file.parent_path());
+        std::ofstream(file) << text;
+    };
+    const auto owner = [&](const std::filesystem::path& dir, const std::string& server, int epoch) {
+        write(dir / "owner.json", "{\"server_id\": \"" + server + "\", \"epoch\": " + std::to_string(epoch) + "}\n");
+    };
+    // Cut off: mesh and Draco written, a half-written trajectory's temporary, no summary.
+    owner(data / "cut", "srv-a", 2);
+    for (const char* f : {"mesh.ply", "mesh.drc", "trajectory.txt.tmp"}) write(data / "cut" / f, f);
+    // Cut off beside another owner's finished files: the sub-folder goes, the other's files stay.
+    owner(data / "beside", "srv-b", 3);
+    for (const char* f : {"mesh.ply", "summary.json"}) write(data / "beside" / f, f);
+    owner(data / "beside" / "srv-a.e2", "srv-a", 2);
+    write(data / "beside" / "srv-a.e2" / "mesh.ply", "x");
+    // Finished here; resumable here; cut off on another server (a shared folder); no owner record.
+    owner(data / "done", "srv-a", 1);
+    for (const char* f : {"mesh.ply", "summary.json"}) write(data / "done" / f, f);
+    owner(data / "resumable", "srv-a", 1);
+    for (const char* f : {"mesh.ply", "replica.log"}) write(data / "resumable" / f, f);
+    owner(data / "theirs", "srv-b", 1);
+    write(data / "theirs" / "mesh.ply", "x");
+    write(data / "unknown" / "mesh.ply", "x");
+
+    const std::vector<InterruptedFinish> cut = removeInterruptedFinishes(data, "srv-a");
+    ASSERT_EQ(cut.size(), 2u);
+    EXPECT_EQ(cut[0].dir, data / "beside" / "srv-a.e2");
+    EXPECT_EQ(cut[0].removed, (std::vector<std::string>{"mesh.ply"}));
+    EXPECT_EQ(cut[1].dir, data / "cut");
+    EXPECT_EQ(cut[1].removed, (std::vector<std::string>{"mesh.drc", "mesh.ply", "trajectory.txt.tmp"}));
+    EXPECT_FALSE(std::filesystem::exists(data / "cut")) << "nothing else was in it";
+    EXPECT_FALSE(std::filesystem::exists(data / "beside" / "srv-a.e2"));
+    EXPECT_TRUE(std::filesystem::exists(data / "beside" / "mesh.ply"));
+    EXPECT_EQ(readSessionOwner(data / "beside")->first, "srv-b");
+    for (const char* kept : {"done/mesh.ply", "done/summary.json", "resumable/mesh.ply", "resumable/replica.log",
+                             "theirs/mesh.ply", "unknown/mesh.ply"}) {
+        EXPECT_TRUE(std::filesystem::exists(data / kept)) << kept;
+    }
+    EXPECT_TRUE(removeInterruptedFinishes(data, "srv-a").empty()) << "once is enough";
+    EXPECT_TRUE(removeInterruptedFinishes(data / "missing", "srv-a").empty());
 }
 
 // Restart recovery: the data dir's replica log resumes from its last complete round, whatever a crash tore.

@@ -121,6 +121,15 @@ Status Server::start() {
     }
     startRetention();                 // before the resume: an expired replica is erased, not resumed
     RETURN_IF_ERROR(startErasure());  // and so is one the domain asks to erase
+    // Before the resume: what a finish cut off by a kill left is no result, and no copy to continue from.
+    for (const InterruptedFinish& cut : removeInterruptedFinishes(params_.data_dir, params_.server_id)) {
+        std::string files;
+        for (const std::string& f : cut.removed) files += (files.empty() ? "" : ", ") + f;
+        std::fprintf(stderr,
+                     "facescan-server: %s: a finish cut off here (the server was killed or crashed while it wrote) "
+                     "left an incomplete result (%s, no summary.json and no replica to continue from): removed\n",
+                     cut.dir.c_str(), files.c_str());
+    }
     loadResumable();
     RETURN_IF_ERROR(join());
     joined_ = true;

@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <fstream>
@@ -184,6 +185,65 @@ void removeReplicaLog(const std::filesystem::path& dir) {
     std::error_code ec;
     std::filesystem::remove(dir / "replica.log", ec);
     std::filesystem::remove(dir / "replica.log.tmp", ec);
+}
+
+namespace {
+
+std::optional<InterruptedFinish> removeInterruptedFinish(const std::filesystem::path& dir,
+                                                         const std::string& server_id) {
+    std::error_code ec;
+    const auto owner = readSessionOwner(dir);
+    if (!owner || owner->first != server_id) return std::nullopt;
+    if (std::filesystem::exists(dir / "summary.json", ec) || std::filesystem::exists(dir / "replica.log", ec)) {
+        return std::nullopt;  // finished, or resumable from its replica
+    }
+    InterruptedFinish cut{dir, {}};
+    bool others = false;  // sub-folders (another owner's files beside), kept
+    for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+        const std::string name = entry.path().filename().string();
+        if (!entry.is_regular_file(ec) || entry.is_symlink(ec)) {
+            others = true;
+            continue;
+        }
+        if (name == "owner.json") continue;
+        if (std::filesystem::remove(entry.path(), ec)) cut.removed.push_back(name);
+    }
+    if (cut.removed.empty()) return std::nullopt;
+    std::sort(cut.removed.begin(), cut.removed.end());
+    if (!others) {
+        std::filesystem::remove(dir / "owner.json", ec);
+        std::filesystem::remove(dir, ec);
+    }
+    return cut;
+}
+
+}  // namespace
+
+std::vector<InterruptedFinish> removeInterruptedFinishes(const std::filesystem::path& data_dir,
+                                                         const std::string& server_id) {
+    std::vector<InterruptedFinish> out;
+    std::error_code ec;
+    std::vector<std::filesystem::path> sessions;
+    for (const auto& entry : std::filesystem::directory_iterator(data_dir, ec)) {
+        if (entry.is_directory(ec) && !entry.is_symlink(ec)) sessions.push_back(entry.path());
+    }
+    std::sort(sessions.begin(), sessions.end());
+    const std::string beside = server_id + ".e";
+    for (const std::filesystem::path& session : sessions) {
+        std::vector<std::filesystem::path> mine;
+        for (const auto& entry : std::filesystem::directory_iterator(session, ec)) {
+            const std::string name = entry.path().filename().string();
+            if (name.rfind(beside, 0) == 0 && entry.is_directory(ec) && !entry.is_symlink(ec)) {
+                mine.push_back(entry.path());
+            }
+        }
+        std::sort(mine.begin(), mine.end());
+        for (const std::filesystem::path& dir : mine) {
+            if (auto cut = removeInterruptedFinish(dir, server_id)) out.push_back(std::move(*cut));
+        }
+        if (auto cut = removeInterruptedFinish(session, server_id)) out.push_back(std::move(*cut));
+    }
+    return out;
 }
 
 }  // namespace facescan::service

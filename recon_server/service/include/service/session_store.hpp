@@ -57,6 +57,20 @@ StatusOr<std::filesystem::path> claimSessionDir(const std::filesystem::path& dat
 std::optional<std::pair<std::string, uint32_t>> readSessionOwner(const std::filesystem::path& dir);
 // A finished session needs no replica: removes DIR/replica.log (and its temporary file).
 void removeReplicaLog(const std::filesystem::path& dir);
+
+// A finish writes its files one by one, summary.json last, and removes the replica log once they are all there.
+// A folder of `server_id`'s (its owner.json names it) with files but neither summary.json nor replica.log is a
+// finish that a kill or a crash cut off: an incomplete result, which nothing can continue (no replica) and which
+// would stand beside the result that the next owner writes from its copy and the frames its agent keeps. Removes
+// such a folder's files (the main folder and this server's SERVER.eEPOCH folders beside another's; every other
+// folder is left as it is), and the folder when nothing else is left in it. Called when the server starts, before
+// it resumes anything: the folders it cleaned.
+struct InterruptedFinish {
+    std::filesystem::path dir;
+    std::vector<std::string> removed;  // file names
+};
+std::vector<InterruptedFinish> removeInterruptedFinishes(const std::filesystem::path& data_dir,
+                                                         const std::string& server_id);
 // Creates dir when missing and proves that a file can be written there (a probe written atomically, then
 // removed): checked when the server starts, so that a data dir the server cannot write is refused at once with
 // the reason, not discovered when the first finished scan cannot be saved.
