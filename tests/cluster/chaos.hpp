@@ -137,6 +137,12 @@ class ProgressWatch {
     }
     // A moment of progress known otherwise (a server's log line with its wall-clock time).
     void addProgress(const std::string& session, int64_t at_ns) { progress_[session].push_back(at_ns); }
+    // The session's first progress (nullopt: none yet).
+    std::optional<int64_t> firstProgress(const std::string& session) const {
+        const auto it = progress_.find(session);
+        if (it == progress_.end() || it->second.empty()) return std::nullopt;
+        return *std::min_element(it->second.begin(), it->second.end());
+    }
     std::optional<double> resumedAfter(const std::string& session, int64_t since_ns) const {
         const auto it = progress_.find(session);
         if (it == progress_.end()) return std::nullopt;

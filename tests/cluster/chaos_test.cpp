@@ -439,8 +439,12 @@ class ChaosRun {
         const double bound_s = resumeBoundS();
         for (const FaultDone& f : faults_) {
             for (const Scan& s : scans_) {
-                // Live scans streaming (placed: 5 s after the start) from the fault until its bound has passed.
+                // Live scans streaming from the fault until its bound has passed. A scan streams from its first
+                // progress: on a loaded host its placement can take longer than a fault's bound, and a fault before
+                // it would measure that wait, not a recovery. A scan never placed fails checkScans.
                 if (s.recording || s.started_ns + 5'000'000'000 > f.at_ns) continue;
+                const std::optional<int64_t> streaming = watch_.firstProgress(s.id);
+                if (!streaming || *streaming > f.at_ns) continue;
                 if (s.ended_ns != 0 && s.ended_ns < f.at_ns + static_cast<int64_t>((bound_s + 1) * 1e9)) continue;
                 const std::optional<double> after = watch_.resumedAfter(s.id, f.at_ns);
                 if (after) resumes_s_.push_back(*after);
