@@ -1,11 +1,12 @@
 // A real program of ours as a child process for integration tests, with its output in a log file; stopped with
-// SIGTERM (SIGKILL after 10 s) and reaped on destruction. Safe to start from a test process that already runs
-// threads (DDS): nothing allocates between fork and exec.
-// kill9() for the failover tests (no clean exit, no last word on the network).
+// SIGTERM (SIGKILL after 10 s) and reaped on destruction, and killed when the test process dies. Safe to start from a
+// test process that already runs threads (DDS): nothing allocates between fork and exec. kill9() for the failover tests
+// (no clean exit, no last word on the network).
 #pragma once
 
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -26,8 +27,15 @@ class ChildProcess {
         for (std::string& a : args_) argv.push_back(a.data());
         argv.push_back(nullptr);
         const std::string log_path = log.string();
+        const pid_t parent = ::getpid();
         pid_ = ::fork();
         if (pid_ == 0) {
+            // Ends with the test: a test process killed (a ctest timeout, a replay stopped by hand) left its servers
+            // and agents running, minutes of CPU that slowed every test after it. The signal comes when the thread
+            // that started the child ends: children are started from the test's main thread.
+            ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+            if (::getppid() != parent) ::_exit(127);  // the test ended before the prctl
+
             const int fd = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
             if (fd >= 0) {
                 ::dup2(fd, 1);
