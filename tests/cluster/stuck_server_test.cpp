@@ -64,6 +64,33 @@ void expectFinishedOnceWhole(const ClusterRig& rig, const std::string& session, 
               lastMatch(readText(rig.agentLog(session)), "frames digest ([0-9a-f]{16})"));
 }
 
+// Whether `server`'s log says `text` within `timeout`.
+bool logSays(const ClusterRig& rig, const std::string& server, const std::string& text,
+             std::chrono::seconds timeout = 30s) {
+    return waitUntil([&] { return readText(rig.serverLog(server)).find(text) != std::string::npos; }, timeout);
+}
+
+// srv-a and srv-b, each with FACESCAN_FAILPOINT=FAILPOINT:DIR/stall-ID: the test makes one server's file to set
+// its fault off.
+void startServersStalledByFile(ClusterRig& rig, const std::string& failpoint,
+                               const std::vector<std::string>& extra = {}) {
+    for (const std::string id : {"srv-a", "srv-b"}) {
+        ::setenv("FACESCAN_FAILPOINT", (failpoint + ":" + (rig.dir() / ("stall-" + id)).string()).c_str(), 1);
+        rig.startServer(id, extra);
+    }
+    ::unsetenv("FACESCAN_FAILPOINT");
+}
+
+// The owner frozen (SIGSTOP) well past the lease (3 s), until the other server takes the recording over and 2 s
+// more, then woken: whether it was taken over.
+bool freezeUntilTakenOver(ClusterRig& rig, const std::string& owner, const std::string& other) {
+    rig.server(owner).signal(SIGSTOP);
+    const bool taken = logSays(rig, other, "session rec: owner '" + owner + "' is gone");
+    std::this_thread::sleep_for(2s);
+    rig.server(owner).signal(SIGCONT);
+    return taken;
+}
+
 TEST(StuckServer, AFrozenOwnerWakesActsOnNothingItMissedAndWritesNothingForWhatWasTakenOver) {
     ClusterRig rig("frozen", 61);
     rig.startServer("srv-a");
@@ -71,22 +98,12 @@ TEST(StuckServer, AFrozenOwnerWakesActsOnNothingItMissedAndWritesNothingForWhatW
     ASSERT_TRUE(rig.waitForServers(2, 30s));
     std::string owner, other;
     ASSERT_NO_FATAL_FAILURE(startRecording(rig, owner, other));
-    rig.server(owner).signal(SIGSTOP);
-    // Frozen well past the lease (3 s): the other server takes the session over meanwhile.
-    const bool taken = waitUntil(
-        [&] {
-            return readText(rig.serverLog(other)).find("session rec: owner '" + owner + "' is gone") !=
-                   std::string::npos;
-        },
-        30s);
-    std::this_thread::sleep_for(2s);
-    rig.server(owner).signal(SIGCONT);
-    ASSERT_TRUE(taken) << readText(rig.serverLog(other));
+    // Frozen: the other server takes the session over meanwhile.
+    ASSERT_TRUE(freezeUntilTakenOver(rig, owner, other)) << readText(rig.serverLog(other));
     ASSERT_EQ(rig.agent("rec").wait(180s), 0) << readText(rig.agentLog("rec"));
     expectFinishedOnceWhole(rig, "rec", other);
     // Once it sees the stronger claim again (rediscovery after the pause), it gives the session up.
-    EXPECT_TRUE(waitUntil(
-        [&] { return readText(rig.serverLog(owner)).find("session rec: gave it up") != std::string::npos; }, 30s));
+    EXPECT_TRUE(logSays(rig, owner, "session rec: gave it up"));
     const std::string woke = readText(rig.serverLog(owner));
     EXPECT_NE(woke.find("its view of the cluster is stale"), std::string::npos) << woke;
     EXPECT_NE(woke.find("session rec: gave it up"), std::string::npos) << woke;
@@ -100,19 +117,12 @@ TEST(StuckServer, AFrozenOwnerWakesActsOnNothingItMissedAndWritesNothingForWhatW
 TEST(StuckServer, AnOwnerWhoseIntakeStallsIsEndedByItsWatchdogAndTheScanFinishesWholeElsewhere) {
     ClusterRig rig("stalled", 62);
     // Each server stops its intake when its own file appears; the test makes the owner's.
-    const std::vector<std::string> extra = {"--set", "stall_limit_s=8"};
-    for (const std::string id : {"srv-a", "srv-b"}) {
-        ::setenv("FACESCAN_FAILPOINT", ("intake-stall-when-file:" + (rig.dir() / ("stall-" + id)).string()).c_str(), 1);
-        rig.startServer(id, extra);
-    }
-    ::unsetenv("FACESCAN_FAILPOINT");
+    startServersStalledByFile(rig, "intake-stall-when-file", {"--set", "stall_limit_s=8"});
     ASSERT_TRUE(rig.waitForServers(2, 30s));
     std::string owner, other;
     ASSERT_NO_FATAL_FAILURE(startRecording(rig, owner, other));
     std::ofstream(rig.dir() / ("stall-" + owner)).put('\n');
-    ASSERT_TRUE(waitUntil(
-        [&] { return readText(rig.serverLog(owner)).find("failpoint: the intake thread stops") != std::string::npos; },
-        30s));
+    ASSERT_TRUE(logSays(rig, owner, "failpoint: the intake thread stops"));
     const auto stalled_at = std::chrono::steady_clock::now();
     // The claim's liveliness is asserted by the intake alone, so it lapses within the lease while the stuck process
     // still runs (with automatic liveliness its DDS threads kept the session for ever). In about one run in five
@@ -458,12 +468,7 @@ TEST(StuckServer, AnOwnerHeardAfterItsClaimLapsedKeepsItsLiveScan) {
 // heard neither its two scans' frames nor their ends of stream, and finished both at the idle timeout (60 s).
 TEST(StuckServer, AServerWhoseReplicationStallsStillHearsTheFramesOfItsOwnScan) {
     ClusterRig rig("slowreplication", 76);
-    for (const std::string id : {"srv-a", "srv-b"}) {
-        ::setenv("FACESCAN_FAILPOINT",
-                 ("replication-stall-when-file:" + (rig.dir() / ("stall-" + id)).string()).c_str(), 1);
-        rig.startServer(id);
-    }
-    ::unsetenv("FACESCAN_FAILPOINT");
+    startServersStalledByFile(rig, "replication-stall-when-file");
     ASSERT_TRUE(rig.waitForServers(2, 30s));
     const auto [server, other] = rig.startTwoLiveScans("own", "other");
     ASSERT_FALSE(server.empty() || other.empty());
@@ -489,11 +494,7 @@ TEST(StuckServer, AServerWhoseReplicationStallsStillHearsTheFramesOfItsOwnScan) 
     std::this_thread::sleep_for(2s);  // replicas of the other scan arrive
 
     std::ofstream(rig.dir() / ("stall-" + server)).put('\n');
-    ASSERT_TRUE(waitUntil(
-        [&] {
-            return readText(rig.serverLog(server)).find("failpoint: the replication thread stops") != std::string::npos;
-        },
-        30s));
+    ASSERT_TRUE(logSays(rig, server, "failpoint: the replication thread stops"));
     // Four replica rounds (one a second) fill a reader that nothing takes from; what is measured comes after them.
     std::this_thread::sleep_for(6s);
     const int received_before = received(), published_before = rig.published("own");
@@ -509,51 +510,24 @@ TEST(StuckServer, AServerWhoseReplicationStallsStillHearsTheFramesOfItsOwnScan) 
 
 TEST(StuckServer, AnOwnerGivingUpASessionInTheMiddleOfItsReplicationRoundWaitsForTheRound) {
     ClusterRig rig("yieldinround", 77);
-    for (const std::string id : {"srv-a", "srv-b"}) {
-        ::setenv("FACESCAN_FAILPOINT",
-                 ("replication-stall-when-file:" + (rig.dir() / ("stall-" + id)).string()).c_str(), 1);
-        rig.startServer(id);
-    }
-    ::unsetenv("FACESCAN_FAILPOINT");
+    startServersStalledByFile(rig, "replication-stall-when-file");
     ASSERT_TRUE(rig.waitForServers(2, 30s));
     std::string owner, other;
     ASSERT_NO_FATAL_FAILURE(startRecording(rig, owner, other));
     // The owner's replication thread stops in a round, holding the session, as an encoding that takes seconds on a
     // loaded machine does.
     std::ofstream(rig.dir() / ("stall-" + owner)).put('\n');
-    ASSERT_TRUE(waitUntil(
-        [&] {
-            return readText(rig.serverLog(owner)).find("failpoint: the replication thread stops") != std::string::npos;
-        },
-        30s));
-    // Frozen past the lease: the other server takes the recording over, and the owner, awake, gives it up while
-    // its round still holds it.
-    rig.server(owner).signal(SIGSTOP);
-    const bool taken = waitUntil(
-        [&] {
-            return readText(rig.serverLog(other)).find("session rec: owner '" + owner + "' is gone") !=
-                   std::string::npos;
-        },
-        30s);
-    std::this_thread::sleep_for(2s);
-    rig.server(owner).signal(SIGCONT);
-    ASSERT_TRUE(taken) << readText(rig.serverLog(other));
-    ASSERT_TRUE(waitUntil(
-        [&] { return readText(rig.serverLog(owner)).find("session rec: gave it up") != std::string::npos; }, 30s))
-        << readText(rig.serverLog(owner));
+    ASSERT_TRUE(logSays(rig, owner, "failpoint: the replication thread stops"));
+    // Frozen: the other server takes the recording over, and the owner, awake, gives it up while its round still
+    // holds it.
+    ASSERT_TRUE(freezeUntilTakenOver(rig, owner, other)) << readText(rig.serverLog(other));
+    ASSERT_TRUE(logSays(rig, owner, "session rec: gave it up")) << readText(rig.serverLog(owner));
     // Longer than the retiring thread used to wait for the other threads before it ended the session's claim and
     // worker anyway, under the round that still used them.
     std::this_thread::sleep_for(8s);
     fs::remove(rig.dir() / ("stall-" + owner));
-    ASSERT_TRUE(waitUntil(
-        [&] {
-            return readText(rig.serverLog(owner)).find("failpoint: the replication thread goes on") !=
-                   std::string::npos;
-        },
-        30s));
-    EXPECT_TRUE(waitUntil(
-        [&] { return readText(rig.serverLog(owner)).find("session rec: replication round") != std::string::npos; },
-        30s))
+    ASSERT_TRUE(logSays(rig, owner, "failpoint: the replication thread goes on"));
+    EXPECT_TRUE(logSays(rig, owner, "session rec: replication round"))
         << "the round went on for a session given up: " << readText(rig.serverLog(owner));
     ASSERT_EQ(rig.agent("rec").wait(180s), 0) << readText(rig.agentLog("rec"));
     expectFinishedOnceWhole(rig, "rec", other);
