@@ -198,18 +198,21 @@ std::optional<InterruptedFinish> removeInterruptedFinish(const std::filesystem::
         return std::nullopt;  // finished, or resumable from its replica
     }
     InterruptedFinish cut{dir, {}};
-    bool others = false;  // sub-folders (another owner's files beside), kept
+    bool others = false;             // sub-folders (another owner's files beside), kept
+    std::vector<std::string> files;  // listed first, removed after: not while the folder is read
     for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
         const std::string name = entry.path().filename().string();
         if (!entry.is_regular_file(ec) || entry.is_symlink(ec)) {
             others = true;
-            continue;
+        } else if (name != "owner.json") {
+            files.push_back(name);
         }
-        if (name == "owner.json") continue;
-        if (std::filesystem::remove(entry.path(), ec)) cut.removed.push_back(name);
+    }
+    std::sort(files.begin(), files.end());
+    for (const std::string& name : files) {
+        if (std::filesystem::remove(dir / name, ec)) cut.removed.push_back(name);
     }
     if (cut.removed.empty()) return std::nullopt;
-    std::sort(cut.removed.begin(), cut.removed.end());
     if (!others) {
         std::filesystem::remove(dir / "owner.json", ec);
         std::filesystem::remove(dir, ec);
