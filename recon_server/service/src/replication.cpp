@@ -79,13 +79,11 @@ void Replicator::receiveLoop() {
     // a slow standby: seconds on a loaded machine, at a background priority), it did.
     while (running_) {
         replica_reader_->waitForData(std::chrono::milliseconds(100));
-        std::lock_guard lk(poll_mutex_);
         takeReplicas();
     }
 }
 
 void Replicator::poll() {
-    std::lock_guard lk(poll_mutex_);
     takeReplicas();
     takeAcks();
 }
@@ -101,10 +99,7 @@ void Replicator::loop() {
     while (running_) {
         // The replicas that come in are receiveLoop's; this thread takes the acknowledgements of its own rounds.
         ack_reader_->waitForData(std::chrono::milliseconds(20));
-        {
-            std::lock_guard lk(poll_mutex_);
-            takeAcks();
-        }
+        takeAcks();
         std::map<std::string, bool> live;
         // Held one at a time, each for its own round only: a session given up meanwhile ends on the retiring
         // thread once nobody else holds it (Server::retireOwned), and a list held through every round (seconds

@@ -52,8 +52,8 @@ class Replicator {
 
     void start();
     void stop();
-    // Takes replicas and acknowledgements that arrived (the threads do this too; the server calls it while it
-    // joins, before the threads run).
+    // Takes replicas and acknowledgements that arrived: the server calls it while it joins, before start(). Once
+    // started, the receiving thread alone takes replicas and the replication thread alone acknowledgements.
     void poll();
 
     // The standby's full copy of a session (nullopt when this server holds none).
@@ -94,7 +94,8 @@ class Replicator {
     std::optional<wire::Topic<facescan_wire_ReplicaAck>> ack_topic_;
     std::optional<wire::Reader<facescan_wire_SessionReplica>> replica_reader_;  // our partition
     std::optional<wire::Reader<facescan_wire_ReplicaAck>> ack_reader_;          // our partition
-    // One writer per peer, in that peer's partition (replication thread only).
+    // One writer per peer, in that peer's partition: replicas from the replication thread, acknowledgements from
+    // the receiving thread.
     std::map<std::string, std::unique_ptr<wire::Writer<facescan_wire_SessionReplica>>> replica_writers_;
     std::map<std::string, std::unique_ptr<wire::Writer<facescan_wire_ReplicaAck>>> ack_writers_;
     std::map<std::string, std::unique_ptr<Outgoing>> outgoing_;  // by session id (replication thread only)
@@ -112,7 +113,6 @@ class Replicator {
 
     std::string stall_file_;  // the failpoint's file (empty: none)
 
-    std::mutex poll_mutex_;  // poll() from the server while joining vs the threads
     std::atomic<bool> running_{false};
     std::thread thread_;
     std::thread receive_thread_;
